@@ -1,0 +1,68 @@
+"""Install wgse_mmseg.
+
+Like MMSegmentation, the package carries its ``configs/`` and ``tools/`` inside
+``wgse_mmseg/.mim/`` so that ``mim train wgse_mmseg configs/pspnet_wgse.py``
+finds both from a regular install. A regular build copies them there; an
+editable install (``pip install -e .``, i.e. ``setup.py develop``) links them,
+so edits in the repository take effect at once.
+"""
+import os
+import os.path as osp
+import shutil
+import sys
+
+from setuptools import find_packages, setup
+
+ROOT = osp.dirname(osp.abspath(__file__))
+MIM_DIRS = ('configs', 'tools')
+
+
+def version():
+    namespace = {}
+    with open(osp.join(ROOT, 'wgse_mmseg', 'version.py')) as f:
+        exec(f.read(), namespace)
+    return namespace['__version__']
+
+
+def add_mim_extension():
+    """Place configs/ and tools/ under wgse_mmseg/.mim (links when editable)."""
+    editable = 'develop' in sys.argv or 'editable_wheel' in sys.argv
+    mim_root = osp.join(ROOT, 'wgse_mmseg', '.mim')
+    os.makedirs(mim_root, exist_ok=True)
+    for name in MIM_DIRS:
+        src, dst = osp.join(ROOT, name), osp.join(mim_root, name)
+        if osp.islink(dst) or osp.isfile(dst):
+            os.remove(dst)
+        elif osp.isdir(dst):
+            shutil.rmtree(dst)
+        if editable:
+            os.symlink(osp.relpath(src, mim_root), dst)
+        else:
+            shutil.copytree(src, dst, ignore=shutil.ignore_patterns('__pycache__', '*.pyc'))
+
+
+if __name__ == '__main__':
+    add_mim_extension()
+    setup(
+        name='wgse_mmseg',
+        version=version(),
+        description='Wavelet-guided spike enhancing (WGSE) and spike-camera data for MMSegmentation',
+        long_description=open(osp.join(ROOT, 'README.md'), encoding='utf-8').read(),
+        long_description_content_type='text/markdown',
+        license='Apache-2.0',
+        python_requires='>=3.9',
+        packages=find_packages(include=['wgse_mmseg', 'wgse_mmseg.*']),
+        include_package_data=True,
+        package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*', '.mim/**/**/**/*']},
+        install_requires=[
+            'torch>=2.0',
+            'mmengine>=0.10,<0.11',
+            'mmsegmentation>=1.2,<1.3',
+            'numpy',
+            'PyWavelets>=1.4',
+            'opencv-python>=4.8,<5',
+            'tqdm',
+        ],
+        extras_require={'tests': ['pytest>=7', 'hypothesis>=6.80'], 'mim': ['openmim==0.3.8']},
+        zip_safe=False,
+    )
