@@ -1,0 +1,99 @@
+"""Let torch's weights-only loader open mmengine checkpoints, and no more.
+
+Since torch 2.6, ``torch.load`` defaults to ``weights_only=True``, which
+refuses any Python object outside an allowlist. mmengine 0.10.7 checkpoints
+hold, besides tensors, the message hub's ``HistoryBuffer`` logs and the NumPy
+arrays and scalars inside them, so ``resume=True`` and ``load_from`` fail.
+This module adds exactly those classes to torch's allowlist
+(``torch.serialization.add_safe_globals``); weights-only loading stays on, and
+any other object in a checkpoint is still refused.
+
+``HistoryBuffer`` also pickles its statistics methods as
+``getattr(HistoryBuffer, 'min')``. Allowing the builtin ``getattr`` would let
+a checkpoint fetch any attribute of any allowed object, so the name
+``builtins.getattr`` is bound to :func:`history_buffer_statistic` instead,
+which returns only those methods and refuses everything else.
+
+The list was read off real checkpoints with
+``torch.serialization.get_unsafe_globals_in_checkpoint`` (see
+``tests/test_checkpoints.py``, which checks it stays complete).
+"""
+import importlib
+import pickle
+from typing import List
+
+import torch
+
+__all__ = [
+    'MMENGINE_CHECKPOINT_GLOBALS', 'allow_mmengine_checkpoints',
+    'history_buffer_statistic'
+]
+
+#: ``module:qualname`` of every non-tensor class an mmengine 0.10.7
+#: checkpoint pickles (NumPy spells its core ``numpy.core`` or
+#: ``numpy._core`` depending on the version that wrote the file).
+MMENGINE_CHECKPOINT_GLOBALS = (
+    'mmengine.logging.history_buffer:HistoryBuffer',
+    'numpy:ndarray',
+    'numpy:dtype',
+    'numpy.core.multiarray:_reconstruct',
+    'numpy.core.multiarray:scalar',
+    'numpy._core.multiarray:_reconstruct',
+    'numpy._core.multiarray:scalar',
+) + tuple(  # NumPy 2 builds dtype objects of these classes (not GLOBALs, so
+    # get_unsafe_globals_in_checkpoint does not list them)
+    f'numpy.dtypes:{kind}DType'
+    for kind in ('Float64', 'Float32', 'Float16', 'Int64', 'Int32', 'Int16',
+                 'Int8', 'UInt64', 'UInt32', 'UInt16', 'UInt8', 'Bool'))
+
+
+def history_buffer_statistic(owner, name: str):
+    """``getattr`` restricted to ``HistoryBuffer``'s statistics methods."""
+    from mmengine.logging import HistoryBuffer
+    # The built-in statistics are only entered into _statistics_methods when
+    # a first buffer is made, which may not have happened before loading.
+    statistics = {'min', 'max', 'mean', 'current'}
+    statistics.update(HistoryBuffer._statistics_methods)
+    if (owner is HistoryBuffer or isinstance(owner, HistoryBuffer)) and \
+            name in statistics:
+        return getattr(owner, name)
+    raise pickle.UnpicklingError(
+        f'checkpoint asks for getattr({owner!r}, {name!r}); only '
+        f'HistoryBuffer statistics methods are allowed')
+
+
+def _resolve(spec: str):
+    module_name, _, qualname = spec.partition(':')
+    try:
+        obj = importlib.import_module(module_name)
+    except ImportError:
+        return None
+    for part in qualname.split('.'):
+        obj = getattr(obj, part, None)
+        if obj is None:
+            return None
+    return obj
+
+
+def allow_mmengine_checkpoints() -> List[str]:
+    """Allowlist the classes of :data:`MMENGINE_CHECKPOINT_GLOBALS`.
+
+    Returns the specs that exist in this environment (NumPy 1 and 2 name
+    some differently). Idempotent.
+    """
+    add_safe_globals = getattr(torch.serialization, 'add_safe_globals', None)
+    if add_safe_globals is None:  # torch < 2.4 has no weights-only default
+        return []
+    allowed, found = [], []
+    for spec in MMENGINE_CHECKPOINT_GLOBALS:
+        obj = _resolve(spec)
+        if obj is None:
+            continue
+        module_name, _, qualname = spec.partition(':')
+        # Register under the name the pickle uses, which may differ from
+        # where the object now lives (numpy.core -> numpy._core).
+        allowed.append((obj, f'{module_name}.{qualname}'))
+        found.append(spec)
+    allowed.append((history_buffer_statistic, 'builtins.getattr'))
+    add_safe_globals(allowed)
+    return found
