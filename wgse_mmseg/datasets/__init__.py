@@ -1,0 +1,7 @@
+from .spike_cityscapes import SpikeCityscapesDataset
+from .transforms import LoadSpikeFromFile, SpikeRandomCrop, SpikeRandomFlip
+
+__all__ = [
+    'SpikeCityscapesDataset', 'LoadSpikeFromFile', 'SpikeRandomCrop',
+    'SpikeRandomFlip'
+]

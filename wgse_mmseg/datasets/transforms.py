@@ -1,0 +1,157 @@
+"""Data-pipeline transforms for spike streams.
+
+In a pipeline a spike stream lives in ``results['img']`` as an ``(H, W, T)``
+``uint8`` array of 0/1: MMSeg's channel-last image convention, so
+``PackSegInputs`` turns it into the ``(T, H, W)`` tensor that
+:class:`~wgse_mmseg.models.SpikeSegDataPreProcessor` batches. Spikes stay
+binary and one byte per spike until the preprocessor.
+"""
+from typing import Optional, Sequence, Union
+
+import numpy as np
+from mmcv.transforms import BaseTransform
+
+from mmseg.datasets.transforms import RandomCrop
+from mmseg.registry import TRANSFORMS
+from ..io import load_spikes, spike_shape
+
+__all__ = ['LoadSpikeFromFile', 'SpikeRandomCrop', 'SpikeRandomFlip']
+
+
+def _source(results: dict) -> str:
+    return results.get('img_path', '<spike stream>')
+
+
+def _check_label_matches(results: dict) -> None:
+    """Fail clearly when a label map's size differs from the stream's."""
+    height, width = results['img'].shape[:2]
+    for key in results.get('seg_fields', []):
+        if results[key].shape[:2] != (height, width):
+            raise ValueError(
+                f'{_source(results)}: spike frames are {height}x{width} but '
+                f'{key} ({results.get("seg_map_path", "label")}) is '
+                f'{results[key].shape[0]}x{results[key].shape[1]}')
+
+
+@TRANSFORMS.register_module()
+class LoadSpikeFromFile(BaseTransform):
+    """Load a spike stream from ``results['img_path']``.
+
+    Reads ``.dat``, ``.spk``, ``.npy`` and ``.npz`` files (see
+    :mod:`wgse_mmseg.io`).
+
+    Args:
+        num_steps: frames to load. ``None`` loads the whole stream. A longer
+            stream gives a window of ``num_steps`` frames centred on
+            ``center`` (the middle frame by default, where the annotated
+            frame of Spike-Cityscapes and REDS lies); a shorter one is an
+            error naming the file and both numbers.
+        height, width: frame size of ``.dat`` files (other formats, and
+            ``.dat`` files with a ``.json`` side file, record it).
+        center: frame the window is centred on; ``None`` for the middle.
+
+    Added keys: ``img`` ``(H, W, T)`` uint8, ``img_shape``, ``ori_shape``,
+    ``num_steps``.
+    """
+
+    def __init__(self, num_steps: Optional[int] = None,
+                 height: Optional[int] = None, width: Optional[int] = None,
+                 center: Optional[int] = None):
+        super().__init__()
+        if num_steps is not None and num_steps < 1:
+            raise ValueError(f'num_steps must be >= 1, got {num_steps}')
+        self.num_steps = num_steps
+        self.height = height
+        self.width = width
+        self.center = center
+
+    def transform(self, results: dict) -> dict:
+        path = results['img_path']
+        total, _, _ = spike_shape(path, self.height, self.width)
+        length = total if self.num_steps is None else self.num_steps
+        if length > total:
+            raise ValueError(
+                f'{path}: the stream has T={total} frames but the config '
+                f'asks for num_steps={length}')
+        center = total // 2 if self.center is None else self.center
+        start = min(max(center - length // 2, 0), total - length)
+        spikes = load_spikes(path, self.height, self.width, start, length)
+        results['img'] = np.ascontiguousarray(spikes.transpose(1, 2, 0))
+        results['img_shape'] = spikes.shape[1:]
+        results['ori_shape'] = spikes.shape[1:]
+        results['num_steps'] = length
+        return results
+
+    def __repr__(self):
+        return (f'{self.__class__.__name__}(num_steps={self.num_steps}, '
+                f'height={self.height}, width={self.width}, '
+                f'center={self.center})')
+
+
+@TRANSFORMS.register_module()
+class SpikeRandomCrop(RandomCrop):
+    """Random crop of a spike stream and its label maps, over all ``T``.
+
+    The crop box is drawn as in MMSeg's ``RandomCrop``, including
+    ``cat_max_ratio`` (retry up to 10 times until no class covers more than
+    that share of the crop); ``ignore_index`` pixels are not counted. Streams
+    smaller than the crop are kept whole (the preprocessor pads them).
+    """
+
+    def transform(self, results: dict) -> dict:
+        _check_label_matches(results)
+        return super().transform(results)
+
+
+@TRANSFORMS.register_module()
+class SpikeRandomFlip(BaseTransform):
+    """Flip a spike stream and its label maps, over all ``T`` channels.
+
+    Horizontal and vertical flips are drawn independently.
+
+    Args:
+        prob: probability of each flip, or ``(p_horizontal, p_vertical)``.
+        direction: ``'horizontal'``, ``'vertical'`` or both (a sequence).
+
+    Added keys: ``flip`` (bool), ``flip_direction`` (``None``,
+    ``'horizontal'``, ``'vertical'`` or ``'diagonal'`` for both, as in mmcv).
+    """
+
+    def __init__(self, prob: Union[float, Sequence[float]] = 0.5,
+                 direction: Union[str, Sequence[str]] = ('horizontal',
+                                                         'vertical')):
+        super().__init__()
+        directions = [direction] if isinstance(direction, str) else list(
+            direction)
+        if not directions or any(d not in ('horizontal', 'vertical')
+                                 for d in directions):
+            raise ValueError(
+                f"direction must be 'horizontal', 'vertical' or both, got "
+                f'{direction!r}')
+        probs = [prob] * len(directions) if np.isscalar(prob) else list(prob)
+        if len(probs) != len(directions) or any(not 0 <= p <= 1
+                                                for p in probs):
+            raise ValueError(
+                f'prob must be one probability or one per direction '
+                f'{directions}, each in [0, 1]; got {prob!r}')
+        self.probs = dict(zip(directions, probs))
+
+    def transform(self, results: dict) -> dict:
+        _check_label_matches(results)
+        flipped = [d for d, p in self.probs.items() if np.random.rand() < p]
+        axes = {'vertical': 0, 'horizontal': 1}
+        for direction in flipped:
+            axis = axes[direction]
+            results['img'] = np.flip(results['img'], axis=axis)
+            for key in results.get('seg_fields', []):
+                results[key] = np.flip(results[key], axis=axis)
+        results['img'] = np.ascontiguousarray(results['img'])
+        for key in results.get('seg_fields', []):
+            results[key] = np.ascontiguousarray(results[key])
+        results['flip'] = bool(flipped)
+        results['flip_direction'] = (None if not flipped else flipped[0]
+                                     if len(flipped) == 1 else 'diagonal')
+        return results
+
+    def __repr__(self):
+        return f'{self.__class__.__name__}(probs={self.probs})'

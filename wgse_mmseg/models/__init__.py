@@ -1,0 +1,4 @@
+from .data_preprocessor import SpikeSegDataPreProcessor
+from .wgse import WGSE, BandNetwork
+
+__all__ = ['WGSE', 'BandNetwork', 'SpikeSegDataPreProcessor']

@@ -1,0 +1,87 @@
+"""Batching of spike streams for MMSeg segmentors."""
+from typing import Any, Dict, List, Optional, Sequence
+
+import torch
+
+from mmseg.models.data_preprocessor import SegDataPreProcessor
+from mmseg.registry import MODELS
+
+__all__ = ['SpikeSegDataPreProcessor']
+
+
+@MODELS.register_module()
+class SpikeSegDataPreProcessor(SegDataPreProcessor):
+    """Batch ``T``-channel spike tensors and optionally enhance them.
+
+    Takes the packed samples of ``PackSegInputs`` (each ``(T, H, W)``, binary
+    ``uint8``/``bool``), casts them to float, pads them like
+    :class:`mmseg.models.SegDataPreProcessor` (spikes with ``pad_val``, i.e.
+    no spike; labels with ``seg_pad_val``, the ignore index) and stacks them
+    into ``(B, T, H, W)``. If ``enhancer`` is given (for example
+    ``dict(type='WGSE')``), its output ``(B, C, H, W)`` is what the backbone
+    receives; its parameters train with the model.
+
+    Args:
+        num_steps: the ``T`` the model is built for (the backbone's
+            ``in_channels``); a batch with another ``T`` fails at once with a
+            message naming both numbers and the file. ``None`` skips the
+            check.
+        enhancer: config of a registered module mapping ``(B, T, H, W)`` to
+            ``(B, C, H, W)``.
+        size, size_divisor, pad_val, seg_pad_val, batch_augments, test_cfg:
+            as in ``SegDataPreProcessor``. No mean/std normalisation and no
+            colour conversion: spikes have neither.
+    """
+
+    def __init__(self,
+                 num_steps: Optional[int] = None,
+                 enhancer: Optional[dict] = None,
+                 size: Optional[Sequence[int]] = None,
+                 size_divisor: Optional[int] = None,
+                 pad_val: float = 0,
+                 seg_pad_val: int = 255,
+                 batch_augments: Optional[List[dict]] = None,
+                 test_cfg: Optional[dict] = None):
+        super().__init__(
+            mean=None,
+            std=None,
+            size=size,
+            size_divisor=size_divisor,
+            pad_val=pad_val,
+            seg_pad_val=seg_pad_val,
+            bgr_to_rgb=False,
+            rgb_to_bgr=False,
+            batch_augments=batch_augments,
+            test_cfg=test_cfg)
+        if num_steps is not None and num_steps < 1:
+            raise ValueError(f'num_steps must be >= 1, got {num_steps}')
+        self.num_steps = num_steps
+        self.enhancer = MODELS.build(enhancer) if enhancer else None
+
+    def _check_num_steps(self, inputs: Sequence[torch.Tensor],
+                         data_samples: Optional[list]) -> None:
+        if self.num_steps is None:
+            return
+        for index, spikes in enumerate(inputs):
+            if spikes.dim() != 3 or spikes.shape[0] != self.num_steps:
+                source = 'sample %d' % index
+                if data_samples is not None and 'img_path' in data_samples[
+                        index]:
+                    source = data_samples[index].img_path
+                found = (f'T={spikes.shape[0]}' if spikes.dim() == 3 else
+                         f'shape {tuple(spikes.shape)}')
+                raise ValueError(
+                    f'{source}: spike stream has {found} but the model is '
+                    f'built for T={self.num_steps} '
+                    f'(model.data_preprocessor.num_steps, which must equal '
+                    f'model.backbone.in_channels); set num_steps in the '
+                    f'config, e.g. --cfg-options num_steps='
+                    f'{spikes.shape[0] if spikes.dim() == 3 else "T"}')
+
+    def forward(self, data: dict, training: bool = False) -> Dict[str, Any]:
+        """``data['inputs']``: list of ``(T, H, W)``; returns ``(B, C, H, W)``."""
+        self._check_num_steps(data['inputs'], data.get('data_samples'))
+        data = super().forward(data, training)
+        if self.enhancer is not None:
+            data['inputs'] = self.enhancer(data['inputs'])
+        return data
