@@ -1,0 +1,55 @@
+# Spike-Cityscapes: Cityscapes scenes as spike streams (README, "Spike-Cityscapes").
+#
+# The settings every T-dependent field derives from are set here, once:
+#   num_steps  T, spike frames per sample (the paper: 129)
+#   data_root  the dataset root
+#   crop_size  training crop (H, W) (the paper: 256 x 512)
+# Override them with `--cfg-options num_steps=41 data_root=DIR crop_size=128,256`
+# (tools/train.py, tools/test.py and tools/demo.py pass them in as the
+# environment variables WGSE_NUM_STEPS, WGSE_DATA_ROOT and WGSE_CROP_SIZE, which
+# mmengine substitutes below), so the loader, the preprocessor and the
+# backbone's in_channels always agree.
+custom_imports = dict(imports=['wgse_mmseg'], allow_failed_imports=False)
+
+dataset_type = 'SpikeCityscapesDataset'
+data_root = '{{$WGSE_DATA_ROOT:data/spike_cityscapes}}'
+num_steps = int('{{$WGSE_NUM_STEPS:129}}')
+crop_size = tuple(map(int, '{{$WGSE_CROP_SIZE:256,512}}'.split(',')))
+
+train_pipeline = [
+    dict(type='LoadSpikeFromFile', num_steps=num_steps),
+    dict(type='LoadAnnotations'),
+    dict(type='SpikeRandomCrop', crop_size=crop_size, cat_max_ratio=0.75),
+    dict(type='SpikeRandomFlip', prob=0.5,
+         direction=('horizontal', 'vertical')),
+    dict(type='PackSegInputs'),
+]
+test_pipeline = [
+    dict(type='LoadSpikeFromFile', num_steps=num_steps),
+    dict(type='LoadAnnotations'),
+    dict(type='PackSegInputs'),
+]
+train_dataloader = dict(
+    batch_size=4,
+    num_workers=2,
+    persistent_workers=True,
+    sampler=dict(type='DefaultSampler', shuffle=True),
+    dataset=dict(
+        type=dataset_type,
+        data_root=data_root,
+        data_prefix=dict(img_path='spike/train', seg_map_path='gtFine/train'),
+        pipeline=train_pipeline))
+val_dataloader = dict(
+    batch_size=1,
+    num_workers=2,
+    persistent_workers=True,
+    sampler=dict(type='DefaultSampler', shuffle=False),
+    dataset=dict(
+        type=dataset_type,
+        data_root=data_root,
+        data_prefix=dict(img_path='spike/val', seg_map_path='gtFine/val'),
+        pipeline=test_pipeline))
+test_dataloader = val_dataloader
+val_evaluator = dict(type='IoUMetric', iou_metrics=['mIoU'])
+test_evaluator = val_evaluator
+

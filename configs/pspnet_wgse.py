@@ -1,0 +1,26 @@
+# PSPNet-R50-D8 on Spike-Cityscapes with WGSE in front (the paper's setting:
+# T=129, crop 256x512, flips, batch 4, AdamW lr 1e-3 / wd 0.01, 10-epoch
+# warm-up, OHEM cross-entropy). No pretrained weights.
+_base_ = [
+    'mmseg::_base_/models/pspnet_r50-d8.py',
+    './_base_/datasets/spike_cityscapes.py',
+    './_base_/default_runtime.py',
+    './_base_/schedules/adamw_warmup_100e.py',
+]
+norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN needs distributed runs
+ohem = dict(type='OHEMPixelSampler', thresh=0.7, min_kept=100000)
+model = dict(
+    pretrained=None,
+    data_preprocessor=dict(
+        _delete_=True,
+        type='SpikeSegDataPreProcessor',
+        num_steps={{_base_.num_steps}},
+        size={{_base_.crop_size}},
+        pad_val=0,
+        seg_pad_val=255,
+        enhancer=dict(type='WGSE', dim=1, wavelet='db8', level=5,
+                      mode='zero', kernel_size=3, hidden_channels=32)),
+    backbone=dict(in_channels={{_base_.num_steps}}, norm_cfg=norm_cfg),
+    decode_head=dict(norm_cfg=norm_cfg, sampler=ohem),
+    auxiliary_head=dict(norm_cfg=norm_cfg, sampler=ohem))
+optim_wrapper = dict(optimizer=dict(lr=1e-3, weight_decay=0.01))
