@@ -25,6 +25,8 @@ SPIKE_SETTINGS = {
 
 def _as_env_value(key: str, value) -> str:
     if key == 'crop_size':
+        if isinstance(value, str):
+            value = value.split(',')
         sizes = [value] * 2 if isinstance(value, int) else list(value)
         if len(sizes) != 2:
             raise ValueError(f'crop_size must be H,W; got {value!r}')

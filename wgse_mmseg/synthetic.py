@@ -43,17 +43,18 @@ def _background(rng: np.random.Generator, height: int,
     _box(image, label, 0, horizon, 0, width, rng.uniform(0.8, 0.95), SKY)
     x = 0
     while x < width:  # a row of buildings with lit windows
-        w = int(width * rng.uniform(0.12, 0.3))
+        w = max(int(width * rng.uniform(0.12, 0.3)), 1)
         top = int(horizon * rng.uniform(0.1, 0.6))
         _box(image, label, top, horizon, x, x + w, rng.uniform(0.3, 0.55),
              BUILDING)
-        for wy in range(top + 4, horizon - 6, 10):
+        for wy in range(top + 4, horizon - 6, 10):  # none on tiny frames
             for wx in range(x + 3, x + w - 6, 9):
                 image[wy:wy + 4, wx:wx + 4] = rng.uniform(0.6, 0.9)
         x += w
     for _ in range(rng.integers(1, 4)):  # trees in front of the buildings
-        cx, cy = rng.uniform(0, width), horizon - rng.uniform(5, horizon / 3)
-        axes = (int(rng.uniform(8, width / 10)), int(rng.uniform(8, 25)))
+        cx, cy = rng.uniform(0, width), horizon * rng.uniform(0.65, 0.95)
+        axes = (1 + int(width * rng.uniform(0.03, 0.1)),
+                1 + int(height * rng.uniform(0.06, 0.2)))
         mask = np.zeros_like(label)
         cv2.ellipse(mask, (int(cx), int(cy)), axes, 0, 0, 360, 1, -1)
         texture = 0.3 + 0.1 * rng.random((height, width))

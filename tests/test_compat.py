@@ -1,0 +1,81 @@
+"""mmcv.ops fallback (mmcv-lite) and weights-only loading of checkpoints."""
+import importlib.util
+import io
+import pickle
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+from mmengine.logging import HistoryBuffer, MessageHub
+
+import wgse_mmseg  # noqa: F401
+from wgse_mmseg.compat.checkpoint_safety import history_buffer_statistic
+from wgse_mmseg.compat.mmcv_ops_fallback import MissingCompiledOpError
+
+HAS_COMPILED_OPS = importlib.util.find_spec('mmcv._ext') is not None
+
+
+@pytest.mark.skipif(HAS_COMPILED_OPS, reason='full mmcv: nothing replaced')
+def test_fallback_supplies_mmcv_point_sample_and_mmseg_imports():
+    import mmcv.ops
+    import mmseg.models  # noqa: F401  imports mmcv.ops at module level
+    assert mmcv.ops.__wgse_fallback__
+    features = torch.arange(2 * 3 * 4 * 5, dtype=torch.float32).reshape(
+        2, 3, 4, 5)
+    points = torch.rand(2, 7, 2)
+    got = mmcv.ops.point_sample(features, points, align_corners=False)
+    # point_sample maps [0, 1] points onto grid_sample's [-1, 1]
+    want = F.grid_sample(features, (2 * points - 1).unsqueeze(2),
+                         align_corners=False).squeeze(3)
+    torch.testing.assert_close(got, want)
+
+
+@pytest.mark.skipif(HAS_COMPILED_OPS, reason='full mmcv: nothing replaced')
+def test_compiled_only_ops_import_but_fail_clearly_on_use():
+    from mmcv.ops import CrissCrossAttention, sigmoid_focal_loss
+    with pytest.raises(MissingCompiledOpError, match='CrissCrossAttention'):
+        CrissCrossAttention(16)
+    with pytest.raises(MissingCompiledOpError, match='MMCV=full'):
+        sigmoid_focal_loss(torch.zeros(1, 2), torch.zeros(1))
+
+
+@pytest.mark.skipif(not HAS_COMPILED_OPS, reason='needs full mmcv')
+def test_full_mmcv_is_left_alone():
+    import mmcv.ops
+    assert not getattr(mmcv.ops, '__wgse_fallback__', False)
+
+
+def test_mmengine_checkpoint_contents_load_weights_only():
+    hub = MessageHub.get_instance('wgse_checkpoint_test')
+    for value in (1.0, 2.5, np.float64(3.0)):
+        hub.update_scalar('train/loss', value)
+    checkpoint = dict(
+        state_dict={'w': torch.ones(2)},
+        message_hub=hub.state_dict(),
+        meta=dict(epoch=np.int64(3), array=np.arange(3.0)))
+    buffer = io.BytesIO()
+    torch.save(checkpoint, buffer)
+    buffer.seek(0)
+    loaded = torch.load(buffer, weights_only=True)
+    logs = loaded['message_hub']['log_scalars']['train/loss']
+    assert isinstance(logs, HistoryBuffer)
+    assert logs.mean() == pytest.approx(6.5 / 3)
+
+
+class _Payload:
+    """Pickles as ``getattr(HistoryBuffer, '__init__')``: not a statistic."""
+
+    def __reduce__(self):
+        return getattr, (HistoryBuffer, '__init__')
+
+
+def test_getattr_stays_restricted_to_history_buffer_statistics():
+    assert history_buffer_statistic(HistoryBuffer, 'min') is HistoryBuffer.min
+    with pytest.raises(pickle.UnpicklingError):
+        history_buffer_statistic(HistoryBuffer, '__init__')
+    buffer = io.BytesIO()
+    torch.save({'x': _Payload()}, buffer)
+    buffer.seek(0)
+    with pytest.raises(pickle.UnpicklingError, match='getattr'):
+        torch.load(buffer, weights_only=True)
