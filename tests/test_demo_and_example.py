@@ -1,0 +1,141 @@
+"""The worked example config (DeepLabV3+-R18 + WGSE) and tools/demo.py."""
+import importlib.util
+import os.path as osp
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+import wgse_mmseg  # noqa: F401  (registers the spike modules)
+from mmengine.registry import init_default_scope
+from mmengine.structures import PixelData
+from mmseg.registry import MODELS
+from mmseg.structures import SegDataSample
+from wgse_mmseg.config import load_config
+from wgse_mmseg.datasets import SpikeCityscapesDataset
+from wgse_mmseg.io import save_spikes
+
+ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+EXAMPLE = osp.join(ROOT, 'configs', 'examples', 'deeplabv3plus_r18_wgse.py')
+DEMO = osp.join(ROOT, 'tools', 'demo.py')
+NUM_STEPS = 9  # small T keeps WGSE fast on CPU
+CROP = (32, 64)
+WGSE_PARAMS = 19974  # 6 bands (db8, level 5) x 3329 parameters each
+
+
+def _build(**options):
+    cfg = load_config(EXAMPLE, dict(num_steps=NUM_STEPS, crop_size=CROP,
+                                    **options))
+    init_default_scope(cfg.get('default_scope', 'mmseg'))
+    return cfg, MODELS.build(cfg.model)
+
+
+def _count(model):
+    return sum(p.numel() for p in model.parameters())
+
+
+def _spikes(steps, height, width, seed=0):
+    rng = np.random.default_rng(seed)
+    return (rng.random((steps, height, width)) < 0.2).astype(np.uint8)
+
+
+def test_example_config_trains_on_spikes():
+    torch.manual_seed(0)
+    cfg, model = _build()
+    assert cfg.model.backbone.in_channels == NUM_STEPS
+    assert model.data_preprocessor.num_steps == NUM_STEPS
+    assert type(model.data_preprocessor).__name__ == \
+        'SpikeSegDataPreProcessor'
+    assert type(model.data_preprocessor.enhancer).__name__ == 'WGSE'
+
+    inputs, samples = [], []
+    for index in range(2):
+        inputs.append(torch.from_numpy(_spikes(NUM_STEPS, *CROP, index)))
+        sample = SegDataSample()
+        sample.gt_sem_seg = PixelData(data=torch.randint(0, 19, (1, *CROP)))
+        sample.set_metainfo(dict(img_shape=CROP, ori_shape=CROP))
+        samples.append(sample)
+    model.train()
+    data = model.data_preprocessor(dict(inputs=inputs, data_samples=samples),
+                                   True)
+    assert data['inputs'].shape == (2, NUM_STEPS, *CROP)
+    losses = model.loss(data['inputs'], data['data_samples'])
+    loss = sum(v for k, v in losses.items() if 'loss' in k)
+    assert torch.isfinite(loss)
+    loss.backward()
+    for name, param in model.named_parameters():
+        if name.startswith(('data_preprocessor.enhancer', 'backbone.stem')):
+            assert param.grad is not None, name
+
+    _, plain = _build(**{'model.data_preprocessor.enhancer': None})
+    assert plain.data_preprocessor.enhancer is None
+    assert _count(model) - _count(plain) == WGSE_PARAMS
+
+
+@pytest.fixture(scope='module')
+def checkpoint(tmp_path_factory):
+    """An untrained example model saved as a checkpoint for T=NUM_STEPS."""
+    torch.manual_seed(0)
+    _, model = _build()
+    path = tmp_path_factory.mktemp('ckpt') / 'model.pth'
+    meta = dict(classes=SpikeCityscapesDataset.METAINFO['classes'],
+                palette=SpikeCityscapesDataset.METAINFO['palette'])
+    torch.save({'state_dict': model.state_dict(),
+                'meta': {'dataset_meta': meta}}, path)
+    return path
+
+
+def _demo(*args, cwd):
+    return subprocess.run(
+        [sys.executable, DEMO, *map(str, args), '--device', 'cpu',
+         '--cfg-options', f'num_steps={NUM_STEPS}'],
+        cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def test_demo_writes_overlay(tmp_path, checkpoint):
+    height, width = 24, 40  # not the crop size: inference is on whole frames
+    spike_file = tmp_path / 'stream.spk'
+    save_spikes(str(spike_file), _spikes(NUM_STEPS + 6, height, width))
+    out = tmp_path / 'out' / 'overlay.png'
+    proc = _demo(spike_file, EXAMPLE, checkpoint, '--out-file', out,
+                 cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert str(out) in proc.stdout
+    image = cv2.imread(str(out))
+    assert image is not None and image.shape == (height, width, 3)
+    assert not list((tmp_path / 'out').glob('.tmp-*'))  # no temp left over
+
+
+def test_demo_rejects_short_stream(tmp_path, checkpoint):
+    spike_file = tmp_path / 'short.spk'
+    save_spikes(str(spike_file), _spikes(NUM_STEPS - 4, 16, 16))
+    proc = _demo(spike_file, EXAMPLE, checkpoint, cwd=tmp_path)
+    assert proc.returncode != 0
+    assert str(spike_file) in proc.stderr
+    assert f'T={NUM_STEPS - 4}' in proc.stderr
+    assert f'num_steps={NUM_STEPS}' in proc.stderr
+    assert 'Traceback' not in proc.stderr
+    assert not (tmp_path / 'short_seg.png').exists()
+
+
+def test_demo_grey_image_and_blend():
+    spec = importlib.util.spec_from_file_location('wgse_demo', DEMO)
+    demo = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(demo)
+
+    spikes = torch.zeros(4, 2, 3, dtype=torch.uint8)
+    spikes[:, 0, 0] = 1  # rate 1 -> white
+    spikes[:2, 1, 2] = 1  # rate 1/2 -> mid grey
+    grey = demo.rate_image(spikes)
+    assert grey.dtype == np.uint8
+    assert grey[0, 0] == 255 and grey[1, 2] == 128 and grey[0, 1] == 0
+    assert demo.rate_image(torch.zeros(4, 2, 3, dtype=torch.uint8)).max() == 0
+
+    labels = np.zeros((2, 3), np.int64)
+    palette = [[200, 100, 0]]
+    assert (demo.overlay(grey, labels, palette, 0.0) == grey[...,
+                                                             None]).all()
+    assert (demo.overlay(grey, labels, palette, 1.0) == palette[0]).all()

@@ -1,0 +1,174 @@
+"""Segment one spike stream and save a colour overlay (MMSeg's image demo).
+
+    python tools/demo.py SPIKE_FILE CONFIG CHECKPOINT [--out-file PATH]
+        [--device cpu] [--opacity 0.5] [--height H --width W]
+        [--cfg-options num_steps=41 ...]
+
+``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.io` reads (``.spk``, ``.npy``,
+``.npz``; ``.dat`` needs ``--height``/``--width`` or a ``<file>.json`` side
+file). It goes through the config's test pipeline, so ``LoadSpikeFromFile``
+takes the window of ``num_steps`` frames centred on the middle frame, exactly
+as in testing; a stream shorter than ``num_steps`` is an error naming the file
+and both numbers (``--cfg-options num_steps=T`` sets the model's ``T``).
+
+The prediction is painted in the dataset's palette (from the checkpoint's
+``dataset_meta``, else Spike-Cityscapes') over a grey image of the stream's
+spike rate in that window (the highest rate is white), blended with
+``--opacity``, and written as a PNG to ``--out-file`` (default
+``<stem>_seg.png`` in the current directory). The path is printed.
+"""
+import argparse
+import copy
+import os.path as osp
+import sys
+
+import cv2
+import numpy as np
+import torch
+from mmengine.config import DictAction
+
+import wgse_mmseg  # noqa: F401  (registers the spike modules; before mmseg)
+from mmengine.dataset import Compose
+from mmengine.registry import init_default_scope
+from mmengine.runner import load_checkpoint
+from mmseg.apis import init_model
+from wgse_mmseg.config import load_config
+from wgse_mmseg.datasets import SpikeCityscapesDataset
+from wgse_mmseg.io import atomic_output
+
+
+def parse_args():
+    parser = argparse.ArgumentParser(
+        description='Segment a spike stream and save a colour overlay')
+    parser.add_argument('spikes', help='spike file (.dat, .spk, .npy, .npz)')
+    parser.add_argument('config', help='config file')
+    parser.add_argument('checkpoint', help='checkpoint file')
+    parser.add_argument(
+        '--out-file', help='output PNG (default: <stem>_seg.png)')
+    parser.add_argument(
+        '--device', default='cuda:0' if torch.cuda.is_available() else 'cpu',
+        help='device used for inference (default: cuda:0 if available)')
+    parser.add_argument(
+        '--opacity', type=float, default=0.5,
+        help='opacity of the painted segmentation map, in [0, 1]')
+    parser.add_argument('--height', type=int,
+                        help='frame height of a .dat file')
+    parser.add_argument('--width', type=int, help='frame width of a .dat file')
+    parser.add_argument(
+        '--cfg-options', nargs='+', action=DictAction,
+        help='override config settings, key=value; num_steps, data_root and '
+        'crop_size re-derive every field that depends on them')
+    args = parser.parse_args()
+    if not 0 <= args.opacity <= 1:
+        parser.error(f'--opacity must be in [0, 1], got {args.opacity}')
+    if (args.height is None) != (args.width is None):
+        parser.error('--height and --width go together')
+    if args.out_file is None:
+        stem = osp.splitext(osp.basename(args.spikes))[0]
+        args.out_file = f'{stem}_seg.png'
+    return args
+
+
+def build_pipeline(cfg, height=None, width=None) -> Compose:
+    """The config's test pipeline without label loading.
+
+    ``height``/``width`` are given to ``LoadSpikeFromFile`` (for ``.dat``).
+    """
+    pipeline = cfg.get('test_pipeline') or cfg.test_dataloader.dataset.pipeline
+    transforms = []
+    for transform in copy.deepcopy(pipeline):
+        if transform['type'] == 'LoadAnnotations':
+            continue
+        if transform['type'] == 'LoadSpikeFromFile' and height is not None:
+            transform.update(height=height, width=width)
+        transforms.append(transform)
+    if not any(t['type'] == 'LoadSpikeFromFile' for t in transforms):
+        raise ValueError('the config\'s test pipeline has no '
+                         'LoadSpikeFromFile; is it a spike config?')
+    return Compose(transforms)
+
+
+def load_model(cfg, checkpoint: str, device: str):
+    """``mmseg.apis.init_model``, but refusing a checkpoint that does not fit.
+
+    ``init_model`` loads non-strictly, so a checkpoint trained for another
+    ``num_steps`` would leave the backbone's stem at random weights with only
+    a logged warning.
+    """
+    model = init_model(cfg, None, device='cpu')
+    try:
+        state = load_checkpoint(model, checkpoint, map_location='cpu',
+                                strict=True)
+    except RuntimeError as err:
+        raise ValueError(
+            f'{checkpoint}: does not fit the model built from the config '
+            f'(num_steps={cfg.num_steps}; a checkpoint trained with another '
+            f'T needs --cfg-options num_steps=T): {err}') from err
+    meta = state.get('meta', {}).get('dataset_meta') or {}
+    model.dataset_meta = {
+        'classes': meta.get('classes',
+                            SpikeCityscapesDataset.METAINFO['classes']),
+        'palette': meta.get('palette',
+                            SpikeCityscapesDataset.METAINFO['palette']),
+    }
+    return model.to(device).eval()
+
+
+def rate_image(spikes: torch.Tensor) -> np.ndarray:
+    """``(T, H, W)`` spikes -> ``(H, W)`` uint8 spike rate, max rate white."""
+    rate = spikes.float().mean(0).cpu().numpy()
+    peak = rate.max()
+    grey = np.clip(rate / peak, 0, 1) if peak > 0 else rate
+    return np.round(grey * 255).astype(np.uint8)
+
+
+def overlay(grey: np.ndarray, labels: np.ndarray, palette,
+            opacity: float) -> np.ndarray:
+    """Blend the palette colours of ``labels`` over ``grey``; RGB uint8."""
+    palette = np.asarray(palette, dtype=np.uint8)
+    if labels.max() >= len(palette):  # more classes than named colours
+        extra = np.random.default_rng(42).integers(
+            0, 256, (int(labels.max()) + 1 - len(palette), 3), np.uint8)
+        palette = np.concatenate([palette, extra])
+    if grey.shape != labels.shape:  # a test pipeline that resizes
+        grey = cv2.resize(grey, labels.shape[::-1],
+                          interpolation=cv2.INTER_LINEAR)
+    colour = palette[labels].astype(np.float32)
+    blended = (1 - opacity) * grey[..., None].astype(np.float32) + \
+        opacity * colour
+    return np.round(blended).astype(np.uint8)
+
+
+def write_png(path: str, rgb: np.ndarray) -> None:
+    """Write ``rgb`` as a PNG; the file appears complete or not at all."""
+    ok, encoded = cv2.imencode('.png', rgb[..., ::-1])
+    if not ok:
+        raise RuntimeError(f'{path}: PNG encoding failed')
+    with atomic_output(path) as f:
+        f.write(encoded.tobytes())
+
+
+def main():
+    args = parse_args()
+    cfg = load_config(args.config, args.cfg_options)
+    init_default_scope(cfg.get('default_scope', 'mmseg'))
+    try:
+        # The stream is read first, so a file that does not fit fails fast.
+        data = build_pipeline(cfg, args.height, args.width)(
+            dict(img_path=args.spikes))
+        model = load_model(cfg, args.checkpoint, args.device)
+    except (ValueError, FileNotFoundError) as err:
+        sys.exit(f'{osp.basename(__file__)}: error: {err}')
+
+    batch = dict(inputs=[data['inputs']], data_samples=[data['data_samples']])
+    with torch.no_grad():
+        result = model.test_step(batch)[0]
+    labels = result.pred_sem_seg.data[0].cpu().numpy()
+    image = overlay(rate_image(data['inputs']), labels,
+                    model.dataset_meta['palette'], args.opacity)
+    write_png(args.out_file, image)
+    print(args.out_file)
+
+
+if __name__ == '__main__':
+    main()
