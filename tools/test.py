@@ -44,11 +44,13 @@ def main():
     elif cfg.get('work_dir', None) is None:
         cfg.work_dir = osp.join('./work_dirs',
                                 osp.splitext(osp.basename(args.config))[0])
-    cfg.load_from = args.checkpoint
     if args.out is not None:
         cfg.test_evaluator['output_dir'] = args.out
         cfg.test_evaluator['keep_results'] = True
     runner = Runner.from_cfg(cfg)
+    # Strict: a checkpoint made for another T (or model) must not be scored
+    # with some layers left at random initialisation.
+    runner.load_checkpoint(args.checkpoint, strict=True)
     runner.test()
 
 

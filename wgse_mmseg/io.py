@@ -22,17 +22,18 @@ requested window of frames (memory-mapped), and names the file and the
 expected sizes when the file does not fit. Writers write atomically: a
 temporary file beside the target, renamed into place when complete.
 """
+import contextlib
 import json
 import os
 import os.path as osp
 import struct
 import tempfile
-from typing import Optional, Tuple
+from typing import BinaryIO, Iterator, Optional, Tuple
 
 import numpy as np
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'SPIKE_EXTENSIONS']
+           'atomic_output', 'SPIKE_EXTENSIONS']
 
 SPIKE_EXTENSIONS = ('.dat', '.spk', '.npy', '.npz')
 _MAGIC = b'WGSESPK1'
@@ -42,6 +43,31 @@ _HEADER = struct.Struct('<8sIIII8x')  # magic, version, T, H, W, reserved
 
 class SpikeFileError(ValueError):
     """A spike file that cannot be read as asked; names the file."""
+
+
+@contextlib.contextmanager
+def atomic_output(path: str) -> Iterator[BinaryIO]:
+    """Open ``path`` for binary writing so that it appears whole or not at all.
+
+    Writes go to a temporary file beside ``path``, renamed over it when the
+    block ends without error (with the permissions ``open`` would give);
+    on error the temporary file is removed and ``path`` is untouched.
+    """
+    directory = osp.dirname(osp.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix='.tmp-',
+                               suffix=osp.splitext(path)[1])
+    try:
+        with os.fdopen(fd, 'wb') as f:
+            yield f
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600
+        os.replace(tmp, path)
+    except BaseException:
+        if osp.exists(tmp):
+            os.remove(tmp)
+        raise
 
 
 def _extension(path: str) -> str:
@@ -218,23 +244,13 @@ def save_spikes(path: str, spikes: np.ndarray) -> None:
         raise SpikeFileError(
             f'{path}: .dat needs height*width divisible by 8, got '
             f'{height}x{width}')
-    directory = osp.dirname(osp.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix='.tmp-',
-                               suffix=ext)
-    try:
-        with os.fdopen(fd, 'wb') as f:
-            if ext == '.dat':
-                f.write(_pack(spikes[:, ::-1]).tobytes())
-            elif ext == '.spk':
-                f.write(_HEADER.pack(_MAGIC, _VERSION, steps, height, width))
-                f.write(_pack(spikes).tobytes())
-            elif ext == '.npy':
-                np.save(f, spikes)
-            else:
-                np.savez_compressed(f, spikes=spikes)
-        os.replace(tmp, path)
-    except BaseException:
-        if osp.exists(tmp):
-            os.remove(tmp)
-        raise
+    with atomic_output(path) as f:
+        if ext == '.dat':
+            f.write(_pack(spikes[:, ::-1]).tobytes())
+        elif ext == '.spk':
+            f.write(_HEADER.pack(_MAGIC, _VERSION, steps, height, width))
+            f.write(_pack(spikes).tobytes())
+        elif ext == '.npy':
+            np.save(f, spikes)
+        else:
+            np.savez_compressed(f, spikes=spikes)

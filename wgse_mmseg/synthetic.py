@@ -7,16 +7,14 @@ spike stream by :func:`wgse_mmseg.simulation.simulate_spikes`, and labelled
 with Cityscapes train ids at the middle instant, where the stream is centred.
 Everything is seeded: the same arguments give the same files.
 """
-import os
 import os.path as osp
-import tempfile
 from typing import Tuple
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .io import save_spikes
+from .io import atomic_output, save_spikes
 from .simulation import simulate_spikes
 
 __all__ = ['render_street_scene', 'make_synthetic_dataset']
@@ -121,18 +119,11 @@ def render_street_scene(rng: np.random.Generator, height: int, width: int,
 
 
 def _write_png(path: str, label: np.ndarray) -> None:
-    directory = osp.dirname(path)
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix='.tmp-', suffix='.png')
-    os.close(fd)
-    try:
-        if not cv2.imwrite(tmp, label):
-            raise OSError(f'could not write {path}')
-        os.replace(tmp, path)
-    except BaseException:
-        if osp.exists(tmp):
-            os.remove(tmp)
-        raise
+    ok, encoded = cv2.imencode('.png', label)
+    if not ok:
+        raise OSError(f'{path}: PNG encoding failed')
+    with atomic_output(path) as f:
+        f.write(encoded.tobytes())
 
 
 def make_synthetic_dataset(out_dir: str, num_train: int = 48,
