@@ -1,0 +1,394 @@
+"""Spike file reading and writing (``wgse_mmseg.io``)."""
+import json
+import os
+import os.path as osp
+import re
+import struct
+import tempfile
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import wgse_mmseg.io as spike_io
+from wgse_mmseg.io import SpikeFileError, load_spikes, save_spikes, spike_shape
+
+
+def _random_spikes(shape, seed=0, p=0.3):
+    return (np.random.default_rng(seed).random(shape) < p).astype(np.uint8)
+
+
+def _path_in_message(path):
+    return re.escape(str(path))
+
+
+# ------------------------------------------------------------ round trips
+@st.composite
+def _streams(draw, dat=False):
+    steps = draw(st.integers(1, 12))
+    if dat:
+        height = draw(st.integers(1, 8))
+        # height * width must be a multiple of 8 for .dat
+        step = 8 // np.gcd(height, 8)
+        width = step * draw(st.integers(1, 24 // step + 1))
+    else:
+        height = draw(st.integers(1, 9))
+        width = draw(st.integers(1, 9))
+    seed = draw(st.integers(0, 2**32 - 1))
+    p = draw(st.sampled_from([0.0, 0.3, 1.0]))
+    return _random_spikes((steps, height, width), seed, p)
+
+
+@given(spikes=_streams(dat=True))
+def test_round_trip_dat(spikes):
+    steps, height, width = spikes.shape
+    with tempfile.TemporaryDirectory() as tmp:
+        path = osp.join(tmp, 'a.dat')
+        save_spikes(path, spikes)
+        assert osp.getsize(path) == steps * height * width // 8
+        loaded = load_spikes(path, height=height, width=width)
+        assert loaded.dtype == np.uint8
+        np.testing.assert_array_equal(loaded, spikes)
+        assert spike_shape(path, height, width) == spikes.shape
+
+
+@pytest.mark.parametrize('ext', ['.spk', '.npy', '.npz'])
+@given(spikes=_streams())
+def test_round_trip_self_describing(ext, spikes):
+    with tempfile.TemporaryDirectory() as tmp:
+        path = osp.join(tmp, 'a' + ext)
+        save_spikes(path, spikes)
+        loaded = load_spikes(path)
+        assert loaded.dtype == np.uint8
+        assert loaded.flags['C_CONTIGUOUS']
+        np.testing.assert_array_equal(loaded, spikes)
+        assert tuple(spike_shape(path)) == spikes.shape
+
+
+def test_spk_size_and_header(tmp_path):
+    spikes = _random_spikes((5, 3, 7), seed=1)  # 21 pixels -> 3 bytes
+    path = tmp_path / 's.spk'
+    save_spikes(str(path), spikes)
+    raw = path.read_bytes()
+    assert len(raw) == 32 + 5 * 3
+    magic, version, steps, height, width = struct.unpack('<8sIIII', raw[:24])
+    assert (magic, version, steps, height, width) == (b'WGSESPK1', 1, 5, 3, 7)
+    assert raw[24:32] == bytes(8)
+    # .spk frames are stored upright, LSB first.
+    expected = np.packbits(spikes.reshape(5, -1), axis=1, bitorder='little')
+    assert raw[32:] == expected.tobytes()
+
+
+def test_dat_side_file(tmp_path):
+    spikes = _random_spikes((4, 6, 4), seed=2)
+    path = str(tmp_path / 'b.dat')
+    save_spikes(path, spikes)
+    with open(path + '.json', 'w') as f:
+        json.dump({'height': 6, 'width': 4}, f)
+    np.testing.assert_array_equal(load_spikes(path), spikes)
+    assert spike_shape(path) == (4, 6, 4)
+    # Explicit arguments win over the side file.
+    assert spike_shape(path, height=3, width=8) == (4, 3, 8)
+
+
+@pytest.mark.parametrize('ext', ['.dat', '.spk', '.npy', '.npz'])
+@pytest.mark.parametrize('start, length', [
+    (0, None), (0, 1), (3, 4), (5, None), (9, 1), (0, 10), (2, 8)])
+def test_windowed_read_equals_slicing(tmp_path, ext, start, length):
+    spikes = _random_spikes((10, 4, 6), seed=3)
+    path = str(tmp_path / ('w' + ext))
+    save_spikes(path, spikes)
+    kwargs = dict(height=4, width=6) if ext == '.dat' else {}
+    got = load_spikes(path, start=start, length=length, **kwargs)
+    stop = 10 if length is None else start + length
+    np.testing.assert_array_equal(got, spikes[start:stop])
+
+
+def test_npz_keys(tmp_path):
+    spikes = _random_spikes((3, 2, 2), seed=4)
+    single = str(tmp_path / 'single.npz')
+    np.savez(single, other=spikes)
+    np.testing.assert_array_equal(load_spikes(single), spikes)
+    named = str(tmp_path / 'named.npz')
+    np.savez(named, spikes=spikes, extra=np.zeros(3))
+    np.testing.assert_array_equal(load_spikes(named), spikes)
+    ambiguous = str(tmp_path / 'ambiguous.npz')
+    np.savez(ambiguous, a=spikes, b=spikes)
+    with pytest.raises(SpikeFileError, match=_path_in_message(ambiguous)):
+        load_spikes(ambiguous)
+
+
+def test_npy_bool_and_int_arrays_accepted(tmp_path):
+    spikes = _random_spikes((3, 2, 4), seed=5)
+    for dtype in (bool, np.int64, np.float32):
+        path = str(tmp_path / f'x_{np.dtype(dtype).name}.npy')
+        np.save(path, spikes.astype(dtype))
+        got = load_spikes(path)
+        assert got.dtype == np.uint8
+        np.testing.assert_array_equal(got, spikes)
+
+
+# ------------------------------------------------------ .dat bit layout
+# Hand-computed: the stored frame is the upright frame flipped vertically,
+# so upright (row r, col c) is stored at row H-1-r; pixel k = row*W + col of
+# the stored frame is bit k%8 of byte k//8 of its frame; frame t starts at
+# byte t*H*W/8.
+@pytest.mark.parametrize('shape, t, r, c, byte_index, byte_value', [
+    # H=4, W=6 (3 bytes per frame); stored row 3, k=3*6+3=21 -> byte 2 of
+    # frame 2 (offset 6), bit 5.
+    ((3, 4, 6), 2, 0, 3, 6 + 2, 1 << 5),
+    # stored row 0, k=0 -> byte 0, bit 0.
+    ((3, 4, 6), 0, 3, 0, 0, 1 << 0),
+    # stored row 1, k=1*6+5=11 -> byte 1 of frame 1 (offset 3), bit 3.
+    ((3, 4, 6), 1, 2, 5, 3 + 1, 1 << 3),
+    # H=2, W=8: stored row 1, k=8+7=15 -> byte 1, bit 7.
+    ((1, 2, 8), 0, 0, 7, 1, 1 << 7),
+    # H=2, W=8: stored row 0, k=2 -> byte 0, bit 2.
+    ((1, 2, 8), 0, 1, 2, 0, 1 << 2),
+])
+def test_dat_bit_layout(tmp_path, shape, t, r, c, byte_index, byte_value):
+    spikes = np.zeros(shape, np.uint8)
+    spikes[t, r, c] = 1
+    path = str(tmp_path / 'one.dat')
+    save_spikes(path, spikes)
+    expected = bytearray(shape[0] * shape[1] * shape[2] // 8)
+    expected[byte_index] = byte_value
+    with open(path, 'rb') as f:
+        assert f.read() == bytes(expected)
+    # And the reader maps the hand-written bytes back to (t, r, c).
+    raw_path = str(tmp_path / 'hand.dat')
+    with open(raw_path, 'wb') as f:
+        f.write(bytes(expected))
+    loaded = load_spikes(raw_path, height=shape[1], width=shape[2])
+    assert list(zip(*np.nonzero(loaded))) == [(t, r, c)]
+
+
+# ----------------------------------------------------------------- errors
+def _write_dat(tmp_path, name='d.dat', shape=(3, 4, 6)):
+    path = str(tmp_path / name)
+    save_spikes(path, _random_spikes(shape, seed=6))
+    return path
+
+
+def test_truncated_dat(tmp_path):
+    path = _write_dat(tmp_path)  # 3 frames x 3 bytes
+    with open(path, 'r+b') as f:
+        f.truncate(8)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path, height=4, width=6)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        spike_shape(path, height=4, width=6)
+
+
+def test_empty_dat(tmp_path):
+    path = str(tmp_path / 'empty.dat')
+    open(path, 'wb').close()
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path, height=4, width=6)
+
+
+def test_dat_frame_not_whole_bytes(tmp_path):
+    path = _write_dat(tmp_path)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path, height=3, width=3)
+
+
+def test_dat_without_geometry(tmp_path):
+    path = _write_dat(tmp_path)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path, height=4)
+
+
+def test_spk_truncated(tmp_path):
+    path = str(tmp_path / 't.spk')
+    save_spikes(path, _random_spikes((4, 3, 5), seed=7))
+    with open(path, 'r+b') as f:
+        f.truncate(osp.getsize(path) - 1)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+    with open(path, 'r+b') as f:
+        f.truncate(20)  # shorter than the 32-byte header
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+
+
+def test_spk_bad_magic(tmp_path):
+    path = str(tmp_path / 'm.spk')
+    save_spikes(path, _random_spikes((4, 3, 5), seed=8))
+    with open(path, 'r+b') as f:
+        f.write(b'NOTSPIKE')
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+
+
+def test_spk_bad_version(tmp_path):
+    path = str(tmp_path / 'v.spk')
+    save_spikes(path, _random_spikes((4, 3, 5), seed=8))
+    with open(path, 'r+b') as f:
+        f.seek(8)
+        f.write(struct.pack('<I', 2))
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+
+
+@pytest.mark.parametrize('ext', ['.dat', '.spk', '.npy', '.npz'])
+@pytest.mark.parametrize('start, length', [
+    (8, 5), (10, None), (10, 1), (-1, 2), (0, 0), (0, 11)])
+def test_window_past_end(tmp_path, ext, start, length):
+    path = str(tmp_path / ('e' + ext))
+    save_spikes(path, _random_spikes((10, 4, 6), seed=9))
+    kwargs = dict(height=4, width=6) if ext == '.dat' else {}
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path, start=start, length=length, **kwargs)
+
+
+def test_npy_values_outside_binary(tmp_path):
+    path = str(tmp_path / 'two.npy')
+    spikes = _random_spikes((3, 2, 4), seed=10)
+    spikes[1, 1, 1] = 2
+    np.save(path, spikes)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+    neg = str(tmp_path / 'neg.npz')
+    np.savez(neg, spikes=-spikes.astype(np.int8))
+    with pytest.raises(SpikeFileError, match=_path_in_message(neg)):
+        load_spikes(neg)
+
+
+@pytest.mark.parametrize('shape', [(4, 6), (2, 3, 4, 5), (7, )])
+def test_npy_wrong_ndim(tmp_path, shape):
+    path = str(tmp_path / 'nd.npy')
+    np.save(path, np.zeros(shape, np.uint8))
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+
+
+def test_npy_not_an_array(tmp_path):
+    path = str(tmp_path / 'junk.npy')
+    with open(path, 'wb') as f:
+        f.write(b'this is not a numpy file')
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+
+
+def test_unknown_extension(tmp_path):
+    path = str(tmp_path / 'x.txt')
+    with open(path, 'wb') as f:
+        f.write(bytes(24))
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path, height=4, width=6)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        save_spikes(path, np.zeros((1, 4, 6), np.uint8))
+
+
+def test_missing_file(tmp_path):
+    path = str(tmp_path / 'missing.spk')
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+
+
+def test_spike_file_error_is_value_error():
+    assert issubclass(SpikeFileError, ValueError)
+
+
+# ------------------------------------------------------- atomic writes
+def _listing(directory):
+    return sorted(os.listdir(directory))
+
+
+@pytest.mark.parametrize('ext', ['.dat', '.spk', '.npy', '.npz'])
+@pytest.mark.parametrize('bad', ['value_2', 'negative', 'ndim', 'empty'])
+def test_failed_save_leaves_nothing(tmp_path, ext, bad):
+    spikes = _random_spikes((2, 4, 6), seed=11).astype(np.int16)
+    if bad == 'value_2':
+        spikes[0, 0, 0] = 2
+    elif bad == 'negative':
+        spikes[0, 0, 0] = -1
+    elif bad == 'ndim':
+        spikes = spikes[0]
+    else:
+        spikes = spikes[:0]
+    path = str(tmp_path / ('bad' + ext))
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        save_spikes(path, spikes)
+    assert _listing(tmp_path) == []
+
+
+def test_dat_save_requires_whole_bytes(tmp_path):
+    path = str(tmp_path / 'odd.dat')
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        save_spikes(path, np.zeros((2, 3, 3), np.uint8))
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize('ext', ['.dat', '.spk'])
+def test_failure_mid_write_keeps_old_file_and_no_temp(tmp_path, monkeypatch,
+                                                       ext):
+    path = str(tmp_path / ('keep' + ext))
+    old = _random_spikes((2, 4, 6), seed=12)
+    save_spikes(path, old)
+    before = open(path, 'rb').read()
+
+    def broken_pack(spikes):
+        raise RuntimeError('disk full (simulated)')
+
+    monkeypatch.setattr(spike_io, '_pack', broken_pack)
+    with pytest.raises(RuntimeError, match='simulated'):
+        save_spikes(path, _random_spikes((2, 4, 6), seed=13))
+    assert _listing(tmp_path) == [osp.basename(path)]
+    assert open(path, 'rb').read() == before
+
+
+def test_save_creates_directories(tmp_path):
+    path = str(tmp_path / 'a' / 'b' / 'c.spk')
+    spikes = _random_spikes((2, 3, 3), seed=14)
+    save_spikes(path, spikes)
+    np.testing.assert_array_equal(load_spikes(path), spikes)
+    assert _listing(tmp_path / 'a' / 'b') == ['c.spk']
+
+
+# ------------------------------------------------------ shared REDS sample
+SAMPLE_DAT = ('data', 'reds_sample', 'spike', '203_part2_key_id151.dat')
+SAMPLE_GT = ('data', 'reds_sample', 'gt', '203_part2_key_id151.png')
+
+
+@pytest.fixture(scope='module')
+def reds_sample(request):
+    shared_dir = request.getfixturevalue('shared_dir')
+    dat = osp.join(shared_dir, *SAMPLE_DAT)
+    gt = osp.join(shared_dir, *SAMPLE_GT)
+    if not (osp.exists(dat) and osp.exists(gt)):
+        pytest.skip(f'REDS sample not found under {shared_dir}')
+    return dat, gt
+
+
+def _corr(a, b):
+    return float(np.corrcoef(a.ravel(), b.ravel())[0, 1])
+
+
+def test_reds_sample_reads_upright(reds_sample):
+    import cv2
+    dat, gt_path = reds_sample
+    assert spike_shape(dat, 250, 400) == (301, 250, 400)
+    window = load_spikes(dat, height=250, width=400, start=130, length=41)
+    assert window.shape == (41, 250, 400)
+    assert set(np.unique(window)) <= {0, 1}
+    image = np.clip(window.mean(axis=0) / 0.6, 0, 1)
+    gt = cv2.imread(gt_path, cv2.IMREAD_GRAYSCALE)
+    assert gt is not None and gt.shape == (250, 400)
+    gt = gt.astype(np.float64) / 255
+    assert _corr(image, gt) > 0.9
+    assert _corr(image[::-1], gt) < 0.5
+
+
+def test_reds_sample_rewrite_is_byte_identical(reds_sample, tmp_path):
+    dat, _ = reds_sample
+    spikes = load_spikes(dat, height=250, width=400)
+    assert spikes.shape == (301, 250, 400)
+    out = str(tmp_path / 'copy.dat')
+    save_spikes(out, spikes)
+    with open(dat, 'rb') as f1, open(out, 'rb') as f2:
+        assert f1.read() == f2.read()
