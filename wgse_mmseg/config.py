@@ -8,12 +8,17 @@ the file is parsed. ``--cfg-options num_steps=41`` can therefore not be a
 plain merge after parsing: :func:`load_config` turns these keys into the
 environment variables the config reads, then merges the rest as usual.
 """
+import argparse
 import os
+import os.path as osp
 from typing import Dict, Optional
 
-from mmengine.config import Config
+from mmengine.config import Config, DictAction
 
-__all__ = ['SPIKE_SETTINGS', 'load_config']
+__all__ = [
+    'SPIKE_SETTINGS', 'load_config', 'add_runner_arguments',
+    'config_from_args'
+]
 
 #: ``--cfg-options`` key -> environment variable read by the config files.
 SPIKE_SETTINGS = {
@@ -59,4 +64,34 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
                 os.environ[env] = value
     if options:
         cfg.merge_from_dict(options)
+    return cfg
+
+
+def add_runner_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments shared by the train and test tools (as in MMSeg's tools)."""
+    parser.add_argument('--work-dir', help='the dir to save logs and models')
+    parser.add_argument(
+        '--cfg-options', nargs='+', action=DictAction,
+        help='override config settings, key=value; num_steps, data_root and '
+        'crop_size re-derive every field that depends on them')
+    parser.add_argument('--launcher',
+                        choices=['none', 'pytorch', 'slurm', 'mpi'],
+                        default='none', help='job launcher')
+    parser.add_argument('--local_rank', '--local-rank', type=int, default=0)
+
+
+def config_from_args(args: argparse.Namespace) -> Config:
+    """The config of ``args.config`` set up for an mmengine ``Runner``.
+
+    Applies ``--cfg-options``, the launcher and the work dir (default
+    ``./work_dirs/<config name>``), and sets ``LOCAL_RANK`` if unset.
+    """
+    os.environ.setdefault('LOCAL_RANK', str(args.local_rank))
+    cfg = load_config(args.config, args.cfg_options)
+    cfg.launcher = args.launcher
+    if args.work_dir is not None:
+        cfg.work_dir = args.work_dir
+    elif cfg.get('work_dir', None) is None:
+        cfg.work_dir = osp.join('./work_dirs',
+                                osp.splitext(osp.basename(args.config))[0])
     return cfg
