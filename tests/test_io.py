@@ -392,3 +392,38 @@ def test_reds_sample_rewrite_is_byte_identical(reds_sample, tmp_path):
     save_spikes(out, spikes)
     with open(dat, 'rb') as f1, open(out, 'rb') as f2:
         assert f1.read() == f2.read()
+
+
+# Non-binary values inside [0, 1] and NaN once passed a range-only check and
+# were truncated to 0; a malformed side file once raised a bare KeyError.
+
+
+@pytest.mark.parametrize('value', [0.5, np.nan], ids=['half', 'nan'])
+@pytest.mark.parametrize('ext', ['.dat', '.npy'])
+def test_save_rejects_non_binary_values_in_range(tmp_path, ext, value):
+    spikes = np.zeros((1, 2, 4))
+    spikes[0, 0, 0] = value
+    path = str(tmp_path / ('frac' + ext))
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        save_spikes(path, spikes)
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize('value', [0.5, np.nan], ids=['half', 'nan'])
+def test_load_rejects_non_binary_values_in_range(tmp_path, value):
+    spikes = np.zeros((1, 2, 4))
+    spikes[0, 0, 0] = value
+    path = str(tmp_path / 'frac.npy')
+    np.save(path, spikes)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)
+
+
+@pytest.mark.parametrize('content', ['{"h": 4, "w": 6}', '{bad json'],
+                         ids=['missing-keys', 'invalid-json'])
+def test_bad_side_file(tmp_path, content):
+    path = _write_dat(tmp_path)
+    with open(path + '.json', 'w') as f:
+        f.write(content)
+    with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+        load_spikes(path)

@@ -217,3 +217,12 @@ def test_waverec_rejects_inconsistent_coefficients():
     coeffs = [torch.zeros(5), torch.zeros(9)]
     with pytest.raises(ValueError):
         waverec(coeffs, 'db2')
+
+
+def test_waverec_length_out_of_range():
+    coeffs = wavedec(torch.zeros(41), 'db8', level=5)
+    for bad in (0, 43):
+        with pytest.raises(ValueError, match=str(bad)):
+            waverec(coeffs, 'db8', length=bad)
+    # pywt.waverec returns 42 samples here; length=42 is still allowed.
+    assert waverec(coeffs, 'db8', length=42).shape == (42, )

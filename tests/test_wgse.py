@@ -303,3 +303,11 @@ def test_three_dimensional_input_raises():
 def test_invalid_arguments_raise(kwargs):
     with pytest.raises(ValueError):
         WGSE(**kwargs)
+
+
+def test_integer_input_equals_float_input():
+    model = _seeded(hidden_channels=8)
+    x = (torch.rand(1, 41, 2, 3) < 0.5)
+    y_uint8 = model(x.to(torch.uint8))
+    assert y_uint8.dtype == torch.float32
+    assert torch.equal(y_uint8, model(x.float()))

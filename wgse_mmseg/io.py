@@ -70,6 +70,11 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
         raise
 
 
+def _check_binary(path: str, spikes: np.ndarray) -> None:
+    if not ((spikes == 0) | (spikes == 1)).all():
+        raise SpikeFileError(f'{path}: spikes must hold only 0 and 1')
+
+
 def _extension(path: str) -> str:
     ext = osp.splitext(path)[1].lower()
     if ext not in SPIKE_EXTENSIONS:
@@ -93,10 +98,15 @@ def _dat_geometry(path: str, height: Optional[int],
                 f'{path}: a .dat file has no header, so height and width are '
                 f'needed (arguments, or a side file {side} with '
                 f'{{"height": H, "width": W}})')
-        with open(side) as f:
-            meta = json.load(f)
-        height = meta['height'] if height is None else height
-        width = meta['width'] if width is None else width
+        try:
+            with open(side) as f:
+                meta = json.load(f)
+            height = int(meta['height']) if height is None else height
+            width = int(meta['width']) if width is None else width
+        except (ValueError, KeyError, TypeError) as err:
+            raise SpikeFileError(
+                f'{path}: side file {side} must hold {{"height": H, '
+                f'"width": W}} ({err!r})') from err
     if height < 1 or width < 1 or (height * width) % 8:
         raise SpikeFileError(
             f'{path}: .dat frames of {height}x{width} are not a whole number '
@@ -210,10 +220,7 @@ def load_spikes(path: str, height: Optional[int] = None,
     ext = _extension(path)
     if ext in ('.npy', '.npz'):
         window = np.asarray(_array(path)[start:start + length])
-        if window.size and (window.min() < 0 or window.max() > 1):
-            raise SpikeFileError(
-                f'{path}: spike arrays must hold only 0 and 1, found values '
-                f'in [{window.min()}, {window.max()}]')
+        _check_binary(path, window)
         return window.astype(np.uint8)
     frame = _frame_bytes(h, w)
     offset = 0 if ext == '.dat' else _HEADER.size
@@ -236,8 +243,7 @@ def save_spikes(path: str, spikes: np.ndarray) -> None:
         raise SpikeFileError(
             f'{path}: expected a non-empty (T, H, W) array, got shape '
             f'{spikes.shape}')
-    if spikes.size and (spikes.min() < 0 or spikes.max() > 1):
-        raise SpikeFileError(f'{path}: spikes must hold only 0 and 1')
+    _check_binary(path, spikes)
     spikes = spikes.astype(np.uint8)
     steps, height, width = spikes.shape
     if ext == '.dat' and (height * width) % 8:
