@@ -13,14 +13,7 @@ from wgse_mmseg.wavelets import (SUPPORTED_MODES, analysis_matrix,
                                  waverec)
 
 
-@pytest.fixture(autouse=True, scope='module')
-def _single_thread():
-    """Tiny tensors only: one intra-op thread avoids OpenMP oversubscription,
-    which on a busy 2-core machine made these tests ~50x slower."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures('single_thread')
 
 WAVELETS = ['haar', 'db1', 'db2', 'db4', 'db8', 'sym4', 'coif1', 'bior2.2',
             'rbio1.3', 'dmey']

@@ -12,14 +12,7 @@ from mmseg.registry import MODELS
 from wgse_mmseg.models import WGSE
 
 
-@pytest.fixture(autouse=True, scope='module')
-def _single_thread():
-    """Tiny tensors only: one intra-op thread avoids OpenMP oversubscription,
-    which on a busy 2-core machine made these tests ~50x slower."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures('single_thread')
 
 
 def _n_params(module):
