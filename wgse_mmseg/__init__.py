@@ -11,6 +11,6 @@ from .version import __version__
 install_mmcv_ops_fallback()
 allow_mmengine_checkpoints()
 
-from . import datasets, models  # noqa: E402  (registers the modules)
+from . import datasets, evaluation, models  # noqa: E402  (registers the modules)
 
-__all__ = ['__version__', 'datasets', 'models']
+__all__ = ["__version__", "datasets", "evaluation", "models"]

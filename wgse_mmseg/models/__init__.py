@@ -1,3 +1,4 @@
+from . import reconstruction, representations  # noqa: F401  (registers)
 from .data_preprocessor import SpikeSegDataPreProcessor
 from .wgse import WGSE, BandNetwork
 

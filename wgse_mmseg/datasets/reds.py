@@ -1,0 +1,1 @@
+"""REDS spike reconstruction datasets (issue 6)."""

@@ -1,0 +1,1 @@
+"""On-the-fly spike simulation as a data transform (issue 4): SimulateSpikes."""

@@ -1,0 +1,1 @@
+"""Metrics beyond MMSeg's (issue 6): reconstruction quality."""

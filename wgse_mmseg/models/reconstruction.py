@@ -1,0 +1,1 @@
+"""Image reconstruction from spikes (issue 6): WGSE + residual blocks."""

@@ -1,0 +1,1 @@
+"""Classical spike representations as enhancers (issue 5): TFP, TFI, mean filters."""
