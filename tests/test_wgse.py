@@ -9,7 +9,8 @@ import torch
 from torch.func import functional_call
 
 from mmseg.registry import MODELS
-from wgse_mmseg.models import WGSE
+from wgse_mmseg.models import WGSE, fused_band_networks
+from wgse_mmseg.models.wgse import BandNetwork
 
 
 pytestmark = pytest.mark.usefixtures('single_thread')
@@ -156,14 +157,60 @@ def test_checkpointing_gives_same_output_and_gradients():
                                    atol=1e-6, msg=name)
 
 
-def test_pixel_chunk_does_not_change_results():
-    x = (torch.rand(2, 41, 3, 5) < 0.5).float()
+@pytest.mark.parametrize('kwargs', [
+    dict(),
+    dict(num_blocks=2, kernel_size=5, wavelet='sym3', level=3),
+    dict(wavelet=None),
+    dict(with_cp=True),
+], ids=['default', 'long-k5', 'no-wavelet', 'with-cp'])
+@pytest.mark.parametrize('rows_per_chunk', [1, 50, 8192])
+def test_fused_kernel_equals_conv_modules(monkeypatch, kwargs,
+                                          rows_per_chunk):
+    """The CPU kernel against the same band networks run as nn.Conv1d
+    modules, outputs and all gradients, for chunks from one pixel to all."""
+    monkeypatch.setattr(fused_band_networks, 'ROWS_PER_CHUNK', rows_per_chunk)
+    model = _seeded(hidden_channels=8, **kwargs).double()
+    x = (torch.rand(2, 23, 3, 5, dtype=torch.float64) < 0.5).double()
+    x = (x + 0.1 * torch.rand_like(x)).requires_grad_()
     results = []
-    for chunk in (1, 7, 2048):
-        model = _seeded(pixel_chunk=chunk)
-        results.append(model(x).detach())
-    for r in results[1:]:
-        torch.testing.assert_close(r, results[0], rtol=1e-6, atol=1e-6)
+    for use_modules in (False, True):
+        if use_modules:
+            monkeypatch.setattr(model, '_fused_bands',
+                                lambda coeffs, lengths: model._module_bands(
+                                    coeffs, lengths, (3, 5)))
+        model.zero_grad()
+        x.grad = None
+        y = model(x)
+        (y * torch.linspace(-1, 1, y.numel(), dtype=y.dtype).view_as(y)
+         ).sum().backward()
+        results.append([y.detach(), x.grad.clone()] +
+                       [p.grad.clone() for p in model.parameters()])
+    for fused, modules in zip(*results):
+        torch.testing.assert_close(fused, modules, rtol=1e-10, atol=1e-12)
+
+
+def test_fused_kernel_gradcheck(monkeypatch):
+    """Hand-written backward of the fused kernel, long variant with a
+    5-tap kernel, across chunk boundaries, in float64."""
+    monkeypatch.setattr(fused_band_networks, 'ROWS_PER_CHUNK', 30)
+    torch.manual_seed(0)
+    networks = [BandNetwork(1, 5, 3, 2).double() for _ in range(2)]
+    plan = networks[0].layers()
+    residuals = [residual for _, residual in plan]
+    params = [t.detach().clone().requires_grad_() for net in networks
+              for conv, _ in net.layers() for t in (conv.weight, conv.bias)]
+    per_band = 2 * len(plan)
+    coeffs = torch.randn(5, 4 + 6, dtype=torch.float64, requires_grad=True)
+
+    def fn(inp, *ps):
+        weights = [[(ps[b * per_band + 2 * i], ps[b * per_band + 2 * i + 1])
+                    for i in range(len(plan))] for b in range(2)]
+        return fused_band_networks.fused_band_networks(
+            inp, [4, 6], weights, residuals)
+
+    # Seeded Gaussian inputs keep every ReLU pre-activation well away from
+    # the kink relative to gradcheck's eps=1e-6.
+    assert torch.autograd.gradcheck(fn, (coeffs, *params), atol=1e-5)
 
 
 def test_same_seed_same_parameters_and_outputs():
@@ -290,7 +337,7 @@ def test_three_dimensional_input_raises():
 
 @pytest.mark.parametrize('kwargs', [
     dict(dim=0), dict(dim=4), dict(kernel_size=2), dict(kernel_size=0),
-    dict(level=0), dict(num_blocks=0), dict(pixel_chunk=0),
+    dict(level=0), dict(num_blocks=0),
     dict(wavelet='morl'), dict(wavelet='nope'), dict(mode='smooth'),
 ])
 def test_invalid_arguments_raise(kwargs):

@@ -24,6 +24,7 @@ from mmengine.model import BaseModule
 from torch.utils.checkpoint import checkpoint
 
 from mmseg.registry import MODELS
+from .fused_band_networks import fused_band_networks
 from ..wavelets import (analysis_matrix, band_lengths, check_mode, get_wavelet,
                         synthesis_matrix)
 
@@ -97,6 +98,18 @@ class BandNetwork(nn.Module):
             x = F.relu(conv(x))
         return x
 
+    def layers(self) -> List[Tuple[nn.Module, Optional[int]]]:
+        """The convolutions in order, each with the index of the activation
+        added before its ReLU (0: the input, ``i``: the output of the
+        ``i``-th convolution) or ``None``: the description
+        :func:`~wgse_mmseg.models.fused_band_networks.fused_band_networks`
+        runs."""
+        plan = []
+        for block in self.residual_layers:
+            block_input = len(plan)
+            plan += [(block.conv_a, None), (block.conv_b, block_input)]
+        return plan + [(conv, None) for conv in self.output_convs]
+
 
 @MODELS.register_module()
 class WGSE(BaseModule):
@@ -117,20 +130,19 @@ class WGSE(BaseModule):
             2 is the paper's "long" variant.
         with_cp: recompute band activations in the backward pass instead of
             storing them (activation checkpointing): less memory, more time.
-        pixel_chunk: for ``dim=1``, pixels processed together by a band
-            network; chunks that fit in cache run several times faster than
-            one huge batch. Results do not depend on it.
         init_cfg: mmengine initialisation config.
 
     The transform runs in float32 (float64 for float64 input) even under
-    autocast; the band networks follow autocast.
+    autocast. On the CPU, ``dim=1`` runs all band networks as one fused,
+    cache-blocked kernel (:mod:`~wgse_mmseg.models.fused_band_networks`),
+    also in float32/float64; elsewhere the band networks are ``nn.Conv``
+    modules that follow autocast. Both compute the same function.
     """
 
     def __init__(self, dim: int = 1, wavelet: Optional[str] = 'db8',
                  level: int = 5, mode: str = 'zero', kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1,
-                 with_cp: bool = False, pixel_chunk: int = 2048,
-                 init_cfg=None):
+                 with_cp: bool = False, init_cfg=None):
         super().__init__(init_cfg=init_cfg)
         if dim not in (1, 2, 3):
             raise ValueError(f'dim must be 1, 2 or 3, got {dim}')
@@ -139,14 +151,11 @@ class WGSE(BaseModule):
             check_mode(mode)
             if level < 1:
                 raise ValueError(f'level must be >= 1, got {level}')
-        if pixel_chunk < 1:
-            raise ValueError(f'pixel_chunk must be >= 1, got {pixel_chunk}')
         self.dim = dim
         self.wavelet = wavelet
         self.level = level
         self.mode = mode
         self.with_cp = with_cp
-        self.pixel_chunk = pixel_chunk
         num_bands = 1 if wavelet is None else level + 1
         self.band_networks = nn.ModuleList([
             BandNetwork(dim, kernel_size, hidden_channels, num_blocks)
@@ -172,21 +181,45 @@ class WGSE(BaseModule):
                 lengths)
         return self._transforms[key]
 
-    def _run_band(self, network: nn.Module, band: torch.Tensor,
-                  spatial: Tuple[int, int]) -> torch.Tensor:
-        """One band network on ``band`` ``(B, L, H*W)``, same shape out."""
-        batch, length, pixels = band.shape
-        run = network
-        if self.with_cp and torch.is_grad_enabled():
-            def run(x, _net=network):
-                return checkpoint(_net, x, use_reentrant=False)
-        if self.dim == 1:
-            signals = band.transpose(1, 2).reshape(batch * pixels, 1, length)
-            out = torch.cat([run(chunk) for chunk in
-                             signals.split(self.pixel_chunk, dim=0)])
-            return out.reshape(batch, pixels, length).transpose(1, 2)
-        volume = band.reshape(batch, 1, length, *spatial)
-        return run(volume).reshape(batch, length, pixels)
+    def _fused_bands(self, coeffs: torch.Tensor,
+                     lengths: List[int]) -> torch.Tensor:
+        """All band networks on ``(B, P, C)`` pixel-major coefficients
+        (``P = H*W``) with the fused CPU kernel; same shape out."""
+        plans = [net.layers() for net in self.band_networks]
+        weights = [[(conv.weight, conv.bias) for conv, _ in plan]
+                   for plan in plans]
+        residuals = [residual for _, residual in plans[0]]
+        with torch.autocast(coeffs.device.type, enabled=False):
+            out = fused_band_networks(coeffs.reshape(-1, coeffs.shape[2]),
+                                      lengths, weights, residuals,
+                                      recompute=self.with_cp)
+        return out.view(coeffs.shape)
+
+    def _module_bands(self, coeffs: torch.Tensor, lengths: List[int],
+                      spatial: Tuple[int, int]) -> torch.Tensor:
+        """All band networks on ``(B, P, C)`` coefficients as ``nn.Conv``
+        modules (``dim`` 2 and 3, and ``dim=1`` off the CPU); the networks
+        follow autocast. Same shape out."""
+        batch, pixels, _ = coeffs.shape
+        outs = []
+        for network, band in zip(self.band_networks,
+                                 coeffs.split(lengths, dim=2)):
+            length = band.shape[2]
+            if self.dim == 1:
+                signals = band.reshape(batch * pixels, 1, length)
+            else:
+                signals = band.transpose(1, 2).reshape(batch, 1, length,
+                                                       *spatial)
+            if self.with_cp and torch.is_grad_enabled():
+                out = checkpoint(network, signals, use_reentrant=False)
+            else:
+                out = network(signals)
+            if self.dim == 1:
+                out = out.reshape(batch, pixels, length)
+            else:
+                out = out.reshape(batch, length, pixels).transpose(1, 2)
+            outs.append(out.to(coeffs.dtype))
+        return torch.cat(outs, dim=2)
 
     def forward(self, spikes: torch.Tensor) -> torch.Tensor:
         """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats."""
@@ -196,19 +229,24 @@ class WGSE(BaseModule):
                 f'{tuple(spikes.shape)}')
         batch, num_steps, height, width = spikes.shape
         dtype = torch.float64 if spikes.dtype == torch.float64 else torch.float32
-        signal = spikes.to(dtype).reshape(batch, num_steps, height * width)
-        if self.wavelet is None:
-            out = self._run_band(self.band_networks[0], signal, (height, width))
-            return out.to(dtype).reshape(batch, num_steps, height, width)
-        analysis, synthesis, lengths = self._matrices(num_steps,
-                                                      spikes.device, dtype)
-        with torch.autocast(spikes.device.type, enabled=False):
-            coeffs = torch.matmul(analysis, signal)  # (B, C, H*W)
-        bands = [
-            self._run_band(net, band, (height, width)).to(dtype)
-            for net, band in zip(self.band_networks,
-                                 coeffs.split(lengths, dim=1))
-        ]
-        with torch.autocast(spikes.device.type, enabled=False):
-            out = torch.matmul(synthesis, torch.cat(bands, dim=1))
-        return out.reshape(batch, num_steps, height, width)
+        device_type = spikes.device.type
+        with torch.autocast(device_type, enabled=False):
+            # (B, P, T), P = H*W: pixel-major, one time series per row.
+            signal = spikes.to(dtype).reshape(batch, num_steps, -1).transpose(
+                1, 2)
+            if self.wavelet is None:
+                coeffs, lengths = signal, [num_steps]
+            else:
+                analysis, synthesis, lengths = self._matrices(
+                    num_steps, spikes.device, dtype)
+                coeffs = torch.matmul(signal, analysis.t())  # (B, P, C)
+        if self.dim == 1 and device_type == 'cpu':
+            enhanced = self._fused_bands(coeffs, lengths)
+        else:
+            enhanced = self._module_bands(coeffs, lengths, (height, width))
+        with torch.autocast(device_type, enabled=False):
+            if self.wavelet is not None:
+                enhanced = torch.matmul(enhanced, synthesis.t())  # (B, P, T)
+            out = enhanced.transpose(1, 2).reshape(batch, num_steps, height,
+                                                   width)
+        return out.contiguous()
