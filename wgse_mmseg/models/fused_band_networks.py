@@ -173,7 +173,10 @@ def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
                                 param_grads[2 * index])
         if index == 0 and not need_input_grad:
             return None
-        grad_in = grad.new_zeros(rows, weight.shape[1])
+        # Rows on the padding get values here, but the next ReLU backward
+        # (or, for the input, the slice below) discards them.
+        grad_in = grad.new_empty(rows, weight.shape[1])
+        grad_in[:pad] = grad_in[rows - pad:] = 0
         _conv_rows(grad, weight.flip(2).permute(2, 0, 1),
                    grad_in[pad:rows - pad])
         if index in pending:
@@ -213,18 +216,19 @@ class _FusedBandNetworks(torch.autograd.Function):
         param_grads = [p.new_zeros(p.permute(2, 1, 0).shape) if p.dim() == 3
                        else torch.zeros_like(p) for p in params]
         per_band = 2 * len(ctx.residuals)
-        saved = iter(ctx.saved_acts or ())
-        for band, columns, rows, layers in _chunks(
-                coeffs, ctx.lengths, ctx.residuals, ctx.pad, params):
+        saved, ctx.saved_acts = ctx.saved_acts, None
+        for chunk, (band, columns, rows, layers) in enumerate(_chunks(
+                coeffs, ctx.lengths, ctx.residuals, ctx.pad, params)):
             acts = _chunk_forward(columns[rows], layers, ctx.pad,
-                                  next(saved, None))
+                                  saved[chunk] if saved else None)
+            if saved:
+                saved[chunk] = None  # free the chunk once used
             first = band.index * per_band
             grad_in = _chunk_backward(
                 acts, grad_out[rows, band.offset], layers,
                 param_grads[first:first + per_band], ctx.pad, need_input_grad)
             if need_input_grad:
                 grad_coeffs[rows, band.offset] = grad_in
-        ctx.saved_acts = None
         param_grads = [g.permute(2, 1, 0) if g.dim() == 3 else g
                        for g in param_grads]
         return (grad_coeffs, None, None, None, None, *param_grads)
