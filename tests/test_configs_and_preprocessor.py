@@ -127,3 +127,30 @@ def test_mismatched_num_steps_names_both_numbers_and_the_file():
     message = str(err.value)
     assert 'T=17' in message and 'T=41' in message
     assert 'clip_0001_spike.spk' in message
+
+
+@pytest.mark.parametrize('name', MAIN_CONFIGS)
+def test_labels_outside_the_classes_name_the_file_and_values(name):
+    cfg, model = build(name, num_steps=9, crop_size='16,16')
+    assert cfg.model.data_preprocessor.num_classes == 19
+    batch = spike_batch(9, 16, 16, batch=2)
+    label = batch['data_samples'][1].gt_sem_seg.data
+    label[0, 0, :3] = torch.tensor([255, 19, 33])  # 255 ignored; 19, 33 not
+    batch['data_samples'][1].set_metainfo(
+        dict(seg_map_path='aachen_000000_000019_gtFine_labelIds.png'))
+    with pytest.raises(ValueError) as err:
+        model.data_preprocessor(batch, training=True)
+    message = str(err.value)
+    assert 'aachen_000000_000019_gtFine_labelIds.png' in message
+    assert '[19, 33]' in message and '19 classes' in message
+
+
+def test_labels_of_the_classes_and_ignore_index_pass():
+    preprocessor = MODELS.build(
+        dict(type='SpikeSegDataPreProcessor', num_steps=5, num_classes=19,
+             size=(4, 6)))
+    batch = spike_batch(5, 4, 6, batch=1)
+    label = batch['data_samples'][0].gt_sem_seg.data
+    label.view(-1)[:20] = torch.tensor(list(range(19)) + [255])
+    out = preprocessor(batch, training=True)
+    assert torch.equal(out['data_samples'][0].gt_sem_seg.data, label)

@@ -34,6 +34,7 @@ model = dict(
         _delete_=True,
         type='SpikeSegDataPreProcessor',
         num_steps={{_base_.num_steps}},
+        num_classes={{_base_.num_classes}},
         size={{_base_.crop_size}},
         pad_val=0,
         seg_pad_val=255,

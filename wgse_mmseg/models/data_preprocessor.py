@@ -28,6 +28,10 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
             check.
         enhancer: config of a registered module mapping ``(B, T, H, W)`` to
             ``(B, C, H, W)``.
+        num_classes: when given, every label map must hold only
+            ``0 .. num_classes - 1`` and ``seg_pad_val`` (the ignore index);
+            another value fails at once, naming the label file and the
+            values, instead of deep inside the loss.
         size, size_divisor, pad_val, seg_pad_val, batch_augments, test_cfg:
             as in ``SegDataPreProcessor``. No mean/std normalisation and no
             colour conversion: spikes have neither.
@@ -36,6 +40,7 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
     def __init__(self,
                  num_steps: Optional[int] = None,
                  enhancer: Optional[dict] = None,
+                 num_classes: Optional[int] = None,
                  size: Optional[Sequence[int]] = None,
                  size_divisor: Optional[int] = None,
                  pad_val: float = 0,
@@ -55,7 +60,10 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
             test_cfg=test_cfg)
         if num_steps is not None and num_steps < 1:
             raise ValueError(f'num_steps must be >= 1, got {num_steps}')
+        if num_classes is not None and num_classes < 1:
+            raise ValueError(f'num_classes must be >= 1, got {num_classes}')
         self.num_steps = num_steps
+        self.num_classes = num_classes
         self.enhancer = MODELS.build(enhancer) if enhancer else None
 
     def _check_num_steps(self, inputs: Sequence[torch.Tensor],
@@ -78,9 +86,29 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
                     f'config, e.g. --cfg-options num_steps='
                     f'{spikes.shape[0] if spikes.dim() == 3 else "T"}')
 
+    def _check_labels(self, data_samples: Optional[list]) -> None:
+        if self.num_classes is None or not data_samples:
+            return
+        for sample in data_samples:
+            if 'gt_sem_seg' not in sample:
+                continue
+            labels = sample.gt_sem_seg.data
+            bad = ((labels < 0) | (labels >= self.num_classes)) & (
+                labels != self.seg_pad_val)
+            if bad.any():
+                values = labels[bad].unique().tolist()
+                raise ValueError(
+                    f'{sample.get("seg_map_path", "a label map")}: label '
+                    f'values {values[:10]} are outside the '
+                    f'{self.num_classes} classes (0..{self.num_classes - 1})'
+                    f' and the ignore index {self.seg_pad_val}; Cityscapes '
+                    f'labels must be train ids (*_labelTrainIds.png), not '
+                    f'label ids')
+
     def forward(self, data: dict, training: bool = False) -> Dict[str, Any]:
         """``data['inputs']``: list of ``(T, H, W)``; returns ``(B, C, H, W)``."""
         self._check_num_steps(data['inputs'], data.get('data_samples'))
+        self._check_labels(data.get('data_samples'))
         data = super().forward(data, training)
         if self.enhancer is not None:
             data['inputs'] = self.enhancer(data['inputs'])

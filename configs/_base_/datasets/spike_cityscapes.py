@@ -12,6 +12,7 @@
 custom_imports = dict(imports=['wgse_mmseg'], allow_failed_imports=False)
 
 dataset_type = 'SpikeCityscapesDataset'
+num_classes = 19  # Cityscapes train ids 0-18; 255 is ignored
 data_root = '{{$WGSE_DATA_ROOT:data/spike_cityscapes}}'
 num_steps = int('{{$WGSE_NUM_STEPS:129}}')
 crop_size = tuple(map(int, '{{$WGSE_CROP_SIZE:256,512}}'.split(',')))
