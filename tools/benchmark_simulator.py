@@ -1,0 +1,231 @@
+"""Throughput of the spike simulator, and load time of spike files.
+
+Prints two tables:
+
+1. Simulator throughput in pixel-steps per second (``H * W * T`` per
+   second) for the base model and for each effect alone, each against a
+   plain NumPy step-loop integrate-and-fire on the same input in the same
+   run (``vs NumPy loop``: its time over the row's time). Inputs are a
+   procedural street scene (:func:`wgse_mmseg.synthetic.
+   render_street_scene`): ``still`` is its middle frame, ``video`` its
+   ``--frames`` frames spread over the stream.
+2. Time to load one ``--load-shape`` sample (default 129x512x1024) from
+   each format with :func:`wgse_mmseg.io.load_spikes` (files just written,
+   so from the page cache: decoding, not the disk), against simulating it.
+
+Each time is the median of ``--repeat`` runs after one warm-up run. The
+default size runs in about a minute on two cores; the full-size run is::
+
+    python tools/benchmark_simulator.py --height 512 --width 1024 --repeat 5
+
+``--threads`` sets torch's intra-op threads (default 1, the NumPy loop's
+count, so the ratio compares algorithms, not core counts).
+"""
+import argparse
+import os
+import os.path as osp
+import platform
+import statistics
+import tempfile
+import time
+from typing import Callable, List, NamedTuple
+
+import cv2
+import numpy as np
+import torch
+
+from wgse_mmseg.io import load_spikes, save_spikes
+from wgse_mmseg.simulation import simulate_spikes
+from wgse_mmseg.synthetic import render_street_scene
+
+THRESHOLD = 1 / 0.6  # the REDS convention: white fires 0.6 spikes per step
+LOAD_FORMATS = ('.dat', '.spk', '.npy', '.npz')
+
+
+def numpy_step_loop(frames: np.ndarray, num_steps: int, threshold: float,
+                    seed: int) -> np.ndarray:
+    """The plain reference: integrate-and-fire one readout step at a time.
+
+    ``(N, H, W)`` float frames in [0, 1] (linearly interpolated when
+    ``N > 1``), gain 1, subtract reset, uniform initial charge; float64.
+    Returns ``(T, H, W)`` uint8 spikes.
+    """
+    intensity = frames.astype(np.float64)
+    count = intensity.shape[0]
+    charge = np.random.default_rng(seed).random(intensity.shape[1:]) * \
+        threshold
+    spikes = np.empty((num_steps, ) + intensity.shape[1:], np.uint8)
+    positions = np.linspace(0, count - 1, num_steps)
+    for step in range(num_steps):
+        if count == 1:
+            light = intensity[0]
+        else:
+            k = min(int(positions[step]), count - 2)
+            w = positions[step] - k
+            light = (1 - w) * intensity[k] + w * intensity[k + 1]
+        charge += light
+        fired = charge >= threshold
+        charge -= threshold * fired
+        spikes[step] = fired
+    return spikes
+
+
+class Timing(NamedTuple):
+    wall: float  # median wall seconds
+    cpu: float  # median CPU seconds of this process (all its threads)
+    result: object  # the last call's
+
+
+def median_time(run: Callable[[], object], repeat: int) -> Timing:
+    """Median wall and CPU time of ``repeat`` calls after a warm-up.
+
+    On a machine shared with other work the CPU time is the steadier
+    figure; on an idle one, with one thread, the two agree.
+    """
+    result = run()
+    walls, cpus = [], []
+    for _ in range(repeat):
+        wall, cpu = time.perf_counter(), time.process_time()
+        result = run()
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
+    return Timing(statistics.median(walls), statistics.median(cpus), result)
+
+
+def cpu_name() -> str:
+    try:
+        with open('/proc/cpuinfo') as f:
+            for line in f:
+                if line.startswith('model name'):
+                    return line.split(':', 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or 'unknown CPU'
+
+
+def header(args) -> List[str]:
+    return [
+        f'machine: {platform.machine()}, {cpu_name()}, '
+        f'{os.cpu_count()} logical CPUs, {platform.system()} '
+        f'{platform.release()}',
+        f'python {platform.python_version()}, torch {torch.__version__}, '
+        f'numpy {np.__version__}, opencv {cv2.__version__}; torch threads '
+        f'{torch.get_num_threads()}; device {args.device}',
+        f'sample {args.height}x{args.width}, T={args.steps}, threshold '
+        f'1/0.6; median of {args.repeat} runs',
+    ]
+
+
+def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
+    """The throughput table."""
+    inputs = dict(still=still, video=video)
+    reference = {}
+    rows = []
+    for name, frames in inputs.items():
+        timing = median_time(
+            lambda: numpy_step_loop(frames, args.steps, THRESHOLD, 0),
+            args.repeat)
+        reference[name] = timing.wall
+        rows.append(('NumPy step loop', name, timing, timing.result))
+    cases = [
+        ('base model', 'still', None),
+        ('base model', 'video', None),
+        ('+ interpolation (flow)', 'video',
+         dict(interpolation=dict(method='flow'))),
+        ('+ camera_motion', 'still', dict(camera_motion={})),
+        ('+ shot_noise', 'still', dict(shot_noise={})),
+        ('+ dark_current', 'still', dict(dark_current={})),
+        ('+ fixed_pattern', 'still', dict(fixed_pattern={})),
+        ('+ hot_pixels', 'still', dict(hot_pixels={})),
+        ('+ jitter', 'still', dict(jitter={})),
+        ('all sensor + charge effects', 'still',
+         dict(shot_noise={}, dark_current={}, fixed_pattern={},
+              hot_pixels={}, jitter={})),
+    ]
+    for case, name, effects in cases:
+        timing = median_time(
+            lambda: simulate_spikes(inputs[name], args.steps, THRESHOLD,
+                                    effects=effects, seed=0,
+                                    device=args.device), args.repeat)
+        rows.append((case, name, timing, timing.result[0]))
+    pixel_steps = args.height * args.width * args.steps
+    lines = [f'{"case":29s} {"input":6s} {"wall ms":>9s} {"cpu ms":>9s} '
+             f'{"Mpx-steps/s":>12s} {"vs NumPy loop":>14s} '
+             f'{"spike rate":>11s}']
+    for case, name, timing, spikes in rows:
+        lines.append(
+            f'{case:29s} {name:6s} {timing.wall * 1e3:9.1f} '
+            f'{timing.cpu * 1e3:9.1f} '
+            f'{pixel_steps / timing.wall / 1e6:12.1f} '
+            f'{reference[name] / timing.wall:13.2f}x '
+            f'{spikes.mean():11.4f}')
+    return lines
+
+
+def load_rows(args, still: np.ndarray) -> List[str]:
+    """The load-time table: each format against simulating the sample."""
+    steps, height, width = args.load_shape
+    frame = cv2.resize(still[0], (width, height),
+                       interpolation=cv2.INTER_LINEAR)[None]
+    simulated = median_time(
+        lambda: simulate_spikes(frame, steps, THRESHOLD, seed=0,
+                                device=args.device), args.repeat)
+    spikes = simulated.result[0]
+    lines = [f'{"T x H x W = " + "x".join(map(str, args.load_shape)):29s} '
+             f'{"MB":>6s} {"wall ms":>9s} {"cpu ms":>9s} '
+             f'{"vs simulating":>14s}',
+             f'{"simulate (base, still)":29s} {"":6s} '
+             f'{simulated.wall * 1e3:9.1f} {simulated.cpu * 1e3:9.1f} '
+             f'{1:13.2f}x']
+    with tempfile.TemporaryDirectory() as tmp:
+        for ext in LOAD_FORMATS:
+            path = osp.join(tmp, 'sample' + ext)
+            save_spikes(path, spikes)
+            load = median_time(lambda: load_spikes(path, height, width),
+                               args.repeat)
+            if not np.array_equal(load.result, spikes):
+                raise RuntimeError(f'{ext}: the loaded sample differs')
+            lines.append(f'load {ext:24s} {osp.getsize(path) / 1e6:6.1f} '
+                         f'{load.wall * 1e3:9.1f} {load.cpu * 1e3:9.1f} '
+                         f'{simulated.wall / load.wall:13.2f}x')
+    return lines
+
+
+def parse_args():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--height', type=int, default=256)
+    parser.add_argument('--width', type=int, default=512)
+    parser.add_argument('--steps', type=int, default=129)
+    parser.add_argument('--frames', type=int, default=3,
+                        help='video frames over the stream')
+    parser.add_argument('--repeat', type=int, default=5)
+    parser.add_argument('--device', default='cpu')
+    parser.add_argument('--threads', type=int, default=1,
+                        help='torch intra-op threads (0: torch default)')
+    parser.add_argument('--load-shape', default='129,512,1024',
+                        type=lambda s: tuple(int(v) for v in s.split(',')),
+                        help='T,H,W of the load-time sample')
+    parser.add_argument('--skip-load', action='store_true')
+    args = parser.parse_args()
+    if min(args.height, args.width, args.steps, args.repeat) < 1 or \
+            args.frames < 2 or len(args.load_shape) != 3:
+        parser.error('sizes and --repeat must be >= 1, --frames >= 2, '
+                     '--load-shape T,H,W')
+    return args
+
+
+def main():
+    args = parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    frames, _ = render_street_scene(np.random.default_rng(0), args.height,
+                                    args.width, args.frames)
+    still = frames[args.frames // 2:args.frames // 2 + 1]
+    lines = header(args) + [''] + simulator_rows(args, still, frames)
+    if not args.skip_load:
+        lines += [''] + load_rows(args, still)
+    print('\n'.join(lines))
+
+
+if __name__ == '__main__':
+    main()

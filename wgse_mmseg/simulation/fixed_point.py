@@ -1,0 +1,223 @@
+"""Integrate-and-fire in fixed point: exact, and the same on every device.
+
+The model (Eq. 1 of the paper): a pixel's charge ``A(t) = int alpha I dt mod
+theta`` fires a spike at each multiple of the threshold; the camera reads a
+one-bit flag per pixel each readout step (25 us at 40 kHz). Here charge is
+counted in thresholds of the pixel, so the per-step charge is
+``a_t = alpha I_t / theta``, and with the charge ``x_t = q_0 + sum a_s``
+(subtract reset: no charge is lost) the pixel reads a spike at step ``t``
+when ``floor(x_t) > floor(x_(t-1))``. A pixel reads at most one spike per
+step: crossings beyond the first in one readout period are not counted (the
+one-bit readout), so the rate saturates at one spike per step. Below
+saturation (``a_t < 1``, which always holds with ``gain <= threshold`` and
+no effects) the count over ``T`` steps is exactly
+``floor(q_0 + sum_t a_t)``.
+
+Charge is an int32 count of ``2**-24`` thresholds (:data:`ONE` is one
+threshold), so the integration itself is exact integer arithmetic: sums are
+associative, and CPU and GPU give the same spikes bit for bit. The
+fractional charge ``frac(x)`` carries from block to block; the count
+``floor(x)`` within a block is bits 24-31 of ``x``. A step's charge is
+resolved to ``2**-24`` thresholds (``6e-8``: a rate of 0.0024 Hz at 40 kHz);
+charge beyond :data:`MAX_STEP_CHARGE` thresholds per step is clipped (such a
+pixel fires every step anyway).
+
+Steps are integrated in blocks short enough that ``x`` stays below
+``2**31`` (:data:`MAX_BLOCK_STEPS`, or :data:`MAX_LINEAR_BLOCK_STEPS` for a
+closed-form block) and, on CPU, in tiles of pixels.
+"""
+from typing import Iterator, NamedTuple, Optional, Tuple
+
+import numpy as np
+import torch
+
+__all__ = ['FRACTION_BITS', 'ONE', 'MAX_STEP_CHARGE', 'MAX_BLOCK_STEPS',
+           'MAX_LINEAR_BLOCK_STEPS', 'initial_charge', 'quantise',
+           'LinearCharge', 'Integrator']
+
+FRACTION_BITS = 24
+ONE = 1 << FRACTION_BITS
+MAX_STEP_CHARGE = 64
+MAX_BLOCK_STEPS = 32  # steps of up to 2 thresholds each: x < 2**31
+MAX_LINEAR_BLOCK_STEPS = 120  # steps below 1 threshold each: x < 2**31
+_CPU_TILE = 1 << 14  # pixels per tile: larger ops beat cache-sized ones
+
+
+def initial_charge(num_pixels: int, seed: int) -> torch.Tensor:
+    """``(P,)`` int32 initial charge, uniform over ``[0, 1)`` threshold in
+    units of ``2**-24`` (``q_0 = initial_charge / ONE``).
+
+    Drawn on the CPU from ``seed`` alone, so every device starts from the
+    same charge.
+    """
+    generator = torch.Generator().manual_seed(seed)
+    return torch.randint(0, ONE, (num_pixels, ), generator=generator,
+                         dtype=torch.int32)
+
+
+def quantise(charge: torch.Tensor) -> Tuple[torch.Tensor, bool]:
+    """Float charge per step, in thresholds, to fixed point.
+
+    Args:
+        charge: ``(K, P)`` float charge per step, ``>= 0``.
+
+    Returns:
+        ``(steps, saturated)``: ``(K, P)`` int32 charge in units of
+        ``2**-24`` thresholds (rounded down), and whether any step collects
+        a whole threshold or more. Such a step fires whatever the pixel's
+        charge, so only its fraction matters for later steps: it is kept as
+        ``1 + frac(a)``, which leaves the spikes and the carried charge as
+        they are and keeps every step below two thresholds.
+    """
+    charge = charge.clamp(0, MAX_STEP_CHARGE)
+    saturated = bool(charge.max() >= 1)
+    if saturated:
+        charge = torch.where(charge >= 1, charge.frac() + 1, charge)
+    return (charge * ONE).to(torch.int32), saturated
+
+
+def _chunks(steps: int, size: int) -> Iterator[Tuple[int, int]]:
+    """``[0, steps)`` in consecutive ranges of at most ``size``."""
+    for start in range(0, steps, size):
+        yield start, min(start + size, steps)
+
+
+class LinearCharge(NamedTuple):
+    """Charge per step linear in a weight ``w``: ``base + w * slope``.
+
+    ``base``: ``(P,)`` int32 fixed point; ``slope``: ``(P,)`` int32 per
+    unit of weight, or ``None`` for a constant charge.
+    """
+    base: torch.Tensor
+    slope: Optional[torch.Tensor]
+
+
+class Integrator:
+    """Integrate-and-fire of ``P`` pixels, block of steps after block.
+
+    Args:
+        num_pixels: ``P``.
+        seed: seeds the initial charge (:func:`initial_charge`).
+        device: where the charge lives and the arithmetic runs.
+        block_steps: steps its buffers hold; longer blocks (and blocks
+            longer than the overflow bounds) are integrated in parts.
+
+    Each call takes the charge of the next ``K`` steps and writes their
+    ``(K, P)`` uint8 0/1 spikes into ``out``.
+    """
+
+    def __init__(self, num_pixels: int, seed: int, device,
+                 block_steps: int = MAX_BLOCK_STEPS):
+        device = torch.device(device)
+        self.charge = initial_charge(num_pixels, seed).to(device)
+        self.tile = num_pixels if device.type == 'cuda' else min(
+            num_pixels, _CPU_TILE)
+        self.block_steps = block_steps
+        self._sums = torch.empty((block_steps + 1, self.tile),
+                                 dtype=torch.int32, device=device)
+        self._counts = torch.empty((block_steps + 1, self.tile),
+                                   dtype=torch.uint8, device=device)
+        self._index = torch.arange(block_steps + 1, dtype=torch.int32,
+                                   device=device).view(-1, 1)
+
+    @staticmethod
+    def linear_charge(first: torch.Tensor, last: Optional[torch.Tensor],
+                      denominator: int) -> Optional[LinearCharge]:
+        """Fixed-point charge going linearly from ``first`` (weight 0) to
+        ``last`` (weight ``denominator``; ``None``: constant), or ``None``
+        unless it stays below one threshold (then use :func:`quantise` and
+        :meth:`per_step`).
+
+        The slope is rounded toward zero, so every step's charge lies
+        between ``first`` and ``last``, within ``denominator * 2**-24``
+        thresholds of the exact interpolation.
+
+        Args:
+            first, last: ``(P,)`` float charge per step, in thresholds.
+            denominator: positive integer.
+        """
+        top = first.max() if last is None else torch.maximum(
+            first.max(), last.max())
+        if not bool(top < 1):
+            return None
+        base = (first * ONE).to(torch.int32)
+        if last is None:
+            return LinearCharge(base, None)
+        difference = (last * ONE).to(torch.int32) - base
+        return LinearCharge(
+            base, torch.div(difference, denominator, rounding_mode='trunc'))
+
+    def linear(self, charge: LinearCharge, weights: np.ndarray,
+               out: torch.Tensor) -> None:
+        """Steps whose charge is ``base + weights[k] * slope``.
+
+        The running sums are closed forms,
+        ``x_k = x_0 + k * base + W_k * slope`` with ``W_k`` the sum of the
+        first ``k`` weights: no per-step charge is materialised.
+
+        Args:
+            charge: from :meth:`linear_charge`.
+            weights: ``(K,)`` non-negative integers.
+            out: ``(K, P)`` uint8 spikes.
+        """
+        size = min(self.block_steps, MAX_LINEAR_BLOCK_STEPS)
+        for start, stop in _chunks(len(weights), size):
+            self._linear(charge, weights[start:stop], out[start:stop])
+
+    def _linear(self, charge: LinearCharge, weights: np.ndarray,
+                out: torch.Tensor) -> None:
+        steps = len(weights)
+        base, slope = charge
+        cumulative = None
+        if slope is not None and weights.any():
+            cumulative = torch.from_numpy(
+                np.concatenate([[0], np.cumsum(weights)])).to(
+                    device=base.device, dtype=torch.int32).view(-1, 1)
+        for begin in range(0, base.numel(), self.tile):
+            end = min(begin + self.tile, base.numel())
+            sums = self._sums[:steps + 1, :end - begin]
+            torch.addcmul(self.charge[begin:end], self._index[:steps + 1],
+                          base[begin:end], out=sums)
+            if cumulative is not None:
+                sums.addcmul_(cumulative, slope[begin:end])
+            self._fire(sums, begin, end, out, saturated=False)
+
+    def per_step(self, charge: torch.Tensor, saturated: bool,
+                 out: torch.Tensor) -> None:
+        """Steps with any charge each.
+
+        Args:
+            charge: ``(K, P)`` int32 fixed-point charge per step, from
+                :func:`quantise`.
+            saturated: :func:`quantise`'s flag.
+            out: ``(K, P)`` uint8 spikes.
+        """
+        size = min(self.block_steps, MAX_BLOCK_STEPS)
+        for start, stop in _chunks(charge.shape[0], size):
+            self._per_step(charge[start:stop], saturated, out[start:stop])
+
+    def _per_step(self, charge: torch.Tensor, saturated: bool,
+                  out: torch.Tensor) -> None:
+        steps, pixels = charge.shape
+        for begin in range(0, pixels, self.tile):
+            end = min(begin + self.tile, pixels)
+            sums = self._sums[:steps + 1, :end - begin]
+            sums[0] = self.charge[begin:end]
+            for step in range(steps):
+                torch.add(sums[step], charge[step, begin:end],
+                          out=sums[step + 1])
+            self._fire(sums, begin, end, out, saturated)
+
+    def _fire(self, sums: torch.Tensor, begin: int, end: int,
+              out: torch.Tensor, saturated: bool) -> None:
+        """Spikes of pixels ``begin:end`` from their ``(K + 1, tile)``
+        running charge; keep the final fraction as the pixels' charge."""
+        steps = sums.shape[0] - 1
+        torch.bitwise_and(sums[steps], ONE - 1, out=self.charge[begin:end])
+        sums.bitwise_right_shift_(FRACTION_BITS)  # thresholds crossed
+        counts = self._counts[:steps + 1, :end - begin]
+        counts.copy_(sums)
+        spikes = out[:, begin:end]
+        torch.sub(counts[1:], counts[:-1], out=spikes)
+        if saturated:  # a step of 1 + frac(a) may cross twice
+            spikes.clamp_(max=1)
