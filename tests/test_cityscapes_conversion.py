@@ -1,0 +1,336 @@
+"""The Cityscapes -> Spike-Cityscapes converter on a tiny Cityscapes tree."""
+import json
+import os
+import os.path as osp
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+import wgse_mmseg.datasets.cityscapes_conversion as conversion
+from wgse_mmseg.datasets import SpikeCityscapesDataset
+from wgse_mmseg.datasets.cityscapes_conversion import (
+    CITYSCAPES_LABELS, LABEL_ID_TO_TRAIN_ID, ConversionSettings,
+    convert_cityscapes, find_samples, labelids_to_trainids, load_scene,
+    resize_nearest, sample_effects, sample_seed)
+from wgse_mmseg.io import load_spikes
+from wgse_mmseg.simulation import simulate_spikes
+
+REPO_ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+SIZE = (64, 128)  # source frames, H x W
+SETTINGS = ConversionSettings(height=32, width=64, num_steps=9)
+# stem -> (split, city, label files written, has a sequence)
+SAMPLES = {
+    'aachen_000000_000123': ('train', 'aachen', ('labelIds', ), True),
+    'aachen_000001_000019': ('train', 'aachen',
+                             ('labelIds', 'labelTrainIds'), False),
+    'bonn_000000_000019': ('val', 'bonn', ('labelTrainIds', ), False),
+}
+
+
+def _write(path, image):
+    os.makedirs(osp.dirname(path), exist_ok=True)
+    assert cv2.imwrite(path, image)
+
+
+def _image(rng, shift=0):
+    """A smooth random colour image, shifted ``shift`` pixels to the right."""
+    small = rng.integers(0, 256, (8, 16, 3), dtype=np.uint8)
+    image = cv2.resize(small, SIZE[::-1], interpolation=cv2.INTER_CUBIC)
+    return np.roll(image, shift, axis=1)
+
+
+def make_cityscapes(root):
+    """Write a tiny Cityscapes tree; return stem -> source label arrays."""
+    labels = {}
+    for index, (stem, (split, city, kinds, sequence)) in enumerate(
+            SAMPLES.items()):
+        rng = np.random.default_rng(index)
+        image = _image(rng)
+        _write(osp.join(root, 'leftImg8bit', split, city,
+                        f'{stem}_leftImg8bit.png'), image)
+        ids = np.array([i % 256 for i, _, _ in CITYSCAPES_LABELS], np.uint8)
+        labels[stem] = dict(
+            labelIds=rng.choice(ids, SIZE),
+            # deliberately not the mapping of labelIds: it must be copied
+            labelTrainIds=rng.choice([*range(19), 255], SIZE).astype(
+                np.uint8))
+        for kind in kinds:
+            _write(osp.join(root, 'gtFine', split, city,
+                            f'{stem}_gtFine_{kind}.png'),
+                   labels[stem][kind])
+        if sequence:  # 30 frames, the annotated one the 20th
+            name, frame = stem.rsplit('_', 1)
+            for offset in range(-19, 11):
+                _write(osp.join(
+                    root, 'leftImg8bit_sequence', split, city,
+                    f'{name}_{int(frame) + offset:06d}_leftImg8bit.png'),
+                    _image(np.random.default_rng(index), 3 * offset))
+    return labels
+
+
+def _files(out_dir):
+    return sorted(
+        osp.relpath(osp.join(d, f), out_dir)
+        for d, _, files in os.walk(out_dir) for f in files)
+
+
+def _expected_files():
+    return sorted(
+        path for stem, (split, city, _, _) in SAMPLES.items() for path in (
+            f'spike/{split}/{city}/{stem}_spike.spk',
+            f'spike/{split}/{city}/{stem}_spike.json',
+            f'gtFine/{split}/{city}/{stem}_gtFine_labelTrainIds.png'))
+
+
+def _assert_same_files(out, other):
+    """Every file under ``out`` has a byte-identical copy under ``other``."""
+    for path in _files(out):
+        with open(osp.join(out, path), 'rb') as a, \
+                open(osp.join(other, path), 'rb') as b:
+            assert a.read() == b.read(), path
+
+
+@pytest.fixture
+def calls(monkeypatch, single_thread):
+    """Records the number of frames of each simulation."""
+    recorded = []
+
+    def recording(frames, num_steps, threshold, effects, seed):
+        recorded.append(len(frames))
+        return simulate_spikes(frames, num_steps, threshold=threshold,
+                               effects=effects, seed=seed)
+
+    monkeypatch.setattr(conversion, 'simulate_spikes', recording)
+    return recorded
+
+
+@pytest.fixture
+def cityscapes(tmp_path):
+    root = str(tmp_path / 'cityscapes')
+    return root, make_cityscapes(root)
+
+
+# ----------------------------------------------------------------- labels
+def test_label_table_is_cityscapes():
+    ids = [label_id for label_id, _, _ in CITYSCAPES_LABELS]
+    assert sorted(ids) == list(range(-1, 34))
+    train = sorted((t, name) for _, name, t in CITYSCAPES_LABELS
+                   if 0 <= t < 255)
+    assert [t for t, _ in train] == list(range(19))
+    assert tuple(name for _, name in train) == tuple(
+        SpikeCityscapesDataset.METAINFO['classes'])
+    # by hand: road, sidewalk, car, bicycle, unlabeled, parking, -1 (255)
+    for label_id, train_id in [(7, 0), (8, 1), (26, 13), (33, 18), (0, 255),
+                               (9, 255), (255, 255)]:
+        assert LABEL_ID_TO_TRAIN_ID[label_id] == train_id
+
+
+def test_unknown_label_id_names_the_file():
+    with pytest.raises(ValueError, match=r'x\.png.*\[40\]'):
+        labelids_to_trainids(np.array([[7, 40]], np.uint8), 'x.png')
+
+
+def test_resize_nearest_is_opencv_nearest():
+    label = np.random.default_rng(0).integers(0, 256, (64, 128), np.uint8)
+    assert np.array_equal(
+        resize_nearest(label, 32, 64),
+        cv2.resize(label, (64, 32), interpolation=cv2.INTER_NEAREST))
+
+
+# ---------------------------------------------------------------- samples
+def test_find_samples(cityscapes):
+    root, _ = cityscapes
+    samples = {s.stem: s for s in find_samples(root, ('train', 'val'))}
+    assert set(samples) == set(SAMPLES)
+    seq = samples['aachen_000000_000123']
+    assert seq.label_kind == 'labelIds'
+    assert [osp.relpath(p, root) for p in seq.sequence] == [
+        f'{tree}/train/aachen/aachen_000000_{frame}_leftImg8bit.png'
+        for tree, frame in [('leftImg8bit_sequence', '000122'),
+                            ('leftImg8bit', '000123'),
+                            ('leftImg8bit_sequence', '000124')]]
+    assert samples['aachen_000001_000019'].label_kind == 'labelTrainIds'
+    assert samples['bonn_000000_000019'].sequence == ()
+    assert len(find_samples(root, ('train', ), 10)[0].sequence) == 21
+    assert find_samples(root, ('train', ), 0)[0].sequence == ()
+
+
+def test_missing_inputs_are_named(cityscapes):
+    root, _ = cityscapes
+    with pytest.raises(FileNotFoundError, match='leftImg8bit/test'):
+        find_samples(root, ('test', ))
+    label = osp.join(root, 'gtFine', 'val', 'bonn',
+                     'bonn_000000_000019_gtFine_labelTrainIds.png')
+    os.remove(label)
+    with pytest.raises(FileNotFoundError,
+                       match='bonn_000000_000019_leftImg8bit.png.*no label'):
+        find_samples(root, ('val', ))
+    frame = osp.join(root, 'leftImg8bit_sequence', 'train', 'aachen',
+                     'aachen_000000_000124_leftImg8bit.png')
+    os.remove(frame)
+    with pytest.raises(FileNotFoundError, match='000124_leftImg8bit.png'):
+        find_samples(root, ('train', ))
+
+
+# ---------------------------------------------------------------- effects
+def test_effects_per_model_and_scene_files(tmp_path, cityscapes):
+    root, _ = cityscapes
+    seq, static = find_samples(root, ('train', ))
+    scene = {'camera_motion': {'translation': [8, 0], 'per': 'clip'},
+             'shot_noise': None}
+    assert sample_effects(seq, scene) == {
+        'interpolation': {'method': 'flow'}, 'shot_noise': None}
+    assert sample_effects(static, scene) == scene
+    assert sample_effects(seq, {'interpolation': {'method': 'linear'}}) == {
+        'interpolation': {'method': 'linear'}}
+    assert sample_effects(static, {}) == {}
+    (tmp_path / 's.yaml').write_text('shot_noise:\n')
+    (tmp_path / 's.json').write_text(json.dumps(scene))
+    assert load_scene(str(tmp_path / 's.yaml')) == {'shot_noise': None}
+    assert load_scene(str(tmp_path / 's.json')) == scene
+    assert load_scene('{"jitter": {}}') == {'jitter': {}}
+    with pytest.raises(ValueError, match='neither a file nor inline JSON'):
+        load_scene('nope.json')
+    with pytest.raises(ValueError, match='unknown effect'):
+        load_scene('{"blur": {}}')
+    with pytest.raises(ValueError, match='electrons'):
+        load_scene('{"shot_noise": {"electrons": -1}}')
+
+
+# -------------------------------------------------------------- converter
+def test_convert_layout_labels_spikes(tmp_path, cityscapes, calls):
+    root, labels = cityscapes
+    out = str(tmp_path / 'out')
+    counts = convert_cityscapes(root, out, SETTINGS, progress=False)
+    assert counts == dict(sequence=1, static=2, skipped=0)
+    assert _files(out) == _expected_files()
+    for stem, (split, city, kinds, sequence) in SAMPLES.items():
+        source = labels[stem]['labelTrainIds' if 'labelTrainIds' in kinds
+                              else 'labelIds']
+        if 'labelTrainIds' not in kinds:
+            source = LABEL_ID_TO_TRAIN_ID[source]
+        label = cv2.imread(
+            osp.join(out, 'gtFine', split, city,
+                     f'{stem}_gtFine_labelTrainIds.png'),
+            cv2.IMREAD_UNCHANGED)
+        assert label.dtype == np.uint8
+        assert np.array_equal(label, source[::2, ::2])  # nearest, exactly
+        spikes = load_spikes(
+            osp.join(out, 'spike', split, city, f'{stem}_spike.spk'))
+        assert spikes.shape == (9, 32, 64) and spikes.dtype == np.uint8
+        assert set(np.unique(spikes)) <= {0, 1} and spikes.any()
+        with open(osp.join(out, 'spike', split, city,
+                           f'{stem}_spike.json')) as f:
+            meta = json.load(f)
+        recipe = meta['recipe']
+        assert meta['simulation']['resampling'] == (
+            'flow' if sequence else 'static')
+        assert recipe['model'] == ('sequence' if sequence else 'static')
+        assert recipe['seed'] == sample_seed(stem)
+        assert recipe['effects'] == (
+            {'interpolation': {'method': 'flow'}} if sequence else {})
+        assert recipe['time_span']['scene_seconds'] == pytest.approx(
+            2 / 17 if sequence else 0)
+    assert sorted(calls) == [1, 1, 3]
+    # the dataset class reads the result
+    dataset = SpikeCityscapesDataset(
+        data_root=out, data_prefix=dict(img_path='spike/train',
+                                        seg_map_path='gtFine/train'),
+        pipeline=[], lazy_init=False)
+    assert len(dataset) == 2
+
+
+def test_resume_after_interruption(tmp_path, cityscapes, calls, monkeypatch):
+    root, _ = cityscapes
+    out = str(tmp_path / 'out')
+    recording = conversion.simulate_spikes
+
+    def interrupted(*args, **kwargs):
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        return recording(*args, **kwargs)
+
+    monkeypatch.setattr(conversion, 'simulate_spikes', interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        convert_cityscapes(root, out, SETTINGS, progress=False)
+    first = 'aachen_000000_000123'
+    assert _files(out) == [p for p in _expected_files() if first in p]
+    mtimes = {p: os.stat(osp.join(out, p)).st_mtime_ns for p in _files(out)}
+    stale = osp.join(out, 'spike', 'val', 'bonn', '.tmp-killed.spk')
+    os.makedirs(osp.dirname(stale))
+    open(stale, 'wb').close()  # what a SIGKILL mid-write leaves
+
+    monkeypatch.setattr(conversion, 'simulate_spikes', recording)
+    del calls[:]
+    counts = convert_cityscapes(root, out, SETTINGS, progress=False)
+    assert counts == dict(sequence=0, static=2, skipped=1)
+    assert len(calls) == 2 and _files(out) == _expected_files()
+    assert mtimes == {p: os.stat(osp.join(out, p)).st_mtime_ns
+                      for p in mtimes}
+
+    # a truncated spike file and a deleted label are redone, nothing else
+    spike = osp.join(out, 'spike', 'train', 'aachen', f'{first}_spike.spk')
+    with open(spike, 'r+b') as f:
+        f.truncate(40)
+    os.remove(osp.join(out, 'gtFine', 'val', 'bonn',
+                       'bonn_000000_000019_gtFine_labelTrainIds.png'))
+    del calls[:]
+    counts = convert_cityscapes(root, out, SETTINGS, progress=False)
+    assert counts == dict(sequence=1, static=1, skipped=1)
+    assert sorted(calls) == [1, 3]
+    assert _files(out) == _expected_files()
+
+
+def test_deterministic_and_settings_aware(tmp_path, cityscapes, calls):
+    root, _ = cityscapes
+    outs = [str(tmp_path / name) for name in ('a', 'b')]
+    for out in outs:
+        convert_cityscapes(root, out, SETTINGS, splits=('train', ),
+                           progress=False)
+    _assert_same_files(*outs)
+    # other settings redo exactly the samples they change
+    no_sequence = ConversionSettings(height=32, width=64, num_steps=9,
+                                     frames_around=0)
+    counts = convert_cityscapes(root, outs[0], no_sequence,
+                                splits=('train', ), progress=False)
+    assert counts == dict(sequence=0, static=1, skipped=1)
+    lower_threshold = ConversionSettings(height=32, width=64, num_steps=9,
+                                threshold=1.0)
+    counts = convert_cityscapes(root, outs[0], lower_threshold,
+                                splits=('train', ), progress=False)
+    assert counts == dict(sequence=1, static=1, skipped=0)
+
+
+def test_cli_in_parallel_then_resume(tmp_path, cityscapes, single_thread):
+    root, _ = cityscapes
+    out = str(tmp_path / 'out')
+    scene = {'camera_motion': {'translation': [8, 0], 'per': 'clip'}}
+    script = osp.join(REPO_ROOT, 'tools', 'dataset_converters',
+                      'spike_cityscapes.py')
+    result = subprocess.run(
+        [sys.executable, script, root, out, '--height', '32', '--width',
+         '64', '--num-steps', '9', '--nproc', '2', '--limit', '1',
+         '--scene', json.dumps(scene)],
+        capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert '1 samples from sequences, 1 from the static model' in \
+        result.stdout
+    assert _files(out) == [p for p in _expected_files()
+                           if 'aachen_000001' not in p]
+    for stem, resampling in [('aachen_000000_000123', 'flow'),
+                             ('bonn_000000_000019', 'camera_motion')]:
+        split, city = SAMPLES[stem][:2]
+        with open(osp.join(out, 'spike', split, city,
+                           f'{stem}_spike.json')) as f:
+            assert json.load(f)['simulation']['resampling'] == resampling
+    # the same files from one process with other thread counts
+    settings = ConversionSettings(height=32, width=64, num_steps=9,
+                                  scene=scene)
+    serial = str(tmp_path / 'serial')
+    convert_cityscapes(root, serial, settings, limit=1, progress=False)
+    _assert_same_files(out, serial)
+    counts = convert_cityscapes(root, out, settings, progress=False)
+    assert counts == dict(sequence=0, static=1, skipped=2)

@@ -1,0 +1,516 @@
+"""Cityscapes to Spike-Cityscapes: find the samples, map the labels, simulate.
+
+Input, a Cityscapes root::
+
+    leftImg8bit/<split>/<city>/<stem>_leftImg8bit.png          RGB
+    gtFine/<split>/<city>/<stem>_gtFine_labelTrainIds.png
+                       or <stem>_gtFine_labelIds.png
+    leftImg8bit_sequence/<split>/<city>/<stem>_leftImg8bit.png optional
+
+with ``<stem> = <city>_<seq>_<frame>``; a sequence snippet holds 30 frames,
+the annotated one 20th.
+
+Output, the layout :class:`~wgse_mmseg.datasets.SpikeCityscapesDataset`
+reads::
+
+    spike/<split>/<city>/<stem>_spike.spk               (T, H, W) 0/1 spikes
+    spike/<split>/<city>/<stem>_spike.json              what made them
+    gtFine/<split>/<city>/<stem>_gtFine_labelTrainIds.png   (H, W) train ids
+
+Time span. A spike camera reads out at 40 kHz, so ``T`` steps last
+``T / 40000`` s (3.2 ms for ``T = 129``), while Cityscapes' sequence runs at
+17 Hz (59 ms between frames). When ``leftImg8bit_sequence`` holds the
+frames ``frame - K .. frame + K`` (``K = frames_around``), those ``2K + 1``
+frames are spread evenly over the ``T`` steps and the simulator interpolates
+between them along DIS optical flow: the stream covers ``2K / 17`` s of
+scene time, played ``(2K / 17) / (T / 40000)`` times faster than real time
+(x36 for ``K = 1``, ``T = 129``), with the annotated frame at the middle
+step, where the label holds. Without those frames (or with ``K = 0``) the
+scene's static model is used: the annotated frame alone, optionally moved
+by a ``camera_motion`` effect.
+
+Every file is written atomically; a sample whose three files exist, read
+back whole, and record the current settings is skipped, so an interrupted
+conversion resumes. Each sample's seed is derived from its name, so reruns
+give identical files.
+"""
+import contextlib
+import hashlib
+import json
+import multiprocessing
+import os
+import os.path as osp
+import re
+from dataclasses import dataclass, field
+from functools import partial
+from glob import glob
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import cv2
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from ..io import atomic_output, save_spikes, spike_shape
+from ..simulation import parse_effects, read_scene_file, simulate_spikes
+
+__all__ = [
+    'CITYSCAPES_LABELS', 'LABEL_ID_TO_TRAIN_ID', 'CityscapesSample',
+    'ConversionSettings', 'find_samples', 'labelids_to_trainids',
+    'resize_nearest', 'sample_effects', 'sample_seed', 'output_paths',
+    'convert_sample', 'convert_cityscapes', 'load_scene'
+]
+
+CITYSCAPES_FPS = 17.0  # leftImg8bit_sequence frame rate
+SPIKE_READOUT_HZ = 40000.0  # spike camera readout rate
+ANNOTATED_INDEX = 19  # the annotated frame is the 20th of a 30-frame snippet
+SNIPPET_LENGTH = 30
+IGNORE_INDEX = 255
+
+# Cityscapes' class definitions (cityscapesscripts' labels.py): label id,
+# name, train id. Train id 255 (and -1, the licence plate) is ignored.
+CITYSCAPES_LABELS: Tuple[Tuple[int, str, int], ...] = (
+    (0, 'unlabeled', 255), (1, 'ego vehicle', 255),
+    (2, 'rectification border', 255), (3, 'out of roi', 255),
+    (4, 'static', 255), (5, 'dynamic', 255), (6, 'ground', 255),
+    (7, 'road', 0), (8, 'sidewalk', 1), (9, 'parking', 255),
+    (10, 'rail track', 255), (11, 'building', 2), (12, 'wall', 3),
+    (13, 'fence', 4), (14, 'guard rail', 255), (15, 'bridge', 255),
+    (16, 'tunnel', 255), (17, 'pole', 5), (18, 'polegroup', 255),
+    (19, 'traffic light', 6), (20, 'traffic sign', 7),
+    (21, 'vegetation', 8), (22, 'terrain', 9), (23, 'sky', 10),
+    (24, 'person', 11), (25, 'rider', 12), (26, 'car', 13),
+    (27, 'truck', 14), (28, 'bus', 15), (29, 'caravan', 255),
+    (30, 'trailer', 255), (31, 'train', 16), (32, 'motorcycle', 17),
+    (33, 'bicycle', 18), (-1, 'license plate', -1))
+
+
+def _lookup_tables() -> Tuple[np.ndarray, np.ndarray]:
+    """256-entry ``uint8`` label id -> train id table, and which ids exist.
+
+    A ``uint8`` label image stores id -1 as 255.
+    """
+    table = np.full(256, IGNORE_INDEX, np.uint8)
+    known = np.zeros(256, bool)
+    for label_id, _, train_id in CITYSCAPES_LABELS:
+        table[label_id % 256] = train_id if train_id >= 0 else IGNORE_INDEX
+        known[label_id % 256] = True
+    return table, known
+
+
+LABEL_ID_TO_TRAIN_ID, _KNOWN_LABEL_IDS = _lookup_tables()
+_KNOWN_TRAIN_IDS = np.zeros(256, bool)
+_KNOWN_TRAIN_IDS[[*range(19), IGNORE_INDEX]] = True
+
+_STEM = re.compile(r'^(?P<city>.+)_(?P<seq>\d+)_(?P<frame>\d+)$')
+_IMAGE_SUFFIX = '_leftImg8bit.png'
+_LABEL_SUFFIXES = {'labelTrainIds': '_gtFine_labelTrainIds.png',
+                   'labelIds': '_gtFine_labelIds.png'}
+
+
+@dataclass(frozen=True)
+class CityscapesSample:
+    """One annotated Cityscapes frame and the files that make its sample.
+
+    ``label_kind`` is ``'labelTrainIds'`` (copied) or ``'labelIds'``
+    (mapped to train ids). ``sequence`` lists the frames
+    ``frame - K .. frame + K``: ``image`` in the middle, its neighbours from
+    ``leftImg8bit_sequence``; it is empty for the static model.
+    """
+    split: str
+    city: str
+    stem: str
+    image: str
+    label: str
+    label_kind: str
+    sequence: Tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class ConversionSettings:
+    """What a converted sample depends on besides its source files.
+
+    Args:
+        height, width: output frame size (Cityscapes is 1024x2048).
+        num_steps: ``T``, spike readout steps per sample.
+        threshold: firing threshold (REDS convention ``1 / 0.6``).
+        frames_around: ``K``; the sequence frames ``frame - K .. frame + K``
+            span the stream (``0``: always the static model).
+        scene: extra simulator effects, name -> parameters, for every sample;
+            ``interpolation`` applies only to sequence samples (default
+            ``{'method': 'flow'}``), ``camera_motion`` only to static ones.
+        seed: base seed; each sample's seed also depends on its name.
+    """
+    height: int = 512
+    width: int = 1024
+    num_steps: int = 129
+    threshold: float = 1 / 0.6
+    frames_around: int = 1
+    scene: Dict[str, Optional[dict]] = field(default_factory=dict)
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.height < 1 or self.width < 1 or self.num_steps < 1:
+            raise ValueError(
+                f'height, width and num_steps must be >= 1, got '
+                f'{self.height}, {self.width}, {self.num_steps}')
+        if not 0 <= self.frames_around <= SNIPPET_LENGTH - 1 - ANNOTATED_INDEX:
+            raise ValueError(
+                f'frames_around must lie in [0, '
+                f'{SNIPPET_LENGTH - 1 - ANNOTATED_INDEX}] (a snippet holds '
+                f'{SNIPPET_LENGTH} frames, the annotated one at index '
+                f'{ANNOTATED_INDEX}), got {self.frames_around}')
+        if self.threshold <= 0:
+            raise ValueError(f'threshold must be > 0, got {self.threshold}')
+
+
+def _require_dir(path: str, what: str) -> None:
+    if not osp.isdir(path):
+        raise FileNotFoundError(f'{path}: missing; expected {what}')
+
+
+def _sequence_frames(root: str, split: str, city: str, image: str,
+                     frames_around: int) -> Tuple[str, ...]:
+    """Frames ``frame - K .. frame + K`` of ``image``'s snippet.
+
+    The annotated frame is ``image`` itself; its neighbours come from
+    ``leftImg8bit_sequence``. Empty when ``K = 0`` or no neighbour exists.
+    """
+    if frames_around == 0:
+        return ()
+    match = _STEM.match(osp.basename(image)[:-len(_IMAGE_SUFFIX)])
+    frame, digits = int(match['frame']), len(match['frame'])
+    paths = [
+        osp.join(root, 'leftImg8bit_sequence', split, city,
+                 f'{match["city"]}_{match["seq"]}_'
+                 f'{frame + offset:0{digits}d}{_IMAGE_SUFFIX}')
+        for offset in range(-frames_around, frames_around + 1)]
+    paths[frames_around] = image
+    missing = [path for path in paths if not osp.exists(path)]
+    if len(missing) == 2 * frames_around:
+        return ()
+    if missing:
+        raise FileNotFoundError(
+            f'{missing[0]}: missing, but other frames of its snippet are in '
+            f'leftImg8bit_sequence ({len(missing)} of the {2 * frames_around}'
+            f' frames around {image} missing); complete the sequence or '
+            f'pass frames_around=0 for the static model')
+    return tuple(paths)
+
+
+def find_samples(root: str, splits: Sequence[str] = ('train', 'val'),
+                 frames_around: int = 1) -> List[CityscapesSample]:
+    """Every annotated frame of ``splits`` under the Cityscapes ``root``.
+
+    Raises ``FileNotFoundError`` naming the path for a missing
+    ``leftImg8bit`` or ``gtFine`` split, an annotated frame with no label,
+    or a sequence snippet with some of its frames missing.
+    """
+    samples = []
+    for split in splits:
+        image_dir = osp.join(root, 'leftImg8bit', split)
+        _require_dir(image_dir, f'Cityscapes images leftImg8bit/{split}/'
+                     f'<city>/*{_IMAGE_SUFFIX}')
+        _require_dir(osp.join(root, 'gtFine', split),
+                     f'Cityscapes labels gtFine/{split}/<city>/'
+                     f'*_gtFine_labelIds.png')
+        images = sorted(glob(osp.join(image_dir, '*', '*' + _IMAGE_SUFFIX)))
+        if not images:
+            raise FileNotFoundError(
+                f'{image_dir}: holds no <city>/*{_IMAGE_SUFFIX} images')
+        for image in images:
+            city = osp.basename(osp.dirname(image))
+            stem = osp.basename(image)[:-len(_IMAGE_SUFFIX)]
+            if not _STEM.match(stem):
+                raise ValueError(
+                    f'{image}: not a Cityscapes name '
+                    f'<city>_<seq>_<frame>{_IMAGE_SUFFIX}')
+            labels = {kind: osp.join(root, 'gtFine', split, city,
+                                     stem + suffix)
+                      for kind, suffix in _LABEL_SUFFIXES.items()}
+            kind = next((k for k, p in labels.items() if osp.exists(p)), None)
+            if kind is None:
+                raise FileNotFoundError(
+                    f'{image}: annotated frame has no label; expected '
+                    f'{labels["labelTrainIds"]} or {labels["labelIds"]}')
+            samples.append(CityscapesSample(
+                split, city, stem, image, labels[kind], kind,
+                _sequence_frames(root, split, city, image, frames_around)))
+    return samples
+
+
+def labelids_to_trainids(label: np.ndarray, source: str = '<label>'
+                         ) -> np.ndarray:
+    """Map an ``(H, W)`` ``uint8`` Cityscapes label-id map to train ids.
+
+    Raises ``ValueError`` naming ``source`` for a value that is no
+    Cityscapes label id.
+    """
+    unknown = ~_KNOWN_LABEL_IDS[label]
+    if unknown.any():
+        raise ValueError(
+            f'{source}: values {sorted(set(label[unknown].tolist()))[:10]} '
+            f'are not Cityscapes label ids (0..33, 255 for -1)')
+    return LABEL_ID_TO_TRAIN_ID[label]
+
+
+def resize_nearest(label: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Nearest-neighbour resize of an ``(H, W)`` map to ``(height, width)``.
+
+    Output pixel ``(i, j)`` is input pixel
+    ``(i * H // height, j * W // width)``: OpenCV's ``INTER_NEAREST`` (and
+    mmcv's ``'nearest'``) convention, computed exactly. Values are copied,
+    never blended.
+    """
+    rows = np.arange(height) * label.shape[0] // height
+    cols = np.arange(width) * label.shape[1] // width
+    return label[rows[:, None], cols]
+
+
+def _read(path: str, flags: int) -> np.ndarray:
+    image = cv2.imread(path, flags)
+    if image is None:
+        raise OSError(f'{path}: cannot be read as an image')
+    return image
+
+
+def _train_id_label(sample: CityscapesSample, height: int,
+                    width: int, image_shape: Tuple[int, int]) -> np.ndarray:
+    """The sample's ``(height, width)`` ``uint8`` train-id label."""
+    label = _read(sample.label, cv2.IMREAD_UNCHANGED)
+    if label.ndim != 2 or label.dtype != np.uint8:
+        raise ValueError(
+            f'{sample.label}: expected a single-channel 8-bit label image, '
+            f'got shape {label.shape} of {label.dtype}')
+    if label.shape != image_shape:
+        raise ValueError(
+            f'{sample.label}: label is {label.shape[0]}x{label.shape[1]} '
+            f'but its image {sample.image} is '
+            f'{image_shape[0]}x{image_shape[1]}')
+    if sample.label_kind == 'labelIds':
+        label = labelids_to_trainids(label, sample.label)
+    elif not _KNOWN_TRAIN_IDS[label].all():
+        bad = sorted(set(label[~_KNOWN_TRAIN_IDS[label]].tolist()))
+        raise ValueError(
+            f'{sample.label}: values {bad[:10]} are not Cityscapes train '
+            f'ids (0..18, 255)')
+    return resize_nearest(label, height, width)
+
+
+def _rgb_frames(sample: CityscapesSample, height: int,
+                width: int) -> Tuple[np.ndarray, Tuple[int, int]]:
+    """``(N, height, width, 3)`` ``uint8`` RGB frames and the source size:
+    the sequence, or the annotated frame alone."""
+    frames, size = [], None
+    for path in sample.sequence or (sample.image, ):
+        image = _read(path, cv2.IMREAD_COLOR)
+        if size is None:
+            size = image.shape[:2]
+        elif image.shape[:2] != size:
+            raise ValueError(
+                f'{path}: frame is {image.shape[0]}x{image.shape[1]} but '
+                f'{sample.image} is {size[0]}x{size[1]}')
+        image = cv2.resize(image, (width, height),
+                           interpolation=cv2.INTER_AREA)
+        frames.append(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
+    return np.stack(frames), size
+
+
+def sample_effects(sample: CityscapesSample,
+                   scene: Dict[str, Optional[dict]]
+                   ) -> Dict[str, Optional[dict]]:
+    """Simulator effects for ``sample``: name -> parameters.
+
+    A sequence sample gets ``interpolation`` (``{'method': 'flow'}`` unless
+    the scene sets it) and the scene's effects but ``camera_motion``, which
+    its frames already hold; a static sample gets the scene's effects but
+    ``interpolation``.
+    """
+    if sample.sequence:
+        effects = dict(interpolation=scene.get('interpolation',
+                                               {'method': 'flow'}))
+        skip = ('interpolation', 'camera_motion')
+    else:
+        effects, skip = {}, ('interpolation', )
+    effects.update(
+        (name, params) for name, params in scene.items() if name not in skip)
+    return effects
+
+
+def sample_seed(stem: str, base_seed: int = 0) -> int:
+    """A 31-bit seed from the sample's name and the base seed."""
+    digest = hashlib.sha256(f'{base_seed}:{stem}'.encode()).digest()
+    return int.from_bytes(digest[:4], 'little') & 0x7FFFFFFF
+
+
+def output_paths(out_dir: str, sample: CityscapesSample) -> Dict[str, str]:
+    """``spike``, ``meta`` and ``label`` paths of ``sample`` in ``out_dir``."""
+    spike_dir = osp.join(out_dir, 'spike', sample.split, sample.city)
+    return dict(
+        spike=osp.join(spike_dir, f'{sample.stem}_spike.spk'),
+        meta=osp.join(spike_dir, f'{sample.stem}_spike.json'),
+        label=osp.join(out_dir, 'gtFine', sample.split, sample.city,
+                       f'{sample.stem}_gtFine_labelTrainIds.png'))
+
+
+def _recipe(sample: CityscapesSample, settings: ConversionSettings,
+            root: str) -> dict:
+    """Everything a sample's files depend on, as JSON values."""
+    scene_seconds = 2 * settings.frames_around / CITYSCAPES_FPS
+    recipe = dict(
+        model='sequence' if sample.sequence else 'static',
+        sources=dict(
+            image=osp.relpath(sample.image, root),
+            label=osp.relpath(sample.label, root),
+            label_kind=sample.label_kind,
+            sequence=[osp.relpath(p, root) for p in sample.sequence]),
+        height=settings.height, width=settings.width,
+        num_steps=settings.num_steps, threshold=settings.threshold,
+        seed=sample_seed(sample.stem, settings.seed),
+        effects=sample_effects(sample, settings.scene),
+        time_span=dict(
+            readout_seconds=settings.num_steps / SPIKE_READOUT_HZ,
+            scene_seconds=scene_seconds if sample.sequence else 0.0,
+            frames_around=settings.frames_around if sample.sequence else 0))
+    return json.loads(json.dumps(recipe))
+
+
+def _is_done(paths: Dict[str, str], recipe: dict) -> bool:
+    """Whether all three files exist, read back whole, and match ``recipe``."""
+    try:
+        with open(paths['meta']) as f:
+            if json.load(f).get('recipe') != recipe:
+                return False
+        shape = (recipe['num_steps'], recipe['height'], recipe['width'])
+        if spike_shape(paths['spike']) != shape:
+            return False
+        label = cv2.imread(paths['label'], cv2.IMREAD_UNCHANGED)
+    except (OSError, ValueError):  # SpikeFileError is a ValueError
+        return False
+    return label is not None and label.shape == shape[1:]
+
+
+def _jsonable(value):
+    """JSON form of the NumPy values a simulator's metadata may hold."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f'{type(value).__name__} is not JSON serialisable')
+
+
+def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
+                   settings: ConversionSettings) -> str:
+    """Write one sample's spike stream, label and metadata.
+
+    Everything is computed before anything is written, and each file is
+    written atomically, metadata last. Returns ``'skipped'`` when the sample
+    is already done (see :func:`_is_done`), else its model, ``'sequence'``
+    or ``'static'``.
+    """
+    paths = output_paths(out_dir, sample)
+    recipe = _recipe(sample, settings, root)
+    if _is_done(paths, recipe):
+        return 'skipped'
+    frames, size = _rgb_frames(sample, settings.height, settings.width)
+    label = _train_id_label(sample, settings.height, settings.width, size)
+    spikes, simulation = simulate_spikes(
+        frames, settings.num_steps, threshold=settings.threshold,
+        effects=recipe['effects'], seed=recipe['seed'])
+    ok, png = cv2.imencode('.png', label)
+    if not ok:
+        raise OSError(f'{paths["label"]}: PNG encoding failed')
+    with atomic_output(paths['label']) as f:
+        f.write(png.tobytes())
+    save_spikes(paths['spike'], spikes)
+    meta = json.dumps(dict(recipe=recipe, simulation=simulation), indent=1,
+                      default=_jsonable)
+    with atomic_output(paths['meta']) as f:
+        f.write(meta.encode())
+    return recipe['model']
+
+
+def _remove_stale_temporaries(out_dir: str, splits: Sequence[str]) -> None:
+    """Remove temporary files a killed run left (``atomic_output``'s)."""
+    for tree in ('spike', 'gtFine'):
+        for split in splits:
+            for path in glob(osp.join(out_dir, tree, split, '*', '.tmp-*')):
+                os.remove(path)
+
+
+def _init_worker() -> None:
+    """One thread per worker process: the pool provides the parallelism."""
+    torch.set_num_threads(1)
+    cv2.setNumThreads(1)
+
+
+def convert_cityscapes(root: str, out_dir: str,
+                       settings: Optional[ConversionSettings] = None,
+                       splits: Sequence[str] = ('train', 'val'),
+                       nproc: int = 1, limit: Optional[int] = None,
+                       progress: bool = True) -> Dict[str, int]:
+    """Convert the Cityscapes ``root`` into Spike-Cityscapes at ``out_dir``.
+
+    Args:
+        root: Cityscapes root (``leftImg8bit/``, ``gtFine/``, optionally
+            ``leftImg8bit_sequence/``).
+        out_dir: output root.
+        settings: output size, ``T``, threshold, time span, effects, seed.
+        splits: Cityscapes splits to convert.
+        nproc: worker processes (1: in this process).
+        limit: convert at most this many samples per split (first by name).
+        progress: show a progress bar.
+
+    Returns:
+        How many samples were made from a ``'sequence'``, made by the
+        ``'static'`` model, and ``'skipped'`` as already done.
+    """
+    settings = settings or ConversionSettings()
+    if nproc < 1:
+        raise ValueError(f'nproc must be >= 1, got {nproc}')
+    samples = find_samples(root, splits, settings.frames_around)
+    if limit is not None:
+        samples = [s for split in splits
+                   for s in [s for s in samples if s.split == split][:limit]]
+    _remove_stale_temporaries(out_dir, splits)
+    convert = partial(convert_sample, root=root, out_dir=out_dir,
+                      settings=settings)
+    counts = dict(sequence=0, static=0, skipped=0)
+    with contextlib.ExitStack() as stack:
+        if nproc == 1:
+            outcomes = map(convert, samples)
+        else:
+            pool = stack.enter_context(
+                multiprocessing.Pool(nproc, _init_worker))
+            outcomes = pool.imap_unordered(convert, samples)
+        for outcome in tqdm(outcomes, total=len(samples),
+                            desc='Spike-Cityscapes', disable=not progress):
+            counts[outcome] += 1
+    return counts
+
+
+def load_scene(value: Optional[str]) -> Dict[str, Optional[dict]]:
+    """Simulator effects from a JSON/YAML scene file or inline JSON.
+
+    Returns the mapping effect name -> parameters (``None`` or ``{}``: the
+    effect's defaults; empty for ``value=None``), each effect checked by the
+    simulator's parser so that a typo fails before any conversion.
+    """
+    if value is None:
+        return {}
+    if osp.isfile(value):
+        scene = read_scene_file(value)
+    else:
+        try:
+            scene = json.loads(value)
+        except ValueError as err:
+            raise ValueError(
+                f'scene {value!r} is neither a file nor inline JSON: '
+                f'{err}') from err
+        if not isinstance(scene, dict):
+            raise ValueError(
+                f'scene {value!r} must map effect names to parameters, '
+                f'e.g. {{"shot_noise": {{}}}}')
+    for name, params in scene.items():  # one by one: two light effects
+        parse_effects({name: params})  # are allowed, routed per sample
+    return scene
