@@ -1,0 +1,224 @@
+"""WGSE forward+backward time and peak memory against the reference design.
+
+The reference is the public WGSE implementation's design, rebuilt here only:
+``pytorch_wavelets.DWT1DForward(J=level, wave=wavelet, mode='zero')`` over
+every pixel's time series ``(B*H*W, 1, T)``, one ``nn.Conv1d`` band network
+per band on the whole batch, ``DWT1DInverse`` back (``T + 1`` samples for odd
+``T``; the extra one is dropped for the comparison). It uses the same band
+network weights as the package's ``WGSE``, so outputs must agree.
+
+Each measurement runs in a fresh process: peak memory is the growth of the
+process's peak resident set during the first forward+backward after set-up
+(inputs and model already built), time the median (and min-max) wall time of
+``--repeat`` further forward+backward passes after one warm-up.
+
+    python tools/benchmark_wgse.py                          # the issue's shapes
+    python tools/benchmark_wgse.py --shapes 4x41x64x64 --repeat 3
+    python tools/benchmark_wgse.py --out results.json
+
+Needs ``pytorch_wavelets`` (``requirements/tests.txt``).
+"""
+import argparse
+import json
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from typing import Dict, List
+
+import torch
+
+IMPLEMENTATIONS = {
+    'reference': 'pytorch_wavelets + per-pixel nn.Conv1d',
+    'wgse': 'wgse_mmseg WGSE',
+    'wgse_cp': 'wgse_mmseg WGSE, with_cp=True',
+}
+DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
+
+
+def _parse_shape(text: str) -> List[int]:
+    try:
+        shape = [int(v) for v in text.lower().split('x')]
+    except ValueError:
+        shape = []
+    if len(shape) != 4 or min(shape) < 1:
+        raise argparse.ArgumentTypeError(
+            f'shape must be BxTxHxW with positive sizes, got {text!r}')
+    return shape
+
+
+class ReferenceWGSE(torch.nn.Module):
+    """The reference design around ``model``'s band networks: ``(B, T, H, W)``
+    -> ``(B, T', H, W)`` with ``T' = T + 1`` for odd ``T``."""
+
+    def __init__(self, model):
+        super().__init__()
+        from pytorch_wavelets import DWT1DForward, DWT1DInverse
+        self.dwt = DWT1DForward(J=model.level, wave=model.wavelet, mode='zero')
+        self.idwt = DWT1DInverse(wave=model.wavelet, mode='zero')
+        self.band_networks = model.band_networks
+
+    def forward(self, spikes: torch.Tensor) -> torch.Tensor:
+        batch, steps, height, width = spikes.shape
+        signals = spikes.permute(0, 2, 3, 1).reshape(-1, 1, steps)
+        low, highs = self.dwt(signals)
+        low = self.band_networks[0](low)
+        # pytorch_wavelets orders details finest first; WGSE's bands are
+        # [cA_n, cD_n, ..., cD_1], PyWavelets' order.
+        highs = [net(h) for net, h in zip(self.band_networks[1:],
+                                          reversed(highs))]
+        out = self.idwt((low, list(reversed(highs))))
+        return out.reshape(batch, height, width, -1).permute(0, 3, 1, 2)
+
+
+def _build(impl: str, shape: List[int]):
+    import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
+    from wgse_mmseg.models import WGSE
+    torch.manual_seed(0)
+    model = WGSE(with_cp=impl == 'wgse_cp')
+    spikes = (torch.rand(shape, generator=torch.Generator().manual_seed(1))
+              < 0.3).float()
+    if impl == 'reference':
+        return ReferenceWGSE(model), spikes
+    return model, spikes
+
+
+def _step(model, spikes) -> torch.Tensor:
+    out = model(spikes)
+    out.square().mean().backward()
+    return out
+
+
+def worker(impl: str, shape: List[int], repeat: int) -> Dict:
+    """Measure one implementation at one shape (run in a fresh process)."""
+    model, spikes = _build(impl, shape)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    _step(model, spikes)
+    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before
+    times = []
+    for _ in range(repeat):
+        model.zero_grad(set_to_none=True)
+        start = time.perf_counter()
+        _step(model, spikes)
+        times.append(time.perf_counter() - start)
+    return dict(impl=impl, shape=shape, peak_mib=peak_kib / 1024,
+                median_s=statistics.median(times), min_s=min(times),
+                max_s=max(times), repeat=repeat)
+
+
+def agreement(shape: List[int]) -> Dict:
+    """Max |WGSE - reference| over the output (the reference's extra sample
+    for odd T dropped) and the band networks' gradients, same weights."""
+    model, spikes = _build('wgse', shape)
+    reference = ReferenceWGSE(model)
+    results = []
+    for module in (model, reference):
+        model.zero_grad(set_to_none=True)
+        out = module(spikes)[:, :shape[1]]
+        out.square().mean().backward()
+        results.append((out.detach(), [p.grad.clone()
+                                       for p in model.parameters()]))
+    (out, grads), (ref_out, ref_grads) = results
+    grad_err = max(((g - r).abs().max() / r.abs().max().clamp_min(1e-12)
+                    ).item() for g, r in zip(grads, ref_grads))
+    return dict(shape=shape, max_abs_output_diff=(out - ref_out).abs().max()
+                .item(), max_output=ref_out.abs().max().item(),
+                max_rel_grad_diff=grad_err)
+
+
+def _run_worker(args: List[str]) -> Dict:
+    cmd = [sys.executable, os.path.abspath(__file__), '--worker'] + args
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f'benchmark worker {args} failed:\n{proc.stderr}')
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def machine() -> Dict:
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open('/proc/cpuinfo') as f:
+            cpu = next(line.split(':', 1)[1].strip() for line in f
+                       if line.startswith('model name'))
+    except (OSError, StopIteration):
+        pass
+    import pytorch_wavelets
+    return dict(cpu=cpu, cores=os.cpu_count(), torch=torch.__version__,
+                threads=torch.get_num_threads(),
+                pytorch_wavelets=getattr(pytorch_wavelets, '__version__', '?'),
+                python=platform.python_version(),
+                load_average=os.getloadavg()[0])
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--shapes', nargs='+', type=_parse_shape,
+                        default=[_parse_shape(s) for s in DEFAULT_SHAPES],
+                        help='BxTxHxW batches (default: %s)' %
+                        ' '.join(DEFAULT_SHAPES))
+    parser.add_argument('--repeat', type=int, default=3)
+    parser.add_argument('--impls', nargs='+', choices=list(IMPLEMENTATIONS),
+                        default=list(IMPLEMENTATIONS))
+    parser.add_argument('--out', help='also write the results as JSON')
+    parser.add_argument('--worker', nargs='+', help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        kind, *rest = args.worker
+        if kind == 'agree':
+            result = agreement(_parse_shape(rest[0]))
+        else:
+            result = worker(kind, _parse_shape(rest[0]), int(rest[1]))
+        print(json.dumps(result))
+        return 0
+    if args.repeat < 1:
+        parser.error('--repeat must be >= 1')
+
+    info = machine()
+    print('WGSE forward+backward (db8, 5 levels, zero mode, kernel 3, '
+          '32 channels)')
+    print(' | '.join(f'{k}: {v}' for k, v in info.items()))
+    header = (f'{"shape":>14} {"implementation":<40} {"median s":>9} '
+              f'{"min-max s":>13} {"peak MiB":>9} {"speed-up":>9} '
+              f'{"memory":>7}')
+    print(header)
+    print('-' * len(header))
+    rows, checks = [], []
+    for shape in args.shapes:
+        text = 'x'.join(map(str, shape))
+        results = {impl: _run_worker([impl, text, str(args.repeat)])
+                   for impl in args.impls}
+        base = results.get('reference')
+        for impl, res in results.items():
+            speed = mem = ''
+            if base and impl != 'reference':
+                res['speedup'] = base['median_s'] / res['median_s']
+                res['memory_ratio'] = res['peak_mib'] / max(base['peak_mib'],
+                                                             1e-9)
+                speed = f'{res["speedup"]:.1f}x'
+                mem = f'{res["memory_ratio"]:.2f}'
+            print(f'{text:>14} {IMPLEMENTATIONS[impl]:<40} '
+                  f'{res["median_s"]:>9.3f} '
+                  f'{res["min_s"]:>6.3f}-{res["max_s"]:<6.3f} '
+                  f'{res["peak_mib"]:>9.0f} {speed:>9} {mem:>7}')
+            rows.append(res)
+        if 'reference' in args.impls:
+            check = _run_worker(['agree', text])
+            checks.append(check)
+            print(f'{"":>14} output agreement: max |WGSE - reference| = '
+                  f'{check["max_abs_output_diff"]:.2e} (outputs up to '
+                  f'{check["max_output"]:.2f}); band-network gradients: max '
+                  f'relative difference {check["max_rel_grad_diff"]:.2e}')
+    print('speed-up: reference median / median; memory: peak / reference '
+          'peak (peak = growth of peak RSS during one forward+backward)')
+    if args.out:
+        with open(args.out, 'w') as f:
+            json.dump(dict(machine=info, results=rows, agreement=checks), f,
+                      indent=2)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
