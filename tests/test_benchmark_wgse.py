@@ -1,0 +1,45 @@
+"""tools/benchmark_wgse.py: the side-by-side table and the agreement check
+(tiny shapes; the issue's shapes are for the published run)."""
+import json
+import os.path as osp
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip('pytorch_wavelets')
+ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+
+
+def test_table_and_json_report_ratios_and_agreement(tmp_path):
+    out = tmp_path / 'wgse.json'
+    proc = subprocess.run(
+        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_wgse.py'),
+         '--shapes', '1x41x4x6', '1x12x3x3', '--repeat', '1', '--out',
+         str(out)], capture_output=True, text=True, cwd=ROOT,
+        env={'OMP_NUM_THREADS': '1', 'PATH': '/usr/bin:/bin'})
+    assert proc.returncode == 0, proc.stderr
+    assert 'pytorch_wavelets + per-pixel nn.Conv1d' in proc.stdout
+    assert 'output agreement' in proc.stdout
+    report = json.loads(out.read_text())
+    assert report['machine']['torch']
+    assert {r['impl'] for r in report['results']} == {
+        'reference', 'wgse', 'wgse_cp'}
+    for row in report['results']:
+        assert row['median_s'] > 0 and row['peak_mib'] >= 0
+        if row['impl'] != 'reference':
+            assert row['speedup'] > 0 and 'memory_ratio' in row
+    # Same weights, same input: the reference design's output (its extra
+    # sample for odd T dropped) equals WGSE's, and so do the gradients.
+    assert len(report['agreement']) == 2
+    for check in report['agreement']:
+        assert check['max_abs_output_diff'] < 1e-4
+        assert check['max_rel_grad_diff'] < 1e-3
+
+
+def test_bad_shape_is_a_usage_error():
+    proc = subprocess.run(
+        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_wgse.py'),
+         '--shapes', '4x41x128'], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert 'BxTxHxW' in proc.stderr
