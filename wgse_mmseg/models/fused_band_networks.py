@@ -26,7 +26,7 @@ pass (activation checkpointing at chunk granularity: no activation of size
 The result equals ``BandNetwork`` applied per pixel (tests compare both, and
 ``gradcheck`` the gradients in float64).
 """
-from typing import Iterator, List, NamedTuple, Optional, Sequence, Tuple
+from typing import Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
@@ -106,8 +106,14 @@ def _padded_rows(signals: Tensor, pad: int) -> Tensor:
     return padded.view(-1, 1)
 
 
+def _is_wide(weight: Tensor) -> bool:
+    """A convolution with ``C_in, C_out > 1``: a full GEMM to recompute."""
+    return min(weight.shape[:2]) > 1
+
+
 def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
-                   acts: Optional[List[Optional[Tensor]]] = None
+                   acts: Optional[List[Optional[Tensor]]] = None,
+                   stores: Optional[Dict[int, Tensor]] = None
                    ) -> List[Tensor]:
     """All activations of one chunk.
 
@@ -115,6 +121,8 @@ def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
         signals: ``(n, L)`` coefficients of ``n`` pixels.
         acts: activations kept from an earlier pass, ``None`` where dropped;
             only the dropped ones are computed again.
+        stores: activation index -> ``(n * S, C)`` buffer to write that
+            activation into (instead of a fresh tensor).
 
     Returns:
         ``[input, act_1, ..., act_m]``, each ``(n * S, C)`` with zero padding.
@@ -126,7 +134,9 @@ def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
         if acts[index] is not None:
             continue
         rows = acts[index - 1].shape[0]
-        out = signals.new_empty(rows, weight.shape[0])
+        out = (stores or {}).get(index)
+        if out is None:
+            out = signals.new_empty(rows, weight.shape[0])
         interior = out[pad:rows - pad]
         _conv_rows(acts[index - 1], weight.permute(2, 1, 0), interior, bias)
         if residual is not None:
@@ -138,10 +148,10 @@ def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
 
 
 def _drop_cheap(acts: List[Tensor], layers: Sequence[Layer]) -> List:
-    """Keep the input and the outputs of wide layers (``C_in, C_out > 1``);
-    the rest cost a ``k``-column product to recompute, not a full GEMM."""
-    return [act if index == 0 or min(layers[index - 1][0].shape[:2]) > 1
-            else None for index, act in enumerate(acts)]
+    """Keep the input and the outputs of wide layers; the rest cost a
+    ``k``-column product to recompute, not a full GEMM."""
+    return [act if index == 0 or _is_wide(layers[index - 1][0]) else None
+            for index, act in enumerate(acts)]
 
 
 def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
@@ -167,7 +177,7 @@ def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
         weight, _, residual = layers[index]
         # ReLU backward; activations are zero on padding rows, so is grad.
         grad = torch.ops.aten.threshold_backward(grad, acts[index + 1], 0)
-        if residual is not None:
+        if residual is not None and (residual > 0 or need_input_grad):
             skip = grad if acts[residual].shape[1] > 1 else grad.sum(
                 1, keepdim=True)
             pending[residual] = pending.get(residual, 0) + skip
@@ -196,10 +206,24 @@ class _FusedBandNetworks(torch.autograd.Function):
                 residuals: Tuple[Optional[int], ...], pad: int,
                 recompute: bool, *params: Tensor) -> Tensor:
         out = torch.empty_like(coeffs)
-        saved = []
+        saved, stores = [], None
         for band, columns, rows, layers in _chunks(coeffs, lengths,
                                                    residuals, pad, params):
-            acts = _chunk_forward(columns[rows], layers, pad)
+            seg_len = band.length + 2 * pad
+            if not recompute and rows.start == 0:
+                # One buffer per kept activation and band, filled chunk by
+                # chunk: no heap fragmented by thousands of kept pieces.
+                band_stores = {
+                    index: coeffs.new_empty(coeffs.shape[0] * seg_len,
+                                            weight.shape[0])
+                    for index, (weight, _, _) in enumerate(layers, 1)
+                    if _is_wide(weight)}
+            if not recompute:
+                first, last = rows.start * seg_len, min(
+                    rows.stop, coeffs.shape[0]) * seg_len
+                stores = {index: store[first:last]
+                          for index, store in band_stores.items()}
+            acts = _chunk_forward(columns[rows], layers, pad, stores=stores)
             out[rows, band.offset] = acts[-1].view(
                 -1, band.length + 2 * pad)[:, pad:pad + band.length]
             if not recompute:
