@@ -240,7 +240,9 @@ class WGSE(BaseModule):
                 analysis, synthesis, lengths = self._matrices(
                     num_steps, spikes.device, dtype)
                 coeffs = torch.matmul(signal, analysis.t())  # (B, P, C)
-        if self.dim == 1 and device_type == 'cpu':
+        # The fused kernel is opaque to tracing (FLOP counters, jit.trace).
+        if self.dim == 1 and device_type == 'cpu' and \
+                not torch.jit.is_tracing():
             enhanced = self._fused_bands(coeffs, lengths)
         else:
             enhanced = self._module_bands(coeffs, lengths, (height, width))
