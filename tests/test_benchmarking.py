@@ -1,0 +1,151 @@
+"""tools/benchmark.py and the measurements of wgse_mmseg.benchmarking."""
+import json
+import os.path as osp
+import subprocess
+import sys
+
+import pytest
+import torch
+import torch.nn as nn
+
+from mmseg.registry import MODELS
+from wgse_mmseg.benchmarking import (build_model, count_flops,
+                                     inference_parameters, markdown_table,
+                                     measure_enhancer_step,
+                                     measure_train_step, summarize,
+                                     time_calls)
+
+pytestmark = pytest.mark.usefixtures('single_thread')
+
+ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+TINY = dict(num_steps=9, crop_size='32,64')
+
+
+def config_path(name):
+    return osp.join(ROOT, 'configs', f'{name}.py')
+
+
+def count(module):
+    return sum(p.numel() for p in module.parameters())
+
+
+def test_cli_prints_the_table_and_writes_json(tmp_path):
+    out = tmp_path / 'bench.json'
+    proc = subprocess.run(
+        [sys.executable, osp.join(ROOT, 'tools', 'benchmark.py'),
+         config_path('segformer_b0_wgse'), '--crop', '32', '64', '--repeat',
+         '1', '--warmup', '0', '--threads', '1', '--cfg-options',
+         'num_steps=9', 'model.data_preprocessor.enhancer.dim=2', '--out',
+         str(out)],
+        cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    table = proc.stdout
+    for header in ('params (M)', 'GFLOPs', 'enh. GFLOPs', 'latency ms (b1)',
+                   'throughput img/s', 'train step ms', 'enh. share',
+                   'peak mem MB'):
+        assert header in table
+    assert '| segformer_b0_wgse | 9 | 32x64 |' in table
+    assert 'torch 2.' in table and 'mmsegmentation' in table
+    assert 'CPU:' in table and '1 torch threads' in table
+
+    report = json.loads(out.read_text())
+    assert report['settings']['repeat'] == 1
+    assert report['environment']['torch'] == torch.__version__
+    result, = report['results']
+    wgse = MODELS.build(dict(type='WGSE', dim=2, wavelet='db8', level=5,
+                             mode='zero', kernel_size=3, hidden_channels=32))
+    assert result['enhancer'] == 'WGSE'
+    assert result['enhancer_params'] == count(wgse)
+    assert result['num_steps'] == 9 and result['crop'] == [32, 64]
+    assert result['batch_size'] == 4
+    assert result['flops'] > result['enhancer_flops'] > 0
+    for key in ('latency_ms', 'throughput_img_s', 'train_step_ms',
+                'enhancer_step_ms'):
+        assert len(result[key]['samples']) == 1 and result[key]['median'] > 0
+    assert 0 < result['enhancer_share'] < 1
+    assert result['memory']['kind'].startswith('cpu_peak_rss')
+    assert result['memory']['peak_mb'] > 0
+
+
+def test_summarize_is_median_and_median_absolute_deviation():
+    summary = summarize([1.0, 2.0, 3.0, 10.0])
+    assert summary['median'] == 2.5 and summary['mad'] == 1.0
+    assert summary['samples'] == [1.0, 2.0, 3.0, 10.0]
+    with pytest.raises(ValueError, match='repeat'):
+        summarize([])
+
+
+def test_time_calls_warms_up_then_times_each_repeat():
+    calls = []
+    samples = time_calls(lambda: calls.append(1), torch.device('cpu'),
+                         repeat=3, warmup=2)
+    assert len(calls) == 5 and len(samples) == 3
+    assert all(s >= 0 for s in samples)
+    with pytest.raises(ValueError, match='repeat must be >= 1'):
+        time_calls(lambda: None, torch.device('cpu'), repeat=0, warmup=0)
+
+
+def test_flops_split_between_enhancer_and_segmentor():
+    _, raw = build_model(config_path('segformer_b0_raw'), TINY)
+    base = count_flops(raw, 9, (32, 64))
+    assert base['enhancer'] == 0 and base['total'] > 0
+
+    raw.data_preprocessor.enhancer = MODELS.build(dict(type='TFP'))
+    tfp = count_flops(raw, 9, (32, 64))
+    assert tfp['total'] == base['total'] and tfp['enhancer'] == 0
+    assert 'aten::cumsum' in tfp['uncounted_ops']  # listed, not hidden
+
+    raw.data_preprocessor.enhancer = MODELS.build(dict(type='WGSE', dim=2))
+    with_wgse = count_flops(raw, 9, (32, 64))
+    assert with_wgse['enhancer'] > 0
+    assert with_wgse['total'] == base['total'] + with_wgse['enhancer']
+
+
+class Untraceable(nn.Module):
+
+    def forward(self, spikes):
+        if torch.jit.is_tracing():
+            raise RuntimeError('a custom kernel')
+        return spikes
+
+
+def test_flops_of_an_untraceable_enhancer_are_unknown_not_wrong():
+    _, model = build_model(config_path('segformer_b0_raw'), TINY)
+    base = count_flops(model, 9, (32, 64))
+    model.data_preprocessor.enhancer = Untraceable()
+    flops = count_flops(model, 9, (32, 64))
+    assert flops['total'] is None and flops['enhancer'] is None
+    assert 'Untraceable cannot be traced' in flops['note']
+    assert 'a custom kernel' in flops['note']
+    assert base['note'] is None
+
+
+def test_parameters_exclude_the_auxiliary_head():
+    _, model = build_model(config_path('pspnet_wgse'), TINY)
+    parameters = inference_parameters(model)
+    assert parameters['total'] == count(model) - count(model.auxiliary_head)
+    assert parameters['enhancer'] == count(model.data_preprocessor.enhancer)
+
+
+def test_train_step_time_and_peak_memory():
+    cfg, model = build_model(config_path('segformer_b0_raw'), TINY)
+    before = [p.detach().clone() for p in model.parameters()]
+    train = measure_train_step(model, cfg.optim_wrapper, 9, (32, 64),
+                               batch_size=2, repeat=2, warmup=1)
+    assert len(train['step_ms']['samples']) == 2
+    assert train['step_ms']['median'] > 0
+    memory = train['memory']
+    assert memory['kind'] in ('cpu_peak_rss', 'cpu_peak_rss_process_lifetime')
+    assert memory['peak_mb'] >= memory['baseline_mb'] > 0
+    assert any(not torch.equal(a, p) for a, p in zip(before,
+                                                     model.parameters()))
+    assert measure_enhancer_step(model, 9, (32, 64), 2, 1, 0) is None
+
+
+def test_markdown_table_aligns_numbers_right():
+    table = markdown_table(['name', 'ms'], [['a', '1.5 ± 0.1'],
+                                            ['bb', '12.0 ± 2.0']])
+    lines = table.splitlines()
+    assert lines[0] == '| name |         ms |'
+    assert lines[1] == '|------|-----------:|'
+    assert lines[2] == '| a    |  1.5 ± 0.1 |'

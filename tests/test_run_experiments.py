@@ -1,0 +1,235 @@
+"""tools/run_experiments.py: the grids, the options it passes to the train
+and test tools, aggregation and reports, and one tiny run end to end."""
+import argparse
+import csv
+import importlib.util
+import json
+import math
+import os.path as osp
+import subprocess
+import sys
+
+import pytest
+
+from mmseg.registry import MODELS
+from wgse_mmseg.config import add_runner_arguments, load_config
+from wgse_mmseg.synthetic import make_synthetic_dataset
+
+ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+RUNNER = osp.join(ROOT, 'tools', 'run_experiments.py')
+GRID_CPU = osp.join(ROOT, 'configs', 'experiments', 'grid_cpu.py')
+GRID_FULL = osp.join(ROOT, 'configs', 'experiments', 'grid_full.py')
+
+_spec = importlib.util.spec_from_file_location('run_experiments', RUNNER)
+runner = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(runner)
+
+
+def wgse_sweep(entries):
+    return {(e.enhancer['wavelet'], e.enhancer['level']) for e in entries
+            if e.enhancer and e.enhancer['type'] == 'WGSE' and
+            e.enhancer.get('dim') == 1}
+
+
+def test_cpu_grid_covers_every_representation_on_both_models():
+    grid, entries = runner.load_grid(GRID_CPU)
+    names = {e.name for e in entries}
+    for model in ('segformer_b0', 'pspnet'):
+        for enhancer in ('raw', 'tfp', 'tfi', 'mean_spatial',
+                         'mean_temporal', 'wgse1d', 'wgse2d', 'wgse3d'):
+            assert f'{model}_{enhancer}' in names
+    sweep = wgse_sweep(entries)
+    assert {w for w, _ in sweep} == {'db1', 'db4', 'db8', 'sym4', 'coif2'}
+    assert {n for _, n in sweep} == {1, 2, 3, 4, 5}
+    for entry in entries:
+        if entry.enhancer is not None:
+            assert MODELS.get(entry.enhancer['type']) is not None
+    assert len(set(grid.seeds)) >= 2
+
+
+def test_full_grid_crosses_wavelets_and_levels():
+    grid, entries = runner.load_grid(GRID_FULL)
+    assert wgse_sweep(entries) == {(w, n)
+                                   for w in ('db1', 'db4', 'db8', 'sym4',
+                                             'coif2') for n in range(1, 6)}
+    assert grid.cfg_options.num_steps == 129 and grid.epochs == 100
+    assert len(entries) == 2 * 32
+
+
+@pytest.mark.parametrize('name', ['segformer_b0_raw', 'segformer_b0_tfi',
+                                  'segformer_b0_wgse3d',
+                                  'pspnet_wgse1d_db4_l5',
+                                  'pspnet_mean_spatial'])
+def test_entry_options_survive_the_command_line(name):
+    grid, entries = runner.load_grid(GRID_CPU)
+    entry, = runner.select(entries, [name])
+    options = dict(grid.cfg_options, data_root='/data/x',
+                   **runner.enhancer_options(entry.enhancer))
+    parser = argparse.ArgumentParser()
+    add_runner_arguments(parser)
+    args = parser.parse_args(['--cfg-options', *runner.as_cli(options)])
+    cfg = load_config(entry.config, args.cfg_options)
+    assert cfg.model.data_preprocessor.enhancer == entry.enhancer
+    assert cfg.model.backbone.in_channels == grid.cfg_options.num_steps
+    assert cfg.train_dataloader.dataset.data_root == '/data/x'
+    assert tuple(cfg.crop_size) == (64, 128)
+
+
+def schedule_cfg(**kwargs):
+    options, checkpoint = runner.schedule_options(**kwargs)
+    parser = argparse.ArgumentParser()
+    add_runner_arguments(parser)
+    args = parser.parse_args(['--cfg-options', *runner.as_cli(options)])
+    return load_config(osp.join(ROOT, 'configs', 'segformer_b0_raw.py'),
+                       args.cfg_options), checkpoint
+
+
+def test_epoch_schedule_keeps_the_warm_up_shape():
+    cfg, checkpoint = schedule_cfg(epochs=20, max_iters=None)
+    assert checkpoint == 'epoch_20.pth'
+    assert cfg.train_cfg.max_epochs == 20
+    warmup, poly = cfg.param_scheduler
+    assert (warmup.end, poly.begin, poly.end) == (2, 2, 20)
+    assert cfg.val_cfg is None and cfg.val_dataloader is None
+    assert cfg.default_hooks.checkpoint.interval == 1
+    cfg, _ = schedule_cfg(epochs=1, max_iters=None)
+    assert (cfg.param_scheduler[0].end, cfg.param_scheduler[1].end) == (1, 2)
+
+
+def test_iteration_schedule():
+    cfg, checkpoint = schedule_cfg(epochs=None, max_iters=30)
+    assert checkpoint == 'iter_30.pth'
+    assert cfg.train_cfg == dict(type='IterBasedTrainLoop', max_iters=30)
+    assert all(not s.by_epoch for s in cfg.param_scheduler)
+    assert (cfg.param_scheduler[0].end, cfg.param_scheduler[1].end) == (3, 30)
+    assert not cfg.default_hooks.checkpoint.by_epoch
+    assert not cfg.log_processor.by_epoch
+    with pytest.raises(ValueError, match='exactly one'):
+        runner.schedule_options(epochs=2, max_iters=3)
+
+
+def test_values_that_would_not_survive_the_command_line_are_refused():
+    with pytest.raises(TypeError, match='only str'):
+        runner.as_cli({'a': dict(b=1)})
+    with pytest.raises(ValueError, match='survive'):
+        runner.as_cli({'a': 'None'})
+
+
+def test_select_by_pattern_and_unknown_names():
+    _, entries = runner.load_grid(GRID_CPU)
+    chosen = runner.select(entries, ['pspnet_wgse1d_db8_*',
+                                     'segformer_b0_raw'])
+    assert [e.name for e in chosen] == ['segformer_b0_raw'] + [
+        f'pspnet_wgse1d_db8_l{n}' for n in (1, 2, 3, 4)]  # grid order
+    with pytest.raises(ValueError, match='matches no entry.*segformer_b0_raw'):
+        runner.select(entries, ['resnet_raw'])
+
+
+def test_runs_made_with_other_settings_are_not_mixed_in(tmp_path):
+    grid, entries = runner.load_grid(GRID_CPU)
+    args = runner.parse_args([GRID_CPU, '--data-root', 'data/x',
+                              '--work-dir', str(tmp_path), '--seeds', '0',
+                              '1', '--epochs', '3'])
+    runs = runner.plan(runner.select(entries, ['segformer_b0_tf?']), args,
+                       grid)
+    assert [(r.entry.name, r.seed) for r in runs] == [
+        ('segformer_b0_tfp', 0), ('segformer_b0_tfi', 0),
+        ('segformer_b0_tfp', 1), ('segformer_b0_tfi', 1)]
+    run = runs[0]
+    assert run.train_options['randomness.seed'] == 0
+    assert run.train_options['train_cfg.max_epochs'] == 3
+    assert run.checkpoint == osp.join(run.run_dir, 'epoch_3.pth')
+    assert not runner.finished(run)
+    runner._write_json(osp.join(run.run_dir, 'result.json'),
+                       dict(train_options=run.train_options))
+    assert runner.finished(run)
+    runner._write_json(osp.join(run.run_dir, 'result.json'),
+                       dict(train_options=dict(run.train_options,
+                                               **{'train_cfg.max_epochs': 5})))
+    with pytest.raises(SystemExit, match='train_cfg.max_epochs differ'):
+        runner.finished(run)
+
+
+def fake_result(path, entry, seed, miou, ms, seconds):
+    result = dict(name=entry.name, model=entry.model, seed=seed, mIoU=miou,
+                  mAcc=miou + 10, aAcc=miou + 20, params=1000,
+                  enhancer_params=0, ms_per_image=dict(median=ms),
+                  image_size=[64, 128], train_seconds=seconds,
+                  environment=dict(cpu='test cpu', cpu_count=2,
+                                   torch_threads=2, torch='2.x', mmcv='2.1',
+                                   mmengine='0.10', mmsegmentation='1.2',
+                                   python='3', platform='linux'))
+    run_dir = path / entry.name / f'seed_{seed}'
+    run_dir.mkdir(parents=True)
+    (run_dir / 'result.json').write_text(json.dumps(result))
+
+
+def test_aggregate_and_report(tmp_path):
+    grid, entries = runner.load_grid(GRID_CPU)
+    raw, tfp, tfi = runner.select(entries, ['segformer_b0_raw',
+                                            'segformer_b0_tfi',
+                                            'segformer_b0_tfp'])
+    fake_result(tmp_path, raw, 0, 10.0, 5.0, 60.0)
+    fake_result(tmp_path, raw, 1, 14.0, 7.0, 120.0)
+    fake_result(tmp_path, tfi, 0, 20.0, 6.0, 90.0)
+    rows = runner.aggregate([raw, tfi, tfp], [0, 1], str(tmp_path))
+    assert [r['name'] for r in rows] == ['segformer_b0_raw',
+                                         'segformer_b0_tfi']
+    assert rows[0]['mIoU_mean'] == 12.0
+    assert math.isclose(rows[0]['mIoU_std'], math.sqrt(8))
+    assert rows[0]['ms_per_image_mean'] == 6.0 and rows[0]['seeds'] == 2
+    assert rows[1]['mIoU_std'] is None and rows[1]['enhancer'] == 'TFI()'
+
+    runner.write_csv(rows, str(tmp_path / 'results.csv'))
+    with open(tmp_path / 'results.csv') as f:
+        table = list(csv.DictReader(f))
+    assert table[0]['aAcc_mean'] == '32.0' and table[1]['mIoU_std'] == ''
+    assert list(table[0]) == runner.CSV_COLUMNS
+
+    args = runner.parse_args([GRID_CPU, '--data-root', 'data/x',
+                              '--work-dir', str(tmp_path), '--seeds', '0',
+                              '1', '--epochs', '3'])
+    runner.write_markdown(rows, str(tmp_path / 'results.md'), 'python cmd',
+                          args, grid, 'plot.png')
+    text = (tmp_path / 'results.md').read_text()
+    assert '```bash\npython cmd\n```' in text
+    assert '3 epochs, seeds 0 1' in text and 'test cpu' in text
+    assert '| segformer_b0_raw | none     |     2 | 12.00 ± 2.83 |' in text
+    assert '![mIoU against ms per image](plot.png)' in text
+
+    pytest.importorskip('matplotlib')
+    runner.plot(rows, str(tmp_path / 'plot.png'))
+    assert (tmp_path / 'plot.png').read_bytes()[:4] == b'\x89PNG'
+
+
+def test_tiny_grid_end_to_end_and_resume(tmp_path):
+    data = tmp_path / 'data'
+    make_synthetic_dataset(str(data), num_train=4, num_val=2, height=32,
+                           width=64, num_steps=9, progress=False)
+    grid = tmp_path / 'grid.py'
+    grid.write_text(f"_base_ = [{GRID_CPU!r}]\n"
+                    "cfg_options = dict(num_steps=9, crop_size='32,64')\n"
+                    "latency = dict(repeat=1, warmup=0)\n")
+    work, report = tmp_path / 'work', tmp_path / 'report'
+    command = [sys.executable, RUNNER, str(grid), '--data-root', str(data),
+               '--work-dir', str(work), '--seeds', '0', '--max-iters', '1',
+               '--only', 'segformer_b0_tfi', '--report-dir', str(report)]
+    proc = subprocess.run(command, cwd=ROOT, capture_output=True, text=True,
+                          timeout=900)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    assert '[1/1] segformer_b0_tfi seed 0: mIoU' in proc.stdout
+    run_dir = work / 'segformer_b0_tfi' / 'seed_0'
+    result = json.loads((run_dir / 'result.json').read_text())
+    assert result['enhancer'] == dict(type='TFI')
+    assert all(0 <= result[m] <= 100 for m in ('mIoU', 'mAcc', 'aAcc'))
+    assert result['ms_per_image']['median'] > 0
+    assert result['image_size'] == [32, 64] and result['train_attempts'] == 1
+    assert not list(run_dir.glob('*.pth'))  # removed once done
+    for name in ('results.md', 'results.csv', 'accuracy_vs_time.png'):
+        assert (report / name).exists()
+
+    proc = subprocess.run(command, cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert 'done before, skipped' in proc.stdout
+    assert json.loads((run_dir / 'result.json').read_text()) == result

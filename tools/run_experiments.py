@@ -1,0 +1,546 @@
+"""Train and evaluate a grid of configs over seeds; tabulate and plot.
+
+    python tools/run_experiments.py GRID --data-root DIR --work-dir DIR
+        [--seeds 0 1 2] [--epochs N | --max-iters N] [--only NAME ...]
+        [--report-dir DIR] [--keep-checkpoints] [--list]
+
+GRID (e.g. configs/experiments/grid_cpu.py) lists models and enhancers; each
+entry ``<model>_<enhancer>`` is the model's config with
+``model.data_preprocessor.enhancer`` overridden. Each (entry, seed) run
+trains with tools/train.py and evaluates its final checkpoint with
+tools/test.py, each in its own process with the grid's ``--cfg-options``,
+then times batch-1 inference on a validation-sized stream. A run is done
+when ``WORK_DIR/<entry>/seed_<seed>/result.json`` exists (written
+atomically): re-running the command skips finished runs and resumes an
+interrupted one from its last checkpoint. At the end, every finished run of
+the selected entries and seeds is aggregated into ``results.csv``,
+``results.md`` and ``accuracy_vs_time.png`` in ``--report-dir`` (default:
+the work dir). See docs/benchmark.md.
+"""
+import argparse
+import csv
+import fnmatch
+import glob
+import io
+import json
+import os
+import os.path as osp
+import shlex
+import statistics
+import subprocess
+import sys
+import time
+from typing import Any, Dict, List, NamedTuple, Optional, Tuple
+
+from mmengine.config import Config
+
+from wgse_mmseg.benchmarking import markdown_table, validation_cost
+from wgse_mmseg.io import atomic_output
+
+REPO_ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+METRICS = ('mIoU', 'mAcc', 'aAcc')
+ENHANCER_KEY = 'model.data_preprocessor.enhancer'
+
+
+class Entry(NamedTuple):
+    """One grid entry: a model config with one enhancer in front."""
+    name: str
+    model: str
+    config: str
+    enhancer_name: str
+    enhancer: Optional[dict]
+
+
+class RunFailed(RuntimeError):
+    """A training or test process of one run exited with an error."""
+
+
+def load_grid(path: str) -> Tuple[Config, List[Entry]]:
+    """The grid config and its entries, models outer, enhancers inner.
+
+    Model config paths are relative to the repository root (or absolute).
+    """
+    grid = Config.fromfile(path)
+    for key in ('models', 'enhancers', 'cfg_options', 'epochs', 'seeds',
+                'latency'):
+        if key not in grid:
+            raise ValueError(f'{path}: the grid must define {key!r}')
+    entries = []
+    for model, config in grid.models.items():
+        config = osp.join(REPO_ROOT, config)
+        if not osp.isfile(config):
+            raise FileNotFoundError(f'{path}: model {model!r}: {config} '
+                                    f'does not exist')
+        for name, enhancer in grid.enhancers.items():
+            entries.append(Entry(f'{model}_{name}', model, config, name,
+                                 None if enhancer is None else
+                                 dict(enhancer)))
+    return grid, entries
+
+
+def select(entries: List[Entry], patterns: Optional[List[str]]) -> List[
+        Entry]:
+    """Entries matching any of the shell-style ``patterns`` (all if none);
+    a pattern matching nothing is an error that lists the names."""
+    if not patterns:
+        return entries
+    for pattern in patterns:
+        if not any(fnmatch.fnmatchcase(e.name, pattern) for e in entries):
+            raise ValueError(f'--only {pattern!r} matches no entry; the '
+                             f'grid has: {", ".join(e.name for e in entries)}')
+    return [e for e in entries
+            if any(fnmatch.fnmatchcase(e.name, p) for p in patterns)]
+
+
+def enhancer_options(enhancer: Optional[dict]) -> Dict[str, Any]:
+    """``--cfg-options`` replacing the enhancer of a raw-spike config."""
+    if enhancer is None:
+        return {ENHANCER_KEY: None}
+    options = {f'{ENHANCER_KEY}._delete_': True}
+    options.update({f'{ENHANCER_KEY}.{k}': v for k, v in enhancer.items()})
+    return options
+
+
+def schedule_options(epochs: Optional[int],
+                     max_iters: Optional[int]) -> Tuple[Dict[str, Any], str]:
+    """``--cfg-options`` for the schedule and the final checkpoint's name.
+
+    The base schedule's shape is kept: linear warm-up for a tenth of the
+    run (at least one epoch or iteration), then polynomial decay to the end
+    (a one-epoch run is warm-up only). A checkpoint is kept after every epoch
+    (a tenth of the iterations), so an interrupted run resumes; validation
+    during training is off (the run is tested afterwards).
+    """
+    if (epochs is None) == (max_iters is None):
+        raise ValueError('give exactly one of epochs and max_iters')
+    length = epochs if max_iters is None else max_iters
+    if length < 1:
+        raise ValueError(f'epochs/max_iters must be >= 1, got {length}')
+    warmup = max(1, length // 10)
+    options = {
+        'val_cfg': None, 'val_dataloader': None, 'val_evaluator': None,
+        'param_scheduler.0.end': warmup,
+        'param_scheduler.1.begin': warmup,
+        'param_scheduler.1.end': max(length, warmup + 1),
+        'default_hooks.checkpoint.max_keep_ckpts': 1,
+    }
+    if max_iters is None:
+        options.update({'train_cfg.max_epochs': epochs,
+                        'default_hooks.checkpoint.interval': 1})
+        return options, f'epoch_{epochs}.pth'
+    for index in (0, 1):
+        options.update({f'param_scheduler.{index}.by_epoch': False,
+                        f'param_scheduler.{index}.convert_to_iter_based':
+                        False})
+    options.update({
+        'train_cfg._delete_': True,
+        'train_cfg.type': 'IterBasedTrainLoop',
+        'train_cfg.max_iters': max_iters,
+        'default_hooks.checkpoint.by_epoch': False,
+        'default_hooks.checkpoint.interval': warmup,
+        'default_hooks.logger.log_metric_by_epoch': False,
+        'log_processor.by_epoch': False,
+    })
+    return options, f'iter_{max_iters}.pth'
+
+
+def as_cli(options: Dict[str, Any]) -> List[str]:
+    """``key=value`` words that mmengine's ``DictAction`` parses back to
+    ``options`` (strings, ints, floats, booleans and ``None``)."""
+    words = []
+    for key, value in options.items():
+        if not isinstance(value, (str, int, float, bool, type(None))):
+            raise TypeError(f'{key}={value!r}: only str, int, float, bool '
+                            f'and None can be passed as --cfg-options')
+        if isinstance(value, str) and (not value or value.lower() in (
+                'true', 'false', 'none')):
+            raise ValueError(f'{key}={value!r} would not survive the '
+                             f'command line as a string')
+        words.append(f'{key}={value}')
+    return words
+
+
+def describe(enhancer: Optional[dict]) -> str:
+    """``TFP(window=21)``; ``none`` for raw spikes."""
+    if enhancer is None:
+        return 'none'
+    args = ', '.join(f'{k}={v}' for k, v in enhancer.items() if k != 'type')
+    return f"{enhancer['type']}({args})"
+
+
+def _run_logged(command: List[str], log_path: str, what: str) -> None:
+    os.makedirs(osp.dirname(log_path), exist_ok=True)
+    with open(log_path, 'a') as log:
+        log.write(f'$ {shlex.join(command)}\n')
+        log.flush()
+        code = subprocess.call(command, stdout=log, stderr=subprocess.STDOUT,
+                               cwd=REPO_ROOT)
+    if code != 0:
+        with open(log_path) as log:
+            tail = ''.join(log.readlines()[-20:])
+        raise RunFailed(f'{what} exited with {code}; the end of {log_path}:'
+                        f'\n{tail}')
+
+
+def _train(command: List[str], run_dir: str) -> Dict[str, Any]:
+    """Train, adding this attempt's wall time to ``train_time.json``."""
+    path = osp.join(run_dir, 'train_time.json')
+    timing = dict(seconds=0.0, attempts=0)
+    if osp.exists(path):
+        with open(path) as f:
+            timing = json.load(f)
+    start = time.perf_counter()
+    try:
+        _run_logged(command, osp.join(run_dir, 'train.log'), 'training')
+    finally:
+        timing['seconds'] += time.perf_counter() - start
+        timing['attempts'] += 1
+        _write_json(path, timing)
+    return timing
+
+
+def _test_metrics(test_dir: str) -> Dict[str, float]:
+    """mIoU, mAcc, aAcc from the newest test log of ``tools/test.py``
+    (mmengine writes ``<work_dir>/<timestamp>/<timestamp>.json``)."""
+    logs = sorted(p for p in glob.glob(osp.join(test_dir, '*', '*.json'))
+                  if osp.basename(p) == osp.basename(osp.dirname(p)) +
+                  '.json')
+    if not logs:
+        raise RunFailed(f'no test log under {test_dir}')
+    with open(logs[-1]) as f:
+        logged = json.load(f)
+    missing = [m for m in METRICS if m not in logged]
+    if missing:
+        raise RunFailed(f'{logs[-1]} lacks {missing}')
+    return {m: float(logged[m]) for m in METRICS}
+
+
+def _write_json(path: str, data: Any) -> None:
+    with atomic_output(path) as f:
+        f.write(json.dumps(data, indent=2).encode())
+
+
+class Run(NamedTuple):
+    """One entry trained with one seed: where, and with which options."""
+    entry: Entry
+    seed: int
+    run_dir: str
+    model_options: Dict[str, Any]  # data and enhancer: training and test
+    train_options: Dict[str, Any]  # model_options, schedule and seed
+    checkpoint: str  # the final checkpoint
+
+
+def plan(entries: List[Entry], args: argparse.Namespace,
+         grid: Config) -> List[Run]:
+    """The runs of ``entries`` over ``args.seeds``, seeds outer (a partial
+    grid covers every entry with the first seeds)."""
+    schedule, checkpoint = schedule_options(args.epochs, args.max_iters)
+    runs = []
+    for seed in args.seeds:
+        for entry in entries:
+            run_dir = osp.join(args.work_dir, entry.name, f'seed_{seed}')
+            model_options = dict(grid.cfg_options,
+                                 data_root=osp.abspath(args.data_root),
+                                 **enhancer_options(entry.enhancer))
+            train_options = dict(model_options, **schedule,
+                                 **{'randomness.seed': seed})
+            runs.append(Run(entry, seed, run_dir, model_options,
+                            train_options, osp.join(run_dir, checkpoint)))
+    return runs
+
+
+def finished(run: Run) -> bool:
+    """Whether ``run`` has its result; one made with other options (data,
+    enhancer, schedule, seed) is an error, not a result to mix in."""
+    path = osp.join(run.run_dir, 'result.json')
+    if not osp.exists(path):
+        return False
+    with open(path) as f:
+        made_with = json.load(f)['train_options']
+    if made_with != run.train_options:
+        changed = sorted(k for k in set(made_with) | set(run.train_options)
+                         if made_with.get(k) != run.train_options.get(k))
+        raise SystemExit(f'{path} was made with other settings '
+                         f'({", ".join(changed)} differ); use another '
+                         f'--work-dir')
+    return True
+
+
+def run_one(run: Run, keep_checkpoints: bool,
+            latency: Dict[str, int]) -> Dict[str, Any]:
+    """Train, test and time one run; returns (and writes) its result."""
+    entry, python = run.entry, [sys.executable]
+    train_command = python + [
+        osp.join(REPO_ROOT, 'tools', 'train.py'), entry.config, '--work-dir',
+        run.run_dir, '--resume', '--cfg-options', *as_cli(run.train_options)
+    ]
+    timing = _train(train_command, run.run_dir)
+    test_dir = osp.join(run.run_dir, 'test')
+    test_command = python + [
+        osp.join(REPO_ROOT, 'tools', 'test.py'), entry.config, run.checkpoint,
+        '--work-dir', test_dir, '--cfg-options', *as_cli(run.model_options)
+    ]
+    _run_logged(test_command, osp.join(run.run_dir, 'test.log'), 'testing')
+    metrics = _test_metrics(test_dir)
+    try:
+        cost = validation_cost(entry.config, run.model_options,
+                               run.checkpoint, **latency)
+    except Exception as error:  # the run fails, the grid goes on
+        raise RunFailed(f'timing the trained model failed: '
+                        f'{type(error).__name__}: {error}') from error
+    result = dict(
+        name=entry.name, model=entry.model, enhancer_name=entry.enhancer_name,
+        enhancer=entry.enhancer, seed=run.seed, **metrics,
+        params=cost['params'], enhancer_params=cost['enhancer_params'],
+        ms_per_image=cost['latency_ms'], image_size=cost['image_size'],
+        train_seconds=timing['seconds'], train_attempts=timing['attempts'],
+        train_options=run.train_options,
+        commands=[shlex.join(train_command), shlex.join(test_command)],
+        environment=cost['environment'])
+    _write_json(osp.join(run.run_dir, 'result.json'), result)
+    if not keep_checkpoints:
+        for path in glob.glob(osp.join(run.run_dir, '*.pth')) + [
+                osp.join(run.run_dir, 'last_checkpoint')]:
+            if osp.exists(path):
+                os.remove(path)
+    return result
+
+
+def _mean_std(values: List[float]) -> Tuple[float, Optional[float]]:
+    return (statistics.fmean(values),
+            statistics.stdev(values) if len(values) > 1 else None)
+
+
+def aggregate(entries: List[Entry], seeds: List[int],
+              work_dir: str) -> List[Dict[str, Any]]:
+    """One row per entry with finished runs: mean and standard deviation
+    over seeds (``None`` with one seed) of the metrics, ms per image (each
+    run's median) and training time."""
+    rows = []
+    for entry in entries:
+        results = []
+        for seed in seeds:
+            path = osp.join(work_dir, entry.name, f'seed_{seed}',
+                            'result.json')
+            if osp.exists(path):
+                with open(path) as f:
+                    results.append(json.load(f))
+        if not results:
+            continue
+        row = dict(name=entry.name, model=entry.model,
+                   enhancer=describe(entry.enhancer),
+                   seeds=len(results), params=results[0]['params'],
+                   enhancer_params=results[0]['enhancer_params'])
+        columns = {m: [r[m] for r in results] for m in METRICS}
+        columns['ms_per_image'] = [r['ms_per_image']['median']
+                                   for r in results]
+        columns['train_seconds'] = [r['train_seconds'] for r in results]
+        for key, values in columns.items():
+            row[f'{key}_mean'], row[f'{key}_std'] = _mean_std(values)
+        row['environment'] = results[0]['environment']
+        row['image_size'] = results[0]['image_size']
+        rows.append(row)
+    return rows
+
+
+CSV_COLUMNS = ['name', 'model', 'enhancer', 'seeds', 'mIoU_mean',
+               'mIoU_std', 'mAcc_mean', 'mAcc_std', 'aAcc_mean', 'aAcc_std',
+               'params', 'enhancer_params', 'ms_per_image_mean',
+               'ms_per_image_std', 'train_seconds_mean', 'train_seconds_std']
+
+
+def write_csv(rows: List[Dict[str, Any]], path: str) -> None:
+    text = io.StringIO()
+    writer = csv.DictWriter(text, CSV_COLUMNS, extrasaction='ignore',
+                            lineterminator='\n')
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: round(v, 4) if isinstance(v, float) else v
+                         for k, v in row.items()})
+    with atomic_output(path) as f:
+        f.write(text.getvalue().encode())
+
+
+def _pm(row: Dict[str, Any], key: str, scale: float = 1,
+        digits: int = 2) -> str:
+    mean, std = row[f'{key}_mean'] * scale, row[f'{key}_std']
+    spread = '' if std is None else f' ± {std * scale:.{digits}f}'
+    return f'{mean:.{digits}f}{spread}'
+
+
+def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
+                   args: argparse.Namespace, grid: Config,
+                   plot_name: str) -> None:
+    """The results table, with the command, settings and machine."""
+    table = markdown_table(
+        ['entry', 'enhancer', 'seeds', 'mIoU', 'mAcc', 'aAcc', 'params (M)',
+         'ms / image', 'train time (min)'],
+        [[r['name'], r['enhancer'], r['seeds'], _pm(r, 'mIoU'),
+          _pm(r, 'mAcc'), _pm(r, 'aAcc'), f"{r['params'] / 1e6:.3f}",
+          _pm(r, 'ms_per_image', digits=1),
+          _pm(r, 'train_seconds', 1 / 60, 1)] for r in rows])
+    env = rows[0]['environment']
+    schedule = (f'{args.epochs} epochs' if args.max_iters is None else
+                f'{args.max_iters} iterations')
+    settings = ', '.join(f'{k}={v}' for k, v in grid.cfg_options.items())
+    grid_name = osp.relpath(osp.abspath(args.grid), REPO_ROOT)
+    lines = [
+        '# Accuracy against time per image', '',
+        f'Grid `{grid_name}` ({settings}, '
+        f'{schedule}, seeds {" ".join(map(str, args.seeds))}) on '
+        f'`{args.data_root}`, made with:', '', '```bash', command, '```', '',
+        f"Machine: {env['cpu']} ({env['cpu_count']} logical cores, "
+        f"{env['torch_threads']} torch threads); torch {env['torch']}, "
+        f"mmcv {env['mmcv']}, mmengine {env['mmengine']}, "
+        f"mmsegmentation {env['mmsegmentation']}, python {env['python']}; "
+        f"{env['platform']}.", '', table, '',
+        '- mIoU, mAcc, aAcc: % on the validation set (MMSeg `IoUMetric`) of '
+        'the final checkpoint; mean ± standard deviation over seeds (no '
+        'spread with one seed).',
+        '- params: used at inference, enhancer included, auxiliary head '
+        'excluded.',
+        '- ms / image: median of batch-1 inference (preprocessing, enhancer, '
+        'segmentor, resize) on a validation-sized stream '
+        f"({'x'.join(map(str, rows[0]['image_size']))}), per run; mean ± "
+        'standard deviation over seeds.',
+        '- train time: wall time of the training process, start-up '
+        'included; mean ± standard deviation over seeds.', '',
+        f'![mIoU against ms per image]({plot_name})'
+    ]
+    with atomic_output(path) as f:
+        f.write(('\n'.join(lines) + '\n').encode())
+
+
+def plot(rows: List[Dict[str, Any]], path: str) -> None:
+    """mIoU against ms per image (log scale), error bars one standard
+    deviation over seeds; marker: model, colour: enhancer type, label:
+    enhancer name."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    models = sorted({r['model'] for r in rows})
+    markers = dict(zip(models, 'osD^v<>p*h'))
+    types = sorted({r['enhancer'].split('(')[0] for r in rows})
+    colours = {t: plt.get_cmap('tab10')(i % 10) for i, t in enumerate(types)}
+    figure, axes = plt.subplots(figsize=(9, 6))
+    for row in rows:
+        axes.errorbar(row['ms_per_image_mean'], row['mIoU_mean'],
+                      xerr=row['ms_per_image_std'], yerr=row['mIoU_std'],
+                      marker=markers[row['model']], linestyle='none',
+                      color=colours[row['enhancer'].split('(')[0]],
+                      capsize=2)
+        axes.annotate(row['name'][len(row['model']) + 1:],
+                      (row['ms_per_image_mean'], row['mIoU_mean']),
+                      fontsize=6, xytext=(3, 3), textcoords='offset points')
+    handles = [Line2D([], [], marker=markers[m], color='grey',
+                      linestyle='none', label=m) for m in models]
+    handles += [Line2D([], [], marker='o', color=colours[t],
+                       linestyle='none', label=f'enhancer: {t}')
+                for t in types]
+    axes.legend(handles=handles, fontsize=7, loc='best')
+    axes.set_xscale('log')
+    axes.set_xlabel('ms per image (batch 1, log scale)')
+    axes.set_ylabel('mIoU (%)')
+    axes.set_title('Accuracy against time per image')
+    axes.grid(True, which='both', alpha=0.3)
+    figure.tight_layout()
+    with atomic_output(path) as f:
+        figure.savefig(f, format='png', dpi=150)
+    plt.close(figure)
+
+
+def report(entries: List[Entry], args: argparse.Namespace, grid: Config,
+           command: str) -> List[Dict[str, Any]]:
+    """Aggregate the finished runs and write the CSV, Markdown and plot."""
+    rows = aggregate(entries, args.seeds, args.work_dir)
+    if not rows:
+        print('no finished runs to report')
+        return rows
+    report_dir = args.report_dir or args.work_dir
+    plot_path = osp.join(report_dir, 'accuracy_vs_time.png')
+    plot(rows, plot_path)
+    write_csv(rows, osp.join(report_dir, 'results.csv'))
+    write_markdown(rows, osp.join(report_dir, 'results.md'), command, args,
+                   grid, osp.basename(plot_path))
+    print(f'{len(rows)} entries reported in {report_dir}: results.md, '
+          f'results.csv, accuracy_vs_time.png')
+    return rows
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('grid', help='grid file, e.g. '
+                        'configs/experiments/grid_cpu.py')
+    parser.add_argument('--data-root', required=True,
+                        help='dataset root (Spike-Cityscapes layout)')
+    parser.add_argument('--work-dir', required=True,
+                        help='one sub-directory per entry and seed')
+    parser.add_argument('--seeds', type=int, nargs='+',
+                        help="seeds (default: the grid's)")
+    schedule = parser.add_mutually_exclusive_group()
+    schedule.add_argument('--epochs', type=int,
+                          help="training epochs (default: the grid's)")
+    schedule.add_argument('--max-iters', type=int,
+                          help='train for this many iterations instead')
+    parser.add_argument('--only', nargs='+', metavar='NAME',
+                        help='entries to run: names or shell patterns, '
+                        "e.g. 'segformer_b0_*'")
+    parser.add_argument('--report-dir',
+                        help='where results.{md,csv} and the plot go '
+                        '(default: the work dir)')
+    parser.add_argument('--keep-checkpoints', action='store_true',
+                        help='keep each run\'s checkpoints (default: '
+                        'removed once the run is done)')
+    parser.add_argument('--list', action='store_true',
+                        help='list the selected entries and exit')
+    return parser.parse_args(argv)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    command = shlex.join(['python', osp.relpath(__file__, os.getcwd())] +
+                         list(sys.argv[1:] if argv is None else argv))
+    grid, entries = load_grid(args.grid)
+    entries = select(entries, args.only)
+    if args.list:
+        for entry in entries:
+            print(f'{entry.name:32s} {describe(entry.enhancer)}')
+        return 0
+    if not osp.isdir(osp.join(args.data_root, 'spike', 'train')):
+        raise SystemExit(
+            f'{args.data_root}/spike/train does not exist. Make the embedded '
+            f'dataset with: python tools/make_synthetic_dataset.py '
+            f'{args.data_root} --num-steps {grid.cfg_options["num_steps"]}')
+    args.seeds = args.seeds or list(grid.seeds)
+    if args.max_iters is None and args.epochs is None:
+        args.epochs = grid.epochs
+    runs = plan(entries, args, grid)
+    done = [finished(run) for run in runs]  # checks every result first
+    failures = []
+    for index, (run, skip) in enumerate(zip(runs, done), 1):
+        prefix = f'[{index}/{len(runs)}] {run.entry.name} seed {run.seed}:'
+        if skip:
+            print(f'{prefix} done before, skipped', flush=True)
+            continue
+        print(f'{prefix} running ...', flush=True)
+        start = time.perf_counter()
+        try:
+            result = run_one(run, args.keep_checkpoints, grid.latency)
+        except RunFailed as error:
+            print(f'{prefix} FAILED: {error}', flush=True)
+            failures.append(f'{run.entry.name} seed {run.seed}')
+            continue
+        print(f"{prefix} mIoU {result['mIoU']:.2f}, "
+              f"{result['ms_per_image']['median']:.1f} ms/image, "
+              f'{time.perf_counter() - start:.0f} s', flush=True)
+    report(entries, args, grid, command)
+    if failures:
+        print(f'{len(failures)} runs failed: {", ".join(failures)}')
+        return 1
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
