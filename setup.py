@@ -53,7 +53,8 @@ if __name__ == '__main__':
         python_requires='>=3.9',
         packages=find_packages(include=['wgse_mmseg', 'wgse_mmseg.*']),
         include_package_data=True,
-        package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*', '.mim/**/**/**/*']},
+        package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*', '.mim/**/**/**/*',
+                                     'weights/*.pth']},
         install_requires=[
             'torch>=2.0',
             'mmengine>=0.10,<0.11',

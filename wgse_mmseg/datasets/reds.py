@@ -1,1 +1,357 @@
-"""REDS spike reconstruction datasets (issue 6)."""
+"""Datasets for image reconstruction from spikes, on the REDS convention.
+
+Both datasets give samples of a ``num_steps``-frame spike window (41 in the
+literature) and the sharp grey image at its centre frame, on the intensity
+scale of the synthesized REDS spike set: a white pixel fires 0.6 spikes per
+step, so the window's spike rate / 0.6 is the image (see
+:mod:`wgse_mmseg.reconstruction_baselines`).
+
+* :class:`REDSSpikeDataset`: files in the REDS layout
+  (``spike/<name>.dat`` beside ``gt/<name>.png``).
+* :class:`SimulatedSpikeImageDataset`: any folder of still images, moved
+  along random smooth trajectories (shift, rotation, zoom) and turned into
+  spikes by :func:`wgse_mmseg.simulation.simulate_spikes`, so that a user
+  without REDS can train.
+
+In a pipeline the spikes live in ``results['img']`` ``(H, W, T)`` uint8 (as
+for segmentation, so ``SpikeRandomCrop``/``SpikeRandomFlip`` apply) and the
+ground truth in ``results['gt_image']`` ``(H, W)`` float32 in [0, 1], listed
+in ``seg_fields`` so that crops and flips move it with the spikes.
+:class:`PackReconstructionInputs` turns both into the model's inputs
+``(T, H, W)`` and a data sample holding ``gt_image`` ``(1, H, W)``.
+"""
+import glob
+import os.path as osp
+from typing import List, Optional, Sequence, Tuple
+
+import cv2
+import numpy as np
+import torch
+from mmcv.transforms import BaseTransform
+from mmengine.dataset import BaseDataset
+from mmengine.structures import BaseDataElement, PixelData
+
+from mmseg.registry import DATASETS, TRANSFORMS
+from ..reconstruction_baselines import REDS_WHITE_RATE
+from ..simulation import simulate_spikes
+from .transforms import LoadSpikeFromFile
+
+__all__ = [
+    'REDSSpikeDataset', 'SimulatedSpikeImageDataset', 'LoadSpikeImagePair',
+    'PackReconstructionInputs', 'read_grey_image', 'default_image_dir',
+    'render_trajectory'
+]
+
+IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff',
+                    '.webp')
+
+
+def read_grey_image(path: str) -> np.ndarray:
+    """An image file as ``(H, W)`` float32 grey in [0, 1] (colour -> luma)."""
+    image = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise FileNotFoundError(f'{path}: missing or not a readable image')
+    return image.astype(np.float32) / 255.0
+
+
+@TRANSFORMS.register_module()
+class LoadSpikeImagePair(BaseTransform):
+    """Load a spike window and its ground-truth image.
+
+    Reads ``results['gt_path']`` into ``gt_image`` ``(H, W)`` float32 and the
+    ``num_steps`` frames of ``results['img_path']`` centred on
+    ``results['gt_frame']`` (the middle frame when absent or ``None``) into
+    ``img`` ``(H, W, T)``, with :class:`LoadSpikeFromFile`.
+
+    Args:
+        num_steps: frames in the window (41 in the literature).
+        height, width: frame size of ``.dat`` files; by default the ground
+            truth's size (other formats record theirs).
+    """
+
+    def __init__(self, num_steps: int = 41, height: Optional[int] = None,
+                 width: Optional[int] = None):
+        super().__init__()
+        if (height is None) != (width is None):
+            raise ValueError('height and width go together')
+        self.num_steps = num_steps
+        self.height = height
+        self.width = width
+
+    def transform(self, results: dict) -> dict:
+        gt = read_grey_image(results['gt_path'])
+        height, width = ((self.height, self.width) if self.height else
+                         gt.shape)
+        loader = LoadSpikeFromFile(self.num_steps, height, width,
+                                   results.get('gt_frame'))
+        results = loader(results)
+        if results['img'].shape[:2] != gt.shape:
+            raise ValueError(
+                f'{results["img_path"]}: spike frames are '
+                f'{results["img"].shape[0]}x{results["img"].shape[1]} but '
+                f'the ground truth {results["gt_path"]} is '
+                f'{gt.shape[0]}x{gt.shape[1]}')
+        results['gt_image'] = gt
+        results.setdefault('seg_fields', []).append('gt_image')
+        return results
+
+    def __repr__(self):
+        return (f'{self.__class__.__name__}(num_steps={self.num_steps}, '
+                f'height={self.height}, width={self.width})')
+
+
+@TRANSFORMS.register_module()
+class PackReconstructionInputs(BaseTransform):
+    """Pack a sample for :class:`~wgse_mmseg.models.SpikeReconstructor`.
+
+    Returns ``inputs``: ``(T, H, W)`` uint8 tensor, and ``data_samples``: a
+    ``BaseDataElement`` with ``gt_image`` (``PixelData`` ``(1, H, W)``
+    float32 in [0, 1], when the sample has one) and ``meta_keys`` as
+    metainfo.
+    """
+
+    def __init__(self, meta_keys: Sequence[str] = (
+            'img_path', 'gt_path', 'gt_frame', 'ori_shape', 'img_shape',
+            'num_steps', 'flip', 'flip_direction', 'sample_idx')):
+        super().__init__()
+        self.meta_keys = tuple(meta_keys)
+
+    def transform(self, results: dict) -> dict:
+        spikes = np.ascontiguousarray(results['img'].transpose(2, 0, 1))
+        sample = BaseDataElement(metainfo={
+            k: results[k] for k in self.meta_keys if k in results})
+        if 'gt_image' in results:
+            gt = np.ascontiguousarray(results['gt_image'], dtype=np.float32)
+            sample.gt_image = PixelData(data=torch.from_numpy(gt[None]))
+        return dict(inputs=torch.from_numpy(spikes), data_samples=sample)
+
+
+@DATASETS.register_module()
+class REDSSpikeDataset(BaseDataset):
+    """Spike streams with ground-truth frames in the REDS layout::
+
+        data_root/spike/<name>.dat      (e.g. 301 frames of 250x400)
+        data_root/gt/<name>.png         (the sharp frame at the centre)
+
+    Each sample is a window of the stream centred on the ground truth's
+    frame (``gt_frame``, by default the middle frame ``T // 2``, frame 150
+    of a 301-frame stream), loaded by :class:`LoadSpikeImagePair`.
+
+    Args:
+        data_prefix: ``spike_path`` and ``gt_path`` folders under
+            ``data_root``.
+        spike_suffix: spike file extension (``.dat``, ``.spk``, ``.npy``,
+            ``.npz``).
+        gt_suffix: ground-truth extension.
+        gt_frame: frame index of the ground truth in every stream; ``None``
+            for the middle frame.
+        **kwargs: ``data_root``, ``pipeline``, ``test_mode``, ... of
+            mmengine's ``BaseDataset``.
+    """
+
+    def __init__(self, data_prefix: dict = dict(spike_path='spike',
+                                                 gt_path='gt'),
+                 spike_suffix: str = '.dat', gt_suffix: str = '.png',
+                 gt_frame: Optional[int] = None, **kwargs):
+        self.spike_suffix = spike_suffix
+        self.gt_suffix = gt_suffix
+        self.gt_frame = gt_frame
+        super().__init__(data_prefix=dict(data_prefix), **kwargs)
+
+    def load_data_list(self) -> List[dict]:
+        spike_dir = self.data_prefix['spike_path']
+        gt_dir = self.data_prefix['gt_path']
+        paths = sorted(glob.glob(osp.join(spike_dir, '*' + self.spike_suffix)))
+        if not paths:
+            raise FileNotFoundError(
+                f'{spike_dir}: no spike files *{self.spike_suffix} (REDS '
+                f'layout: spike/<name>{self.spike_suffix} beside '
+                f'gt/<name>{self.gt_suffix})')
+        data_list = []
+        for index, path in enumerate(paths):
+            name = osp.basename(path)[:-len(self.spike_suffix)]
+            gt_path = osp.join(gt_dir, name + self.gt_suffix)
+            if not osp.exists(gt_path):
+                raise FileNotFoundError(
+                    f'{path}: no ground truth {gt_path} of the same name')
+            data_list.append(dict(img_path=path, gt_path=gt_path,
+                                  gt_frame=self.gt_frame, sample_idx=index))
+        return data_list
+
+
+def default_image_dir() -> str:
+    """The sample images matplotlib (a dependency of MMSeg) ships.
+
+    ``matplotlib/mpl-data/sample_data``: a photograph (``grace_hopper.jpg``,
+    512x600) and two small graphics; the embedded default training images.
+    """
+    import matplotlib
+    return osp.join(matplotlib.get_data_path(), 'sample_data')
+
+
+def _load_images(image_dir: str, max_side: int) -> Tuple[List[str],
+                                                         List[np.ndarray]]:
+    paths = sorted(p for p in glob.glob(osp.join(image_dir, '**', '*'),
+                                        recursive=True)
+                   if p.lower().endswith(IMAGE_EXTENSIONS))
+    if not paths:
+        raise FileNotFoundError(
+            f'{image_dir}: no images ({", ".join(IMAGE_EXTENSIONS)})')
+    images = []
+    for path in paths:
+        image = read_grey_image(path)
+        scale = max_side / max(image.shape)
+        if scale < 1:
+            image = cv2.resize(image, None, fx=scale, fy=scale,
+                               interpolation=cv2.INTER_AREA)
+        images.append(image)
+    return paths, images
+
+
+def render_trajectory(image: np.ndarray, size: Tuple[int, int],
+                      num_steps: int, rng: np.random.Generator,
+                      max_speed: float = 0.6, max_rotation: float = 0.002,
+                      max_zoom: float = 0.003,
+                      scale_range: Tuple[float, float] = (0.7, 2.5)
+                      ) -> np.ndarray:
+    """A ``num_steps``-frame clip of a camera moving over a still image.
+
+    A view of ``size`` ``(h, w)`` pixels, centred at a random point of
+    ``image`` ``(H, W)`` at a random base scale (source pixels per view
+    pixel, log-uniform in ``scale_range``), moves along a smooth random
+    trajectory: at step ``t`` (``tau = t - num_steps // 2``) it is shifted
+    by ``v * tau + a * tau**2 / 2`` (speed up to ``max_speed`` px/step,
+    acceleration up to ``max_speed / num_steps``), rotated by
+    ``omega * tau`` (``|omega| <= max_rotation`` rad/step) and zoomed by
+    ``exp(zeta * tau)`` (``|zeta| <= max_zoom`` per step). Borders reflect.
+
+    Returns:
+        ``(num_steps, h, w)`` float32 frames; frame ``num_steps // 2`` is the
+        view at the trajectory's reference point.
+    """
+    height, width = size
+    centre_view = np.array([(width - 1) / 2, (height - 1) / 2])
+    centre_src = rng.uniform([0, 0], [image.shape[1] - 1,
+                                      image.shape[0] - 1])
+    base_scale = np.exp(rng.uniform(*np.log(scale_range)))
+    base_angle = rng.uniform(-np.pi, np.pi)
+
+    def random_vector(magnitude):
+        angle = rng.uniform(-np.pi, np.pi)
+        return rng.uniform(0, magnitude) * np.array([np.cos(angle),
+                                                     np.sin(angle)])
+
+    velocity = random_vector(max_speed)
+    acceleration = random_vector(max_speed / num_steps)
+    omega = rng.uniform(-max_rotation, max_rotation)
+    zeta = rng.uniform(-max_zoom, max_zoom)
+    frames = np.empty((num_steps, height, width), np.float32)
+    for step in range(num_steps):
+        tau = step - num_steps // 2
+        angle = base_angle + omega * tau
+        scale = base_scale * np.exp(zeta * tau)
+        linear = scale * np.array([[np.cos(angle), -np.sin(angle)],
+                                   [np.sin(angle), np.cos(angle)]])
+        shift = centre_src + velocity * tau + acceleration * tau ** 2 / 2
+        matrix = np.hstack([linear, (shift - linear @ centre_view)[:, None]])
+        frames[step] = cv2.warpAffine(
+            image, matrix, (width, height),
+            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+            borderMode=cv2.BORDER_REFLECT_101)
+    return frames
+
+
+@DATASETS.register_module()
+class SimulatedSpikeImageDataset(BaseDataset):
+    """Spike windows simulated from still images moved along trajectories.
+
+    Sample ``i`` is drawn from a generator seeded with ``(seed, i)``, so the
+    set is the same on every run: an image (chosen with probability
+    proportional to its area), a view of ``crop_size`` moved along a random
+    trajectory (:func:`render_trajectory`), a random brightness (gain in
+    ``gain_range``, gamma log-uniform in ``gamma_range``), then
+    :func:`~wgse_mmseg.simulation.simulate_spikes` with
+    ``threshold = 1 / white_rate`` (the REDS scale). The ground truth is the
+    centre frame ``num_steps // 2``. Spikes and ground truth are made on the
+    fly, in the data loader.
+
+    Args:
+        image_dir: folder of images (searched recursively, colour -> grey);
+            ``None`` for :func:`default_image_dir`. Images are read once into
+            memory, downscaled to at most ``max_side`` pixels per side.
+        num_samples: length of the dataset.
+        crop_size: ``(h, w)`` of each sample.
+        num_steps: spike frames per sample.
+        seed: seed of the whole set; give a validation set another seed.
+        white_rate: spikes per step of a white pixel (REDS: 0.6).
+        max_speed, max_rotation, max_zoom, scale_range: trajectory limits
+            (see :func:`render_trajectory`).
+        gain_range, gamma_range: brightness augmentation; the ground truth
+            is the augmented image.
+        max_side: longest image side kept in memory.
+        **kwargs: ``pipeline``, ``test_mode``, ... of ``BaseDataset``.
+    """
+
+    def __init__(self, image_dir: Optional[str] = None,
+                 num_samples: int = 10000,
+                 crop_size: Tuple[int, int] = (64, 64), num_steps: int = 41,
+                 seed: int = 0, white_rate: float = REDS_WHITE_RATE,
+                 max_speed: float = 0.6, max_rotation: float = 0.002,
+                 max_zoom: float = 0.003,
+                 scale_range: Tuple[float, float] = (0.7, 2.5),
+                 gain_range: Tuple[float, float] = (0.5, 1.0),
+                 gamma_range: Tuple[float, float] = (0.7, 1.4),
+                 max_side: int = 1024, **kwargs):
+        if num_samples < 1 or num_steps < 1 or white_rate <= 0:
+            raise ValueError(
+                f'num_samples and num_steps must be >= 1 and white_rate > 0; '
+                f'got {num_samples}, {num_steps}, {white_rate}')
+        self.image_dir = image_dir or default_image_dir()
+        self.image_paths, self.images = _load_images(self.image_dir,
+                                                     max_side)
+        areas = np.array([im.size for im in self.images], np.float64)
+        self.image_probs = areas / areas.sum()
+        self.num_samples = num_samples
+        self.crop_size = tuple(crop_size)
+        self.num_steps = num_steps
+        self.seed = seed
+        self.white_rate = white_rate
+        self.trajectory = dict(max_speed=max_speed, max_rotation=max_rotation,
+                               max_zoom=max_zoom,
+                               scale_range=tuple(scale_range))
+        self.gain_range = tuple(gain_range)
+        self.gamma_range = tuple(gamma_range)
+        super().__init__(**kwargs)
+
+    def full_init(self) -> None:
+        # Samples are drawn by index: no data list to load or serialize.
+        self._fully_initialized = True
+
+    def __len__(self) -> int:
+        return self.num_samples
+
+    def get_data_info(self, idx: int) -> dict:
+        return dict(sample_idx=idx)
+
+    def simulate(self, index: int) -> dict:
+        """Sample ``index`` as pipeline results (``img``, ``gt_image``)."""
+        rng = np.random.default_rng((self.seed, index))
+        choice = rng.choice(len(self.images), p=self.image_probs)
+        frames = render_trajectory(self.images[choice], self.crop_size,
+                                   self.num_steps, rng, **self.trajectory)
+        gamma = np.exp(rng.uniform(*np.log(self.gamma_range)))
+        frames = rng.uniform(*self.gain_range) * np.clip(frames, 0, 1)**gamma
+        spikes, _ = simulate_spikes(frames, self.num_steps,
+                                    threshold=1 / self.white_rate,
+                                    seed=int(rng.integers(2**31)))
+        return dict(
+            img=np.ascontiguousarray(spikes.transpose(1, 2, 0)),
+            gt_image=frames[self.num_steps // 2],
+            seg_fields=['gt_image'],
+            img_path=f'<simulated sample {index} of '
+            f'{self.image_paths[choice]}>',
+            img_shape=self.crop_size, ori_shape=self.crop_size,
+            num_steps=self.num_steps, sample_idx=index)
+
+    def prepare_data(self, idx: int):
+        return self.pipeline(self.simulate(idx))

@@ -1,1 +1,216 @@
-"""Image reconstruction from spikes (issue 6): WGSE + residual blocks."""
+"""Image reconstruction from spikes: an enhancer (WGSE) and a residual CNN.
+
+The paper's reconstruction network (Zhang et al., AAAI 2023, Sec. 4.3):
+WGSE maps the spike window ``(B, T, H, W)`` to ``(B, T, H, W)``; then a
+3x3 convolution to ``channels`` (256), ReLU, ``num_blocks`` (3) residual
+blocks without normalisation, a 3x3 convolution to ``mid_channels`` (64),
+ReLU, and a 3x3 convolution to one grey channel. Trained with L1 loss.
+
+The last convolution is linear (the public reference ends in a ReLU); a
+linear output cannot die at initialisation, and predictions are clipped to
+[0, 1]. The ablations of the paper's Table 5 are configs: no enhancer
+(residual blocks alone), ``WGSE(wavelet=None)`` (TRCNN without wavelets) and
+``WGSE(num_blocks=2)`` (long WGSE).
+"""
+import os.path as osp
+from typing import Callable, Dict, List, Optional, Union
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+from mmengine.config import Config
+from mmengine.model import BaseModel
+from mmengine.structures import BaseDataElement, PixelData
+
+from mmseg.registry import MODELS
+from ..io import atomic_output
+from ..reconstruction_baselines import tfi, tfp
+
+__all__ = ['SpikeReconstructor', 'ResidualBlock', 'DEFAULT_WEIGHTS',
+           'load_reconstructor', 'export_weights', 'reconstruction_method',
+           'METHODS']
+
+#: Weights shipped with the package (see docs/reconstruction.md).
+DEFAULT_WEIGHTS = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),
+                           'weights', 'wgse_reconstruction_cpu.pth')
+
+#: Names accepted by :func:`reconstruction_method`.
+METHODS = ('wgse', 'tfp', 'tfi')
+
+
+def _conv3x3(in_channels: int, out_channels: int) -> nn.Conv2d:
+    return nn.Conv2d(in_channels, out_channels, 3, padding=1)
+
+
+class ResidualBlock(nn.Module):
+    """``x + conv(relu(conv(x)))``, 3x3 convolutions, no normalisation."""
+
+    def __init__(self, channels: int):
+        super().__init__()
+        self.conv1 = _conv3x3(channels, channels)
+        self.conv2 = _conv3x3(channels, channels)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.conv2(F.relu(self.conv1(x)))
+
+
+@MODELS.register_module()
+class SpikeReconstructor(BaseModel):
+    """Spike window ``(B, T, H, W)`` -> grey image ``(B, 1, H, W)``.
+
+    Args:
+        num_steps: ``T``, frames per window (41 in the literature); batches
+            with another ``T`` are refused naming both numbers.
+        enhancer: config of a module ``(B, T, H, W) -> (B, T, H, W)``
+            (``dict(type='WGSE')``); ``None`` feeds the raw spikes.
+        channels: width of the residual blocks (256 in the paper).
+        num_blocks: residual blocks (3 in the paper).
+        mid_channels: width of the penultimate convolution (64).
+        data_preprocessor: batches the packed ``(T, H, W)`` uint8 inputs
+            into float ``(B, T, H, W)``; mmengine's ``ImgDataPreprocessor``
+            without normalisation by default.
+        init_cfg: mmengine initialisation config.
+
+    ``forward(inputs, data_samples, mode)``: ``'tensor'`` returns the raw
+    ``(B, 1, H, W)`` output; ``'loss'`` the L1 loss against the samples'
+    ``gt_image`` ``(1, H, W)``; ``'predict'`` the data samples with
+    ``pred_image`` ``(1, H, W)`` clipped to [0, 1].
+    """
+
+    def __init__(self, num_steps: int = 41,
+                 enhancer: Optional[dict] = dict(type='WGSE'),
+                 channels: int = 256, num_blocks: int = 3,
+                 mid_channels: int = 64,
+                 data_preprocessor: Optional[dict] = None,
+                 init_cfg: Optional[dict] = None):
+        super().__init__(
+            data_preprocessor=data_preprocessor or dict(
+                type='ImgDataPreprocessor'),
+            init_cfg=init_cfg)
+        if min(num_steps, channels, mid_channels) < 1 or num_blocks < 0:
+            raise ValueError(
+                f'num_steps, channels and mid_channels must be >= 1 and '
+                f'num_blocks >= 0; got {num_steps}, {channels}, '
+                f'{mid_channels}, {num_blocks}')
+        self.num_steps = num_steps
+        self.enhancer = MODELS.build(enhancer) if enhancer else None
+        self.head = nn.Sequential(
+            _conv3x3(num_steps, channels), nn.ReLU(inplace=True),
+            *[ResidualBlock(channels) for _ in range(num_blocks)],
+            _conv3x3(channels, mid_channels), nn.ReLU(inplace=True),
+            _conv3x3(mid_channels, 1))
+
+    def _forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        if inputs.dim() != 4 or inputs.shape[1] != self.num_steps:
+            raise ValueError(
+                f'SpikeReconstructor is built for (B, T={self.num_steps}, H, '
+                f'W) spike windows, got {tuple(inputs.shape)}; set num_steps '
+                f'in the config to the window length')
+        features = self.enhancer(inputs) if self.enhancer else inputs
+        return self.head(features)
+
+    def forward(self, inputs: torch.Tensor,
+                data_samples: Optional[List[BaseDataElement]] = None,
+                mode: str = 'tensor'
+                ) -> Union[torch.Tensor, Dict[str, torch.Tensor],
+                           List[BaseDataElement]]:
+        out = self._forward(inputs)
+        if mode == 'tensor':
+            return out
+        if mode == 'loss':
+            if not data_samples or any('gt_image' not in s
+                                       for s in data_samples):
+                raise ValueError('mode="loss" needs data samples with '
+                                 'gt_image')
+            gt = torch.stack([s.gt_image.data for s in data_samples]).to(out)
+            return dict(loss_l1=F.l1_loss(out, gt))
+        if mode == 'predict':
+            if data_samples is None:
+                data_samples = [BaseDataElement() for _ in range(len(out))]
+            for sample, image in zip(data_samples, out.clamp(0, 1)):
+                sample.pred_image = PixelData(data=image)
+            return data_samples
+        raise ValueError(f'mode must be "tensor", "loss" or "predict", got '
+                         f'{mode!r}')
+
+    @torch.no_grad()
+    def reconstruct(self, spikes: np.ndarray) -> np.ndarray:
+        """One window ``(T, H, W)`` of 0/1 -> ``(H, W)`` float in [0, 1]."""
+        param = next(self.parameters())
+        inputs = torch.as_tensor(np.asarray(spikes), dtype=param.dtype,
+                                 device=param.device)[None]
+        return self._forward(inputs)[0, 0].clamp(0, 1).cpu().numpy()
+
+
+def _model_config(checkpoint: dict, path: str) -> dict:
+    meta = checkpoint.get('meta') or {}
+    if 'model' in meta:  # exported by export_weights
+        return dict(meta['model'])
+    if 'cfg' in meta:  # an mmengine Runner checkpoint
+        return Config.fromstring(meta['cfg'], '.py').model.to_dict()
+    raise ValueError(
+        f'{path}: holds no model config (neither meta["model"] of '
+        f'export_weights nor meta["cfg"] of an mmengine checkpoint)')
+
+
+def _read_checkpoint(path: str) -> dict:
+    if not osp.exists(path):
+        raise FileNotFoundError(f'{path}: no such checkpoint')
+    return torch.load(path, map_location='cpu', weights_only=True)
+
+
+def load_reconstructor(checkpoint: Optional[str] = None,
+                       device: str = 'cpu') -> SpikeReconstructor:
+    """A trained :class:`SpikeReconstructor` in eval mode.
+
+    Args:
+        checkpoint: an mmengine checkpoint of a reconstruction config
+            (``work_dirs/.../iter_N.pth``) or a file written by
+            :func:`export_weights`; ``None`` for the shipped weights
+            :data:`DEFAULT_WEIGHTS`.
+        device: torch device.
+    """
+    path = checkpoint or DEFAULT_WEIGHTS
+    state = _read_checkpoint(path)
+    model = MODELS.build(_model_config(state, path))
+    try:
+        model.load_state_dict(state['state_dict'], strict=True)
+    except RuntimeError as err:
+        raise ValueError(f'{path}: weights do not fit the model of its own '
+                         f'config: {err}') from err
+    return model.to(device).eval()
+
+
+def export_weights(checkpoint: str, out: str) -> None:
+    """Write the weights and model config of a Runner checkpoint to ``out``.
+
+    The result (``{'state_dict', 'meta': {'model', 'source'}}``, no
+    optimiser state or logs) is what :func:`load_reconstructor` and
+    ``tools/reconstruct.py`` read; about 4 bytes per parameter.
+    """
+    state = _read_checkpoint(checkpoint)
+    model_cfg = _model_config(state, checkpoint)
+    exported = dict(state_dict=state['state_dict'],
+                    meta=dict(model=model_cfg,
+                              source=osp.basename(checkpoint)))
+    with atomic_output(out) as f:
+        torch.save(exported, f)
+
+
+def reconstruction_method(method: str, checkpoint: Optional[str] = None,
+                          device: str = 'cpu'
+                          ) -> Callable[[np.ndarray], np.ndarray]:
+    """A function ``(T, H, W)`` spike window -> ``(H, W)`` image in [0, 1].
+
+    ``method``: ``'wgse'`` (the trained model of ``checkpoint``, by default
+    the shipped weights), ``'tfp'`` or ``'tfi'`` (REDS scale, see
+    :mod:`wgse_mmseg.reconstruction_baselines`).
+    """
+    if method == 'wgse':
+        return load_reconstructor(checkpoint, device).reconstruct
+    if method == 'tfp':
+        return tfp
+    if method == 'tfi':
+        return tfi
+    raise ValueError(f'unknown method {method!r}; expected one of {METHODS}')

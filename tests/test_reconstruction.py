@@ -1,0 +1,443 @@
+"""Image reconstruction from spikes: model, configs, datasets, metrics,
+baselines, tools and the shipped weights."""
+import importlib.util
+import os
+import os.path as osp
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+import torch
+from mmengine.structures import BaseDataElement, PixelData
+
+import wgse_mmseg  # noqa: F401  (registers the modules)
+from mmseg.registry import MODELS
+from wgse_mmseg.config import load_config
+from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
+                                      PackReconstructionInputs,
+                                      REDSSpikeDataset,
+                                      SimulatedSpikeImageDataset,
+                                      render_trajectory)
+from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
+                                   gaussian_window, psnr, ssim)
+from wgse_mmseg.evaluation.reconstruction_benchmark import (benchmark,
+                                                            format_table)
+from wgse_mmseg.io import load_spikes, save_spikes
+from wgse_mmseg.models.reconstruction import (DEFAULT_WEIGHTS,
+                                              SpikeReconstructor,
+                                              export_weights,
+                                              load_reconstructor)
+from wgse_mmseg.reconstruction_baselines import tfi, tfp
+
+pytestmark = pytest.mark.usefixtures('single_thread')
+
+ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+CONFIGS = osp.join(ROOT, 'configs', 'reconstruction')
+TOOLS = osp.join(ROOT, 'tools')
+WGSE_PARAMS = 19974  # 6 bands (db8, level 5) x 3329
+REDS_NAME = '203_part2_key_id151'
+
+
+def _count(module):
+    return sum(p.numel() for p in module.parameters())
+
+
+def _head_params(steps, channels, blocks=3, mid=64):
+    conv = lambda i, o: i * o * 9 + o  # noqa: E731
+    return (conv(steps, channels) + blocks * 2 * conv(channels, channels)
+            + conv(channels, mid) + conv(mid, 1))
+
+
+def _tiny_model(**kwargs):
+    torch.manual_seed(0)
+    kwargs = dict(dict(num_steps=5, channels=8, mid_channels=4,
+                       enhancer=dict(type='WGSE', wavelet='haar', level=1,
+                                     hidden_channels=4)), **kwargs)
+    return SpikeReconstructor(**kwargs)
+
+
+def _tool(name):
+    """Import tools/<name>.py (tools import each other by file name)."""
+    if TOOLS not in sys.path:
+        sys.path.insert(0, TOOLS)
+    spec = importlib.util.spec_from_file_location(
+        name, osp.join(TOOLS, name + '.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _reds_folder(root, steps=9, size=(16, 24), count=2, seed=0):
+    """A REDS-layout folder of random ``.npy`` streams and PNG ground truth."""
+    rng = np.random.default_rng(seed)
+    os.makedirs(osp.join(root, 'spike'))
+    os.makedirs(osp.join(root, 'gt'))
+    for index in range(count):
+        gt = rng.integers(0, 256, size, dtype=np.uint8)
+        spikes = (rng.random((steps, *size)) < gt / 255 * 0.6).astype(
+            np.uint8)
+        save_spikes(osp.join(root, 'spike', f's{index}.npy'), spikes)
+        cv2.imwrite(osp.join(root, 'gt', f's{index}.png'), gt)
+    return root
+
+
+# ------------------------------------------------------------------ model
+def test_model_modes_shapes_and_loss():
+    model = _tiny_model()
+    spikes = (torch.rand(2, 5, 12, 10) < 0.3).float()
+    out = model(spikes, mode='tensor')
+    assert out.shape == (2, 1, 12, 10)
+    samples = []
+    for _ in range(2):
+        sample = BaseDataElement()
+        sample.gt_image = PixelData(data=torch.rand(1, 12, 10))
+        samples.append(sample)
+    losses = model(spikes, samples, mode='loss')
+    assert set(losses) == {'loss_l1'} and torch.isfinite(losses['loss_l1'])
+    losses['loss_l1'].backward()
+    assert all(p.grad is not None for p in model.parameters())
+    predicted = model(spikes, samples, mode='predict')
+    image = predicted[0].pred_image.data
+    assert image.shape == (1, 12, 10)
+    assert image.min() >= 0 and image.max() <= 1
+    assert model.reconstruct(spikes[0].numpy()).shape == (12, 10)
+
+
+def test_model_refuses_other_window_length():
+    with pytest.raises(ValueError, match='T=5'):
+        _tiny_model()(torch.zeros(1, 7, 8, 8))
+
+
+def test_model_batches_packed_uint8_inputs():
+    model = _tiny_model(enhancer=None)
+    data = model.data_preprocessor(dict(
+        inputs=[torch.ones(5, 6, 7, dtype=torch.uint8)] * 3,
+        data_samples=[BaseDataElement()] * 3))
+    assert data['inputs'].dtype == torch.float32
+    assert data['inputs'].shape == (3, 5, 6, 7)
+
+
+@pytest.mark.parametrize('name, enhancer_params, channels', [
+    ('wgse_resnet', WGSE_PARAMS, 256),
+    ('resblocks_only', 0, 256),
+    ('trcnn', WGSE_PARAMS // 6, 256),  # one band network, no wavelets
+    # Long WGSE: per band 2 residual layers (1->32->32, 32->32->32) and
+    # output convs 32->32, 32->1.
+    ('wgse_long', 6 * (128 + 3104 * 4 + 97), 256),
+    ('wgse_resnet_reds', WGSE_PARAMS, 256),
+    ('wgse_resnet_cpu', WGSE_PARAMS, 64),
+    ('wgse_resnet_cpu_anneal', WGSE_PARAMS, 64),
+])
+def test_configs_build_with_paper_sizes(name, enhancer_params, channels):
+    cfg = load_config(osp.join(CONFIGS, name + '.py'))
+    model = MODELS.build(cfg.model)
+    assert model.num_steps == cfg.num_steps == 41
+    head = _count(model.head)
+    assert head == _head_params(41, channels)
+    enhancer = _count(model.enhancer) if model.enhancer else 0
+    assert enhancer == enhancer_params
+    if name == 'wgse_resnet':
+        assert head == 3783297  # the paper's network, 3.8 M parameters
+
+
+def test_cpu_config_trains_a_few_iterations(tmp_path):
+    from mmengine.runner import Runner
+    cfg = load_config(osp.join(CONFIGS, 'wgse_resnet_cpu.py'),
+                      dict(crop_size=(16, 16)))
+    cfg.merge_from_dict({
+        'model.channels': 4, 'model.mid_channels': 4,
+        'train_dataloader.batch_size': 2, 'train_dataloader.num_workers': 0,
+        'train_dataloader.persistent_workers': False,
+        'val_dataloader.dataset.num_samples': 1,
+        'val_dataloader.dataset.crop_size': (16, 16),
+        'train_cfg.max_iters': 2, 'train_cfg.val_interval': 2,
+        'default_hooks.checkpoint.interval': 2,
+        'default_hooks.logger.interval': 1})
+    cfg.work_dir = str(tmp_path)
+    runner = Runner.from_cfg(cfg)
+    runner.train()
+    metrics = runner.val_loop.run()
+    assert {'PSNR', 'SSIM', 'Entropy2D'} <= set(metrics)
+    checkpoint = tmp_path / 'iter_2.pth'
+    out = tmp_path / 'exported.pth'
+    export_weights(str(checkpoint), str(out))
+    model = load_reconstructor(str(out))
+    assert model.head[0].out_channels == 4
+    torch.testing.assert_close(model.state_dict()['head.0.weight'],
+                               runner.model.state_dict()['head.0.weight'])
+
+
+# ------------------------------------------------------------ baselines
+def test_tfp_is_window_rate_over_white_rate():
+    spikes = np.zeros((10, 1, 3), np.uint8)
+    spikes[:3, 0, 0] = 1   # rate 0.3 -> 0.5
+    spikes[:, 0, 1] = 1    # rate 1.0 -> clipped to 1
+    np.testing.assert_allclose(tfp(spikes), [[0.5, 1.0, 0.0]])
+    np.testing.assert_allclose(tfp(spikes, white_rate=1.0), [[0.3, 1, 0]])
+
+
+def test_tfi_uses_the_interval_around_the_centre():
+    spikes = np.zeros((9, 1, 4), np.uint8)   # centre frame 4
+    spikes[[1, 6], 0, 0] = 1                 # interval 5
+    spikes[[4, 5], 0, 1] = 1                 # spike at the centre: 1
+    spikes[7, 0, 2] = 1                      # none before: prev = -1 -> 8
+    expected = [1 / (5 * 0.6), 1.0, 1 / (8 * 0.6), 1 / (10 * 0.6)]
+    np.testing.assert_allclose(tfi(spikes)[0], expected)
+
+
+def test_baselines_reject_bad_input():
+    with pytest.raises(ValueError, match='T, H, W'):
+        tfp(np.zeros((3, 4)))
+    with pytest.raises(ValueError, match='white_rate'):
+        tfi(np.zeros((3, 4, 4)), white_rate=0)
+
+
+# --------------------------------------------------------------- metrics
+def _ssim_reference(x, y, size=11, sigma=1.5):
+    """Wang et al.'s SSIM written out window by window."""
+    w = gaussian_window(size, sigma)
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    values = []
+    for i in range(x.shape[0] - size + 1):
+        for j in range(x.shape[1] - size + 1):
+            a, b = x[i:i + size, j:j + size], y[i:i + size, j:j + size]
+            ma, mb = (w * a).sum(), (w * b).sum()
+            va, vb = (w * (a - ma) ** 2).sum(), (w * (b - mb) ** 2).sum()
+            cov = (w * (a - ma) * (b - mb)).sum()
+            values.append((2 * ma * mb + c1) * (2 * cov + c2) /
+                          ((ma ** 2 + mb ** 2 + c1) * (va + vb + c2)))
+    return np.mean(values)
+
+
+def test_gaussian_window_matches_its_definition():
+    w = gaussian_window()
+    assert w.shape == (11, 11) and np.isclose(w.sum(), 1)
+    assert np.isclose(w[5, 6] / w[5, 5], np.exp(-1 / (2 * 1.5 ** 2)))
+
+
+def test_ssim_against_window_by_window_reference():
+    rng = np.random.default_rng(0)
+    x = rng.random((16, 19))
+    y = np.clip(x + 0.2 * rng.standard_normal(x.shape), 0, 1)
+    assert np.isclose(ssim(x, y), _ssim_reference(x, y), rtol=1e-9)
+    assert np.isclose(ssim(x, x), 1.0)
+
+
+def test_ssim_closed_form_for_flat_images():
+    # Flat images: no variance, so SSIM = (2ab + C1) / (a^2 + b^2 + C1).
+    a, b, c1 = 0.2, 0.7, 0.01 ** 2
+    value = ssim(np.full((12, 12), a), np.full((12, 12), b))
+    assert np.isclose(value, (2 * a * b + c1) / (a * a + b * b + c1))
+
+
+def test_ssim_uint8_matches_float():
+    rng = np.random.default_rng(1)
+    x, y = (rng.integers(0, 256, (2, 14, 14), dtype=np.uint8))
+    assert np.isclose(ssim(x, y), ssim(x / 255.0, y / 255.0))
+
+
+def test_psnr_known_values():
+    gt = np.zeros((4, 4))
+    assert np.isclose(psnr(gt + 0.1, gt), 20.0)
+    assert psnr(gt, gt) == float('inf')
+    with pytest.raises(ValueError, match='differ'):
+        psnr(gt, np.zeros((4, 5)))
+
+
+def test_entropy_2d_known_values():
+    assert entropy_2d(np.full((8, 8), 0.5)) == 0.0
+    # Vertical stripes 0/255 of width 3: each pixel's 3x3 mean is one of
+    # two values per grey level -> the joint histogram has known cells.
+    stripes = np.tile(np.repeat([0, 255], 3), (6, 2)).astype(np.uint8)
+    grey = stripes.astype(np.float64)
+    mean = cv2.blur(grey, (3, 3), borderType=cv2.BORDER_REFLECT)
+    _, counts = np.unique(np.stack([grey, np.round(mean)]).reshape(2, -1),
+                          axis=1, return_counts=True)
+    p = counts / counts.sum()
+    assert np.isclose(entropy_2d(stripes), -(p * np.log2(p)).sum())
+    rng = np.random.default_rng(0)
+    assert entropy_2d(rng.random((64, 64))) > entropy_2d(
+        np.tile(np.linspace(0, 1, 64), (64, 1)))
+
+
+def test_reconstruction_metric_with_and_without_ground_truth():
+    metric = ReconstructionMetric()
+    gt = torch.rand(1, 16, 16)
+    pred = (gt + 0.1).clamp(0, 1)
+    metric.process(None, [dict(pred_image=PixelData(data=pred).to_dict(),
+                               gt_image=PixelData(data=gt).to_dict())])
+    metric.process(None, [dict(pred_image=dict(data=gt))])
+    scores = metric.compute_metrics(metric.results)
+    assert np.isclose(scores['PSNR'], psnr(pred[0].numpy(), gt[0].numpy()))
+    assert np.isclose(scores['SSIM'], ssim(pred[0].numpy(), gt[0].numpy()))
+    assert np.isclose(scores['Entropy2D'], np.mean(
+        [entropy_2d(pred[0].numpy()), entropy_2d(gt[0].numpy())]))
+    blind = ReconstructionMetric()
+    blind.process(None, [dict(pred_image=dict(data=gt))])
+    assert set(blind.compute_metrics(blind.results)) == {'Entropy2D'}
+
+
+# -------------------------------------------------------------- datasets
+def test_reds_dataset_centres_the_window_on_the_ground_truth(tmp_path):
+    os.makedirs(tmp_path / 'spike')
+    os.makedirs(tmp_path / 'gt')
+    steps = np.zeros((11, 4, 8), np.uint8)
+    for frame in range(11):  # frame k fires at pixel (0, k % 8) only
+        steps[frame, 0, frame % 8] = 1
+    save_spikes(str(tmp_path / 'spike' / 'a.dat'), steps)
+    cv2.imwrite(str(tmp_path / 'gt' / 'a.png'), np.full((4, 8), 51,
+                                                         np.uint8))
+    dataset = REDSSpikeDataset(
+        data_root=str(tmp_path),
+        pipeline=[LoadSpikeImagePair(num_steps=5),
+                  PackReconstructionInputs()])
+    sample = dataset[0]
+    window = sample['inputs'].numpy()
+    assert window.shape == (5, 4, 8)  # .dat size taken from the PNG
+    np.testing.assert_array_equal(window, steps[3:8])  # centre frame 5
+    gt = sample['data_samples'].gt_image.data
+    assert gt.shape == (1, 4, 8) and torch.allclose(gt, torch.tensor(0.2))
+    shifted = REDSSpikeDataset(
+        data_root=str(tmp_path), gt_frame=3,
+        pipeline=[LoadSpikeImagePair(num_steps=5),
+                  PackReconstructionInputs()])
+    np.testing.assert_array_equal(shifted[0]['inputs'].numpy(), steps[1:6])
+
+
+def test_reds_dataset_errors_name_the_files(tmp_path):
+    root = _reds_folder(str(tmp_path / 'r'))
+    os.remove(osp.join(root, 'gt', 's1.png'))
+    with pytest.raises(FileNotFoundError, match='s1.png'):
+        REDSSpikeDataset(data_root=root, spike_suffix='.npy')
+    with pytest.raises(FileNotFoundError, match='no spike files'):
+        REDSSpikeDataset(data_root=str(tmp_path))
+    cv2.imwrite(osp.join(root, 'gt', 's1.png'), np.zeros((5, 5), np.uint8))
+    dataset = REDSSpikeDataset(data_root=root, spike_suffix='.npy',
+                               pipeline=[LoadSpikeImagePair(num_steps=3)])
+    with pytest.raises(ValueError, match='s1.png is 5x5'):
+        dataset[1]
+
+
+def test_simulated_dataset_is_seeded_and_on_the_reds_scale():
+    kwargs = dict(num_samples=3, crop_size=(24, 32), num_steps=41,
+                  pipeline=[PackReconstructionInputs()])
+    dataset = SimulatedSpikeImageDataset(**kwargs)
+    first, again = dataset[1], SimulatedSpikeImageDataset(**kwargs)[1]
+    assert first['inputs'].shape == (41, 24, 32)
+    assert torch.equal(first['inputs'], again['inputs'])
+    assert not torch.equal(first['inputs'], dataset[2]['inputs'])
+    # A still view: the window's rate / 0.6 is the image.
+    still = SimulatedSpikeImageDataset(max_speed=0, max_rotation=0,
+                                       max_zoom=0, **kwargs)[0]
+    gt = still['data_samples'].gt_image.data[0].numpy()
+    rate = tfp(still['inputs'].numpy())
+    assert abs(rate.mean() - gt.mean()) < 0.01
+    assert np.abs(rate - gt).max() <= 1 / (41 * 0.6) + 1e-6
+
+
+def test_simulated_dataset_reads_a_folder(tmp_path):
+    image = np.tile(np.linspace(0, 255, 40, dtype=np.uint8), (30, 1))
+    cv2.imwrite(str(tmp_path / 'ramp.png'), image)
+    dataset = SimulatedSpikeImageDataset(image_dir=str(tmp_path),
+                                         num_samples=1, crop_size=(8, 8),
+                                         num_steps=5, pipeline=[])
+    assert dataset.image_paths == [str(tmp_path / 'ramp.png')]
+    with pytest.raises(FileNotFoundError, match='no images'):
+        SimulatedSpikeImageDataset(image_dir=str(tmp_path / 'none'))
+
+
+def test_render_trajectory_moves_by_the_velocity():
+    image = np.random.default_rng(0).random((200, 200)).astype(np.float32)
+    image = cv2.GaussianBlur(image, (0, 0), 3)
+    frames = render_trajectory(image, (48, 48), 21,
+                               np.random.default_rng(3), max_speed=1.0,
+                               max_rotation=0, max_zoom=0,
+                               scale_range=(1, 1))
+    assert frames.shape == (21, 48, 48)
+    (dx, dy), _ = cv2.phaseCorrelate(frames[10], frames[11])
+    assert 0 < np.hypot(dx, dy) <= 1.2
+
+
+# ----------------------------------------------------------------- tools
+def test_reconstruct_cli_writes_one_png_per_frame(tmp_path, capsys):
+    spikes = (np.random.default_rng(0).random((50, 8, 12)) < 0.3).astype(
+        np.uint8)
+    path = str(tmp_path / 'clip.npy')
+    save_spikes(path, spikes)
+    tool = _tool('reconstruct')
+    tool.main([path, '--out', str(tmp_path / 'out'), '--method', 'tfp',
+               '--frames', '20,29'])
+    for frame in (20, 29):
+        image = cv2.imread(str(tmp_path / 'out' / f'clip_{frame}.png'),
+                           cv2.IMREAD_UNCHANGED)
+        assert image.dtype == np.uint8 and image.shape == (8, 12)
+        start = frame - 20
+        expected = np.round(tfp(spikes[start:start + 41]) * 255)
+        np.testing.assert_array_equal(image, expected)
+    assert 'entropy2d=' in capsys.readouterr().out
+    with pytest.raises(SystemExit, match='centre frames 20..29 fit'):
+        tool.main([path, '--out', str(tmp_path), '--frames', '5',
+                   '--method', 'tfi'])
+
+
+def test_figure_tool_grid(tmp_path):
+    spikes = (np.random.default_rng(0).random((45, 8, 10)) < 0.3).astype(
+        np.uint8)
+    save_spikes(str(tmp_path / 'clip.npy'), spikes)
+    out = str(tmp_path / 'fig.png')
+    _tool('make_reconstruction_figure').main(
+        [str(tmp_path / 'clip.npy'), '--out', out, '--methods', 'tfp,tfi',
+         '--count', '3', '--scale', '2'])
+    figure = cv2.imread(out, cv2.IMREAD_UNCHANGED)
+    tile_h, tile_w = 2 * 8 + 22, 2 * 10  # scaled tile + label band
+    assert figure.shape == (2 * tile_h + 4, 3 * tile_w + 2 * 4)
+
+
+def test_benchmark_table(tmp_path):
+    root = _reds_folder(str(tmp_path / 'r'), steps=41, size=(16, 16))
+    results = benchmark(root, ['tfp', 'tfi'], spike_suffix='.npy')
+    assert set(results['tfp']) == {'PSNR', 'SSIM', 'Entropy2D'}
+    table = format_table(results)
+    assert '| TFP |' in table and '+0.00 |' in table
+
+
+# ---------------------------------------------------- shipped weights
+def test_shipped_weights_are_small_and_load():
+    assert osp.getsize(DEFAULT_WEIGHTS) < 20 * 2 ** 20
+    model = load_reconstructor()
+    assert isinstance(model, SpikeReconstructor) and model.num_steps == 41
+    assert type(model.enhancer).__name__ == 'WGSE'
+
+
+def test_shipped_weights_beat_tfp_on_the_reds_sample(shared_dir):
+    spike = osp.join(shared_dir, 'data', 'reds_sample', 'spike',
+                     REDS_NAME + '.dat')
+    gt = cv2.imread(osp.join(shared_dir, 'data', 'reds_sample', 'gt',
+                             REDS_NAME + '.png'), 0) / 255.0
+    window = load_spikes(spike, 250, 400, 130, 41)
+    # A 96x96 crop keeps the test fast; the full-frame table is in the docs.
+    crop = (slice(60, 156), slice(150, 246))
+    pred = load_reconstructor().reconstruct(window[:, crop[0], crop[1]])
+    margin = psnr(pred[8:-8, 8:-8], gt[crop][8:-8, 8:-8]) - psnr(
+        tfp(window)[crop][8:-8, 8:-8], gt[crop][8:-8, 8:-8])
+    assert margin > 3.0  # 30.6 vs 23.8 dB when the weights were shipped
+
+
+def test_reconstruct_cli_on_the_real_dat_is_upright(shared_dir, tmp_path):
+    spike = osp.join(shared_dir, 'data', 'reds_sample', 'spike',
+                     REDS_NAME + '.dat')
+    gt = cv2.imread(osp.join(shared_dir, 'data', 'reds_sample', 'gt',
+                             REDS_NAME + '.png'), 0).astype(np.float64)
+    result = subprocess.run(
+        [sys.executable, osp.join(TOOLS, 'reconstruct.py'), spike, '--out',
+         str(tmp_path), '--method', 'tfp', '--height', '250', '--width',
+         '400', '--frames', '150'], capture_output=True, text=True,
+        cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    image = cv2.imread(str(tmp_path / f'{REDS_NAME}_150.png'),
+                       cv2.IMREAD_UNCHANGED)
+    assert image.dtype == np.uint8 and image.shape == gt.shape
+    assert np.corrcoef(image.ravel(), gt.ravel())[0, 1] > 0.9
+    assert np.corrcoef(image[::-1].ravel(), gt.ravel())[0, 1] < 0.6

@@ -1,0 +1,110 @@
+"""A figure like the paper's Fig. 9: reconstructions of a stream over time.
+
+    python tools/make_reconstruction_figure.py SPIKE_FILE --out FIG.png
+        [--methods wgse] [--frames 60,100,... | --count 5]
+        [--checkpoint CKPT] [--height H --width W] [--scale 1.0]
+
+One column per centre frame (``--frames``, or ``--count`` frames spread
+evenly over the stream), one row per method (``wgse``, ``tfp``, ``tfi``; the
+paper's figure is the ``wgse`` row), each tile labelled with its frame and
+method. ``--scale`` resizes the tiles. Written as an 8-bit grey PNG.
+"""
+import argparse
+import os.path as osp
+import sys
+
+import cv2
+import numpy as np
+
+from reconstruct import to_uint8, window_start, write_png
+from wgse_mmseg.io import SpikeFileError, load_spikes, spike_shape
+from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
+                                              reconstruction_method)
+
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+_GAP = 4
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(
+        description='Reconstructions of a spike stream over time, as a grid')
+    parser.add_argument('spikes', help='spike file (.dat, .spk, .npy, .npz)')
+    parser.add_argument('--out', required=True, help='output PNG')
+    parser.add_argument('--methods', default='wgse',
+                        help=f'comma-separated rows, of {METHODS}')
+    parser.add_argument('--frames', help='comma-separated centre frames')
+    parser.add_argument('--count', type=int, default=5,
+                        help='columns spread over the stream (no --frames)')
+    parser.add_argument('--checkpoint', help='wgse model (default: shipped)')
+    parser.add_argument('--height', type=int, help='frame height of a .dat')
+    parser.add_argument('--width', type=int, help='frame width of a .dat')
+    parser.add_argument('--scale', type=float, default=1.0,
+                        help='tile scale factor')
+    parser.add_argument('--device', default='cpu')
+    args = parser.parse_args(argv)
+    args.methods = [m.strip() for m in args.methods.split(',') if m.strip()]
+    if not args.methods or set(args.methods) - set(METHODS):
+        parser.error(f'--methods must name some of {METHODS}')
+    if args.count < 1 or args.scale <= 0:
+        parser.error('--count must be >= 1 and --scale > 0')
+    return args
+
+
+def labelled(tile: np.ndarray, text: str) -> np.ndarray:
+    """``tile`` (8-bit grey) with ``text`` on a dark band above it."""
+    band = np.zeros((22, tile.shape[1]), np.uint8)
+    cv2.putText(band, text, (4, 16), _FONT, 0.5, 255, 1, cv2.LINE_AA)
+    return np.vstack([band, tile])
+
+
+def grid(rows) -> np.ndarray:
+    """Tiles ``rows[i][j]`` (equal sizes) joined with white gaps."""
+    height, width = rows[0][0].shape
+    out = np.full((len(rows) * (height + _GAP) - _GAP,
+                   len(rows[0]) * (width + _GAP) - _GAP), 255, np.uint8)
+    for i, row in enumerate(rows):
+        for j, tile in enumerate(row):
+            y, x = i * (height + _GAP), j * (width + _GAP)
+            out[y:y + height, x:x + width] = tile
+    return out
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    try:
+        total, _, _ = spike_shape(args.spikes, args.height, args.width)
+        functions, length = {}, 41
+        for method in args.methods:
+            if method == 'wgse':
+                model = load_reconstructor(args.checkpoint, args.device)
+                functions[method], length = model.reconstruct, model.num_steps
+            else:
+                functions[method] = reconstruction_method(method)
+        if args.frames:
+            frames = [int(f) for f in args.frames.split(',') if f.strip()]
+        else:
+            first, last = length // 2, total - length + length // 2
+            frames = np.linspace(first, last, args.count).round().astype(
+                int).tolist()
+        starts = [window_start(args.spikes, total, f, length) for f in frames]
+    except (SpikeFileError, ValueError, FileNotFoundError) as err:
+        sys.exit(f'{osp.basename(__file__)}: error: {err}')
+    columns = []
+    for frame, start in zip(frames, starts):
+        window = load_spikes(args.spikes, args.height, args.width, start,
+                             length)
+        column = []
+        for method, function in functions.items():
+            tile = to_uint8(function(window))
+            if args.scale != 1:
+                tile = cv2.resize(tile, None, fx=args.scale, fy=args.scale,
+                                  interpolation=cv2.INTER_AREA)
+            column.append(labelled(tile, f'{method.upper()}  t={frame}'))
+        columns.append(column)
+    figure = grid([list(row) for row in zip(*columns)])
+    write_png(args.out, figure)
+    print(args.out)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,122 @@
+"""Reconstruct grey images from a spike stream and write them as PNGs.
+
+    python tools/reconstruct.py SPIKE_FILE --out DIR [--method wgse|tfp|tfi]
+        [--checkpoint CKPT] [--height H --width W] [--frames 150,...]
+        [--num-steps 41] [--device cpu]
+
+``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.io` reads (``.dat``, ``.spk``,
+``.npy``, ``.npz``; a ``.dat`` needs ``--height``/``--width`` or a
+``<file>.json`` side file). For each requested centre frame (default: the
+middle frame) the window of ``--num-steps`` frames centred on it goes through
+the method, and ``DIR/<stem>_<frame>.png`` (8-bit grey, upright) is written;
+each path is printed with the image's 2-D entropy (a no-reference measure).
+
+``--method wgse`` (default) runs the trained model of ``--checkpoint``: an
+mmengine checkpoint of a ``configs/reconstruction`` config or a file of
+``export_weights``; without one, the weights shipped in
+``wgse_mmseg/weights``. The model's window length is its own ``num_steps``.
+``tfp``/``tfi`` are the classical baselines on the REDS intensity scale.
+"""
+import argparse
+import os.path as osp
+import sys
+
+import cv2
+import numpy as np
+
+from wgse_mmseg.evaluation import entropy_2d
+from wgse_mmseg.io import (SpikeFileError, atomic_output, load_spikes,
+                           spike_shape)
+from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
+                                              reconstruction_method)
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(
+        description='Reconstruct images from a spike stream')
+    parser.add_argument('spikes', help='spike file (.dat, .spk, .npy, .npz)')
+    parser.add_argument('--out', required=True, help='output directory')
+    parser.add_argument('--method', choices=METHODS, default='wgse',
+                        help='reconstruction method (default: wgse)')
+    parser.add_argument(
+        '--checkpoint',
+        help='model checkpoint for --method wgse (default: shipped weights)')
+    parser.add_argument('--height', type=int,
+                        help='frame height of a .dat file')
+    parser.add_argument('--width', type=int, help='frame width of a .dat file')
+    parser.add_argument(
+        '--frames',
+        help='comma-separated centre frames (default: the middle frame)')
+    parser.add_argument(
+        '--num-steps', type=int, default=41,
+        help='window length for tfp/tfi (wgse uses its model\'s; default 41)')
+    parser.add_argument('--device', default='cpu', help='torch device')
+    args = parser.parse_args(argv)
+    if (args.height is None) != (args.width is None):
+        parser.error('--height and --width go together')
+    if args.checkpoint and args.method != 'wgse':
+        parser.error('--checkpoint is for --method wgse')
+    if args.num_steps < 1:
+        parser.error(f'--num-steps must be >= 1, got {args.num_steps}')
+    try:
+        args.frames = (None if args.frames is None else
+                       [int(f) for f in args.frames.split(',') if f.strip()])
+    except ValueError:
+        parser.error(f'--frames must be comma-separated integers, got '
+                     f'{args.frames!r}')
+    return args
+
+
+def window_start(path: str, total: int, center: int, length: int) -> int:
+    """First frame of the ``length``-frame window centred on ``center``."""
+    start = center - length // 2
+    if start < 0 or start + length > total:
+        first = length // 2
+        last = total - length + length // 2
+        raise SpikeFileError(
+            f'{path}: a {length}-frame window centred on frame {center} does '
+            f'not fit in the stream\'s {total} frames; centre frames '
+            + (f'{first}..{last} fit' if last >= first else 'none fit'))
+    return start
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """``(H, W)`` float in [0, 1] -> 8-bit grey."""
+    return np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
+
+
+def write_png(path: str, image: np.ndarray) -> None:
+    """Write an 8-bit image; the file appears complete or not at all."""
+    ok, encoded = cv2.imencode('.png', image)
+    if not ok:
+        raise RuntimeError(f'{path}: PNG encoding failed')
+    with atomic_output(path) as f:
+        f.write(encoded.tobytes())
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    try:
+        total, _, _ = spike_shape(args.spikes, args.height, args.width)
+        length = args.num_steps
+        if args.method == 'wgse':
+            model = load_reconstructor(args.checkpoint, args.device)
+            method, length = model.reconstruct, model.num_steps
+        else:
+            method = reconstruction_method(args.method)
+        frames = args.frames if args.frames else [total // 2]
+        starts = [window_start(args.spikes, total, f, length) for f in frames]
+    except (SpikeFileError, ValueError, FileNotFoundError) as err:
+        sys.exit(f'{osp.basename(__file__)}: error: {err}')
+    stem = osp.splitext(osp.basename(args.spikes))[0]
+    for frame, start in zip(frames, starts):
+        window = load_spikes(args.spikes, args.height, args.width, start,
+                             length)
+        image = to_uint8(method(window))
+        path = osp.join(args.out, f'{stem}_{frame}.png')
+        write_png(path, image)
+        print(f'{path}\tentropy2d={entropy_2d(image):.3f}')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,97 @@
+"""Image quality measures for reconstructed grey images.
+
+Full-reference (against ground truth): :func:`psnr` and :func:`ssim`, on
+images in [0, 1] (data range 1). No-reference (real recordings without ground
+truth): :func:`entropy_2d`.
+
+Every function takes ``(H, W)`` arrays: float in [0, 1], or ``uint8`` (read
+as ``value / 255``).
+"""
+import cv2
+import numpy as np
+
+__all__ = ['psnr', 'ssim', 'entropy_2d', 'gaussian_window']
+
+#: SSIM constants of Wang et al. (2004) for data range 1.
+_K1, _K2 = 0.01, 0.03
+
+
+def _as_unit_float(image, name: str) -> np.ndarray:
+    array = np.asarray(image)
+    if array.ndim != 2:
+        raise ValueError(f'{name} must be an (H, W) image, got shape '
+                         f'{array.shape}')
+    if array.dtype == np.uint8:
+        return array.astype(np.float64) / 255.0
+    return array.astype(np.float64)
+
+
+def _pair(pred, gt):
+    pred, gt = _as_unit_float(pred, 'pred'), _as_unit_float(gt, 'gt')
+    if pred.shape != gt.shape:
+        raise ValueError(f'pred {pred.shape} and gt {gt.shape} differ in size')
+    return pred, gt
+
+
+def psnr(pred, gt) -> float:
+    """Peak signal-to-noise ratio in dB for data range 1 (inf if equal)."""
+    pred, gt = _pair(pred, gt)
+    mse = np.mean((pred - gt) ** 2)
+    return float('inf') if mse == 0 else float(10 * np.log10(1.0 / mse))
+
+
+def gaussian_window(size: int = 11, sigma: float = 1.5) -> np.ndarray:
+    """``(size, size)`` Gaussian weights summing to 1 (MATLAB ``fspecial``)."""
+    axis = np.arange(size, dtype=np.float64) - (size - 1) / 2
+    g = np.exp(-axis ** 2 / (2 * sigma ** 2))
+    g /= g.sum()
+    return np.outer(g, g)
+
+
+def ssim(pred, gt, size: int = 11, sigma: float = 1.5) -> float:
+    """Mean structural similarity (Wang et al., 2004), data range 1.
+
+    The usual definition: local means, variances and covariance weighted by
+    an 11x11 Gaussian (sigma 1.5), ``K1 = 0.01``, ``K2 = 0.03``, population
+    (not sample) statistics, averaged over the windows that lie inside the
+    image ('valid'); equals ``skimage.metrics.structural_similarity(...,
+    gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+    data_range=1)``.
+    """
+    pred, gt = _pair(pred, gt)
+    if min(pred.shape) < size:
+        raise ValueError(f'SSIM needs images of at least {size}x{size}, got '
+                         f'{pred.shape[0]}x{pred.shape[1]}')
+    window = gaussian_window(size, sigma)
+    pad = size // 2
+
+    def local_mean(x):
+        return cv2.filter2D(x, cv2.CV_64F, window,
+                            borderType=cv2.BORDER_REFLECT)[pad:-pad, pad:-pad]
+
+    c1, c2 = _K1 ** 2, _K2 ** 2
+    mu_x, mu_y = local_mean(pred), local_mean(gt)
+    var_x = local_mean(pred * pred) - mu_x ** 2
+    var_y = local_mean(gt * gt) - mu_y ** 2
+    cov = local_mean(pred * gt) - mu_x * mu_y
+    ssim_map = ((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / (
+        (mu_x ** 2 + mu_y ** 2 + c1) * (var_x + var_y + c2))
+    return float(ssim_map.mean())
+
+
+def entropy_2d(image) -> float:
+    """Two-dimensional image entropy in bits (no reference needed).
+
+    The joint distribution of each pixel's 8-bit grey level ``i`` and the
+    mean ``j`` of its 3x3 neighbourhood (reflected at the border, rounded to
+    8 bits): ``-sum p(i, j) log2 p(i, j)``. Between 0 (flat) and 16 bits;
+    higher means more detail (noise counts as detail too, so compare
+    reconstructions of the same recording).
+    """
+    grey = np.clip(np.round(_as_unit_float(image, 'image') * 255), 0, 255)
+    neighbourhood = cv2.blur(grey, (3, 3), borderType=cv2.BORDER_REFLECT)
+    joint = grey.astype(np.int64) * 256 + np.round(neighbourhood).astype(
+        np.int64)
+    counts = np.bincount(joint.ravel(), minlength=256 * 256)
+    p = counts[counts > 0] / joint.size
+    return float(-(p * np.log2(p)).sum())
