@@ -5,7 +5,9 @@ The reference is the public WGSE implementation's design, rebuilt here only:
 every pixel's time series ``(B*H*W, 1, T)``, one ``nn.Conv1d`` band network
 per band on the whole batch, ``DWT1DInverse`` back (``T + 1`` samples for odd
 ``T``; the extra one is dropped for the comparison). It uses the same band
-network weights as the package's ``WGSE``, so outputs must agree.
+network weights as the package's ``WGSE``, so outputs must agree. (On the CPU
+``WGSE`` runs its fused kernel, which recomputes activations chunk by chunk
+whatever ``with_cp`` says, so there is one WGSE row.)
 
 Each measurement runs in a fresh process: peak memory is the growth of the
 process's peak resident set during the first forward+backward after set-up
@@ -34,7 +36,6 @@ import torch
 IMPLEMENTATIONS = {
     'reference': 'pytorch_wavelets + per-pixel nn.Conv1d',
     'wgse': 'wgse_mmseg WGSE',
-    'wgse_cp': 'wgse_mmseg WGSE, with_cp=True',
 }
 DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
 
@@ -78,7 +79,7 @@ def _build(impl: str, shape: List[int]):
     import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
     from wgse_mmseg.models import WGSE
     torch.manual_seed(0)
-    model = WGSE(with_cp=impl == 'wgse_cp')
+    model = WGSE()
     spikes = (torch.rand(shape, generator=torch.Generator().manual_seed(1))
               < 0.3).float()
     if impl == 'reference':
