@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 import torch
 
+from wgse_mmseg.benchmarking import cpu_model
 from wgse_mmseg.io import load_spikes, save_spikes
 from wgse_mmseg.simulation import simulate_spikes
 from wgse_mmseg.synthetic import render_street_scene
@@ -92,20 +93,9 @@ def median_time(run: Callable[[], object], repeat: int) -> Timing:
     return Timing(statistics.median(walls), statistics.median(cpus), result)
 
 
-def cpu_name() -> str:
-    try:
-        with open('/proc/cpuinfo') as f:
-            for line in f:
-                if line.startswith('model name'):
-                    return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or 'unknown CPU'
-
-
 def header(args) -> List[str]:
     return [
-        f'machine: {platform.machine()}, {cpu_name()}, '
+        f'machine: {platform.machine()}, {cpu_model()}, '
         f'{os.cpu_count()} logical CPUs, {platform.system()} '
         f'{platform.release()}',
         f'python {platform.python_version()}, torch {torch.__version__}, '

@@ -139,15 +139,9 @@ def _run_worker(args: List[str]) -> Dict:
 
 
 def machine() -> Dict:
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open('/proc/cpuinfo') as f:
-            cpu = next(line.split(':', 1)[1].strip() for line in f
-                       if line.startswith('model name'))
-    except (OSError, StopIteration):
-        pass
+    from wgse_mmseg.benchmarking import cpu_model
     import pytorch_wavelets
-    return dict(cpu=cpu, cores=os.cpu_count(), torch=torch.__version__,
+    return dict(cpu=cpu_model(), cores=os.cpu_count(), torch=torch.__version__,
                 threads=torch.get_num_threads(),
                 pytorch_wavelets=getattr(pytorch_wavelets, '__version__', '?'),
                 python=platform.python_version(),

@@ -68,6 +68,7 @@ from mmseg.structures import SegDataSample
 from .config import load_config
 
 __all__ = [
+    'cpu_model',
     'summarize', 'time_calls', 'make_spike_batch', 'build_model',
     'inference_parameters', 'count_flops', 'measure_latency',
     'measure_throughput', 'measure_train_step', 'measure_enhancer_step',
@@ -352,7 +353,8 @@ def measure_enhancer_step(model: nn.Module, num_steps: int,
     return summarize([1e3 * s for s in seconds])
 
 
-def _cpu_model() -> str:
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), else what platform says."""
     try:
         with open('/proc/cpuinfo') as f:
             for line in f:
@@ -379,7 +381,7 @@ def environment(device: str = 'cpu') -> Dict[str, Any]:
     """Device and software versions a benchmark ran with."""
     env = dict(
         device=device,
-        cpu=_cpu_model(),
+        cpu=cpu_model(),
         cpu_count=os.cpu_count(),
         torch_threads=torch.get_num_threads(),
         python=platform.python_version(),
