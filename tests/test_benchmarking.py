@@ -62,7 +62,11 @@ def test_cli_prints_the_table_and_writes_json(tmp_path):
     for key in ('latency_ms', 'throughput_img_s', 'train_step_ms',
                 'enhancer_step_ms'):
         assert len(result[key]['samples']) == 1 and result[key]['median'] > 0
-    assert 0 < result['enhancer_share'] < 1
+    # Two separately timed medians: their ratio is not bounded by 1 when the
+    # enhancer dominates a tiny step, so check how it is derived, not a range.
+    assert result['enhancer_share'] == pytest.approx(
+        result['enhancer_step_ms']['median']
+        / result['train_step_ms']['median'])
     assert result['memory']['kind'].startswith('cpu_peak_rss')
     assert result['memory']['peak_mb'] > 0
 

@@ -31,7 +31,9 @@ What is measured, and how:
   the config's optimiser on a labelled batch: forward, loss (OHEM
   included), backward and update. **Enhancer share**: the median time of
   the enhancer's forward (and backward, if it has parameters) on the same
-  batch alone, divided by the median step time.
+  batch alone, divided by the median step time. The two are timed
+  separately, so where the enhancer is nearly the whole step (tiny crops,
+  few repeats) the share can read slightly above 100%.
 * **Peak memory** during the timed training steps. CUDA:
   ``torch.cuda.max_memory_allocated`` (tensors only, reset before the
   steps). CPU: the process's peak resident set size (Linux ``VmHWM``, reset
