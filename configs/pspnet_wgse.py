@@ -4,6 +4,7 @@
 _base_ = [
     'mmseg::_base_/models/pspnet_r50-d8.py',
     './_base_/datasets/spike_cityscapes.py',
+    './_base_/models/wgse.py',
     './_base_/default_runtime.py',
     './_base_/schedules/adamw_warmup_100e.py',
 ]
@@ -12,15 +13,7 @@ ohem = dict(type='OHEMPixelSampler', thresh=0.7, min_kept=100000)
 model = dict(
     pretrained=None,
     data_preprocessor=dict(
-        _delete_=True,
-        type='SpikeSegDataPreProcessor',
-        num_steps={{_base_.num_steps}},
-        num_classes={{_base_.num_classes}},
-        size={{_base_.crop_size}},
-        pad_val=0,
-        seg_pad_val=255,
-        enhancer=dict(type='WGSE', dim=1, wavelet='db8', level=5,
-                      mode='zero', kernel_size=3, hidden_channels=32)),
+        _delete_=True, **_base_.spike_data_preprocessor, enhancer=_base_.wgse),
     backbone=dict(in_channels={{_base_.num_steps}}, norm_cfg=norm_cfg),
     decode_head=dict(norm_cfg=norm_cfg, sampler=ohem),
     auxiliary_head=dict(norm_cfg=norm_cfg, sampler=ohem))

@@ -22,6 +22,7 @@ _base_ = [
     'mmseg::_base_/models/deeplabv3plus_r50-d8.py',
     # (1) custom_imports, num_steps, crop_size, data_root, pipelines:
     '../_base_/datasets/spike_cityscapes.py',
+    '../_base_/models/wgse.py',
     '../_base_/default_runtime.py',
     '../_base_/schedules/adamw_warmup_100e.py',
 ]
@@ -31,15 +32,7 @@ model = dict(
     pretrained=None,  # no RGB ImageNet weights: the stem takes T channels
     # (2) batch and enhance spike streams instead of normalising RGB images:
     data_preprocessor=dict(
-        _delete_=True,
-        type='SpikeSegDataPreProcessor',
-        num_steps={{_base_.num_steps}},
-        num_classes={{_base_.num_classes}},
-        size={{_base_.crop_size}},
-        pad_val=0,
-        seg_pad_val=255,
-        enhancer=dict(type='WGSE', dim=1, wavelet='db8', level=5,
-                      mode='zero', kernel_size=3, hidden_channels=32)),
+        _delete_=True, **_base_.spike_data_preprocessor, enhancer=_base_.wgse),
     # (3) the backbone takes the T enhanced spike channels:
     backbone=dict(
         depth=18,

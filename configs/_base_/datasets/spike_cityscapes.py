@@ -54,3 +54,15 @@ test_dataloader = val_dataloader
 val_evaluator = dict(type='IoUMetric', iou_metrics=['mIoU'])
 test_evaluator = val_evaluator
 
+# What replaces MMSeg's RGB SegDataPreProcessor in a model on this data:
+#   model = dict(data_preprocessor=dict(
+#       _delete_=True, **_base_.spike_data_preprocessor, enhancer=...))
+# It batches the (T, H, W) streams without mean/std, pads crops (labels with
+# 255) and checks T and the label range at the first batch.
+spike_data_preprocessor = dict(
+    type='SpikeSegDataPreProcessor',
+    num_steps=num_steps,
+    num_classes=num_classes,
+    size=crop_size,
+    pad_val=0,
+    seg_pad_val=255)
