@@ -427,3 +427,19 @@ def test_bad_side_file(tmp_path, content):
         f.write(content)
     with pytest.raises(SpikeFileError, match=_path_in_message(path)):
         load_spikes(path)
+
+
+def test_write_png_round_trip_and_nothing_on_failure(tmp_path):
+    import cv2
+    label = np.random.default_rng(2).integers(0, 19, (7, 9), dtype=np.uint8)
+    bgr = np.random.default_rng(3).integers(0, 256, (5, 4, 3),
+                                            dtype=np.uint8)
+    for name, image in (('label.png', label), ('colour.png', bgr)):
+        path = str(tmp_path / 'out' / name)
+        spike_io.write_png(path, image)
+        np.testing.assert_array_equal(
+            cv2.imread(path, cv2.IMREAD_UNCHANGED), image)
+    with pytest.raises(Exception):  # OpenCV cannot encode an empty image
+        spike_io.write_png(str(tmp_path / 'empty.png'),
+                           np.zeros((0, 3), np.uint8))
+    assert sorted(os.listdir(tmp_path)) == ['out']  # no file, no temp file

@@ -34,7 +34,7 @@ from mmengine.runner import load_checkpoint
 from mmseg.apis import init_model
 from wgse_mmseg.config import load_config
 from wgse_mmseg.datasets import SpikeCityscapesDataset
-from wgse_mmseg.io import atomic_output
+from wgse_mmseg.io import write_png
 
 
 def parse_args():
@@ -139,15 +139,6 @@ def overlay(grey: np.ndarray, labels: np.ndarray, palette,
     return np.round(blended).astype(np.uint8)
 
 
-def write_png(path: str, rgb: np.ndarray) -> None:
-    """Write ``rgb`` as a PNG; the file appears complete or not at all."""
-    ok, encoded = cv2.imencode('.png', rgb[..., ::-1])
-    if not ok:
-        raise RuntimeError(f'{path}: PNG encoding failed')
-    with atomic_output(path) as f:
-        f.write(encoded.tobytes())
-
-
 def main():
     args = parse_args()
     cfg = load_config(args.config, args.cfg_options)
@@ -166,7 +157,7 @@ def main():
     labels = result.pred_sem_seg.data[0].cpu().numpy()
     image = overlay(rate_image(data['inputs']), labels,
                     model.dataset_meta['palette'], args.opacity)
-    write_png(args.out_file, image)
+    write_png(args.out_file, image[..., ::-1])  # RGB -> OpenCV's BGR
     print(args.out_file)
 
 

@@ -16,8 +16,8 @@ import sys
 import cv2
 import numpy as np
 
-from reconstruct import to_uint8, window_start, write_png
-from wgse_mmseg.io import SpikeFileError, load_spikes, spike_shape
+from reconstruct import to_uint8, window_start
+from wgse_mmseg.io import SpikeFileError, load_spikes, spike_shape, write_png
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
                                               reconstruction_method)
 

@@ -21,12 +21,10 @@ import argparse
 import os.path as osp
 import sys
 
-import cv2
 import numpy as np
 
 from wgse_mmseg.evaluation import entropy_2d
-from wgse_mmseg.io import (SpikeFileError, atomic_output, load_spikes,
-                           spike_shape)
+from wgse_mmseg.io import SpikeFileError, load_spikes, spike_shape, write_png
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
                                               reconstruction_method)
 
@@ -83,15 +81,6 @@ def window_start(path: str, total: int, center: int, length: int) -> int:
 def to_uint8(image: np.ndarray) -> np.ndarray:
     """``(H, W)`` float in [0, 1] -> 8-bit grey."""
     return np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
-
-
-def write_png(path: str, image: np.ndarray) -> None:
-    """Write an 8-bit image; the file appears complete or not at all."""
-    ok, encoded = cv2.imencode('.png', image)
-    if not ok:
-        raise RuntimeError(f'{path}: PNG encoding failed')
-    with atomic_output(path) as f:
-        f.write(encoded.tobytes())
 
 
 def main(argv=None):

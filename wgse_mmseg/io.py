@@ -30,10 +30,11 @@ import struct
 import tempfile
 from typing import BinaryIO, Iterator, Optional, Tuple
 
+import cv2
 import numpy as np
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'atomic_output', 'SPIKE_EXTENSIONS']
+           'atomic_output', 'write_png', 'SPIKE_EXTENSIONS']
 
 SPIKE_EXTENSIONS = ('.dat', '.spk', '.npy', '.npz')
 _MAGIC = b'WGSESPK1'
@@ -68,6 +69,16 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
         if osp.exists(tmp):
             os.remove(tmp)
         raise
+
+
+def write_png(path: str, image: np.ndarray) -> None:
+    """Write an 8-bit ``(H, W)`` (grey, labels) or ``(H, W, 3)`` (BGR, OpenCV's
+    order) image as a PNG; the file appears complete or not at all."""
+    ok, encoded = cv2.imencode('.png', image)
+    if not ok:
+        raise OSError(f'{path}: PNG encoding failed')
+    with atomic_output(path) as f:
+        f.write(encoded.tobytes())
 
 
 def _check_binary(path: str, spikes: np.ndarray) -> None:

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .io import atomic_output, save_spikes
+from .io import save_spikes, write_png
 from .simulation import simulate_spikes
 
 __all__ = ['render_street_scene', 'make_synthetic_dataset']
@@ -118,14 +118,6 @@ def render_street_scene(rng: np.random.Generator, height: int, width: int,
     return np.clip(frames, 0, 1), label
 
 
-def _write_png(path: str, label: np.ndarray) -> None:
-    ok, encoded = cv2.imencode('.png', label)
-    if not ok:
-        raise OSError(f'{path}: PNG encoding failed')
-    with atomic_output(path) as f:
-        f.write(encoded.tobytes())
-
-
 def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                            num_val: int = 12, height: int = 128,
                            width: int = 256, num_steps: int = 41,
@@ -155,7 +147,7 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
         frames, label = render_street_scene(rng, height, width, num_frames)
         spikes, _ = simulate_spikes(frames, num_steps, threshold=threshold,
                                     seed=seed * 100003 + scene)
-        _write_png(label_path, label)
+        write_png(label_path, label)
         save_spikes(spike_path, spikes)
         written += 1
     return written

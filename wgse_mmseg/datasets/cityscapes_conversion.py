@@ -51,7 +51,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from ..io import atomic_output, save_spikes, spike_shape
+from ..io import atomic_output, save_spikes, spike_shape, write_png
 from ..simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = [
@@ -417,11 +417,7 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
     spikes, simulation = simulate_spikes(
         frames, settings.num_steps, threshold=settings.threshold,
         effects=recipe['effects'], seed=recipe['seed'])
-    ok, png = cv2.imencode('.png', label)
-    if not ok:
-        raise OSError(f'{paths["label"]}: PNG encoding failed')
-    with atomic_output(paths['label']) as f:
-        f.write(png.tobytes())
+    write_png(paths['label'], label)
     save_spikes(paths['spike'], spikes)
     meta = json.dumps(dict(recipe=recipe, simulation=simulation), indent=1,
                       default=_jsonable)
