@@ -2,7 +2,7 @@
 # Create (or bring up to date) the project's virtual environment in .venv.
 #
 #   bash tools/setup_env.sh            # mmcv-lite + bundled op fallbacks: ~3 minutes
-#   MMCV=full bash tools/setup_env.sh  # full mmcv 2.1.0 with compiled ops: ~17 minutes on 2 cores
+#   MMCV=full bash tools/setup_env.sh  # full mmcv 2.1.0 with compiled ops: ~30 minutes on 2 cores
 #
 # Idempotent: a second run only checks the pins. Variables: VENV (default .venv),
 # MMCV (lite|full), PYTHON (default python3.11, else python3).
@@ -44,7 +44,7 @@ case "$MMCV" in
   full)
     if [ "$(installed_mmcv)" != "mmcv $MMCV_VERSION" ]; then
         "${PIP[@]}" uninstall -q -y mmcv mmcv-lite >/dev/null 2>&1 || true
-        echo "[setup_env] compiling mmcv $MMCV_VERSION with ops (about 17 minutes on 2 cores; pip caches the wheel)"
+        echo "[setup_env] compiling mmcv $MMCV_VERSION with ops (about 30 minutes on 2 cores; pip caches the wheel)"
         MMCV_WITH_OPS=1 "${PIP[@]}" install --no-build-isolation "mmcv==$MMCV_VERSION"
     fi ;;
   *) echo "[setup_env] MMCV must be 'lite' or 'full', not '$MMCV'" >&2; exit 2 ;;

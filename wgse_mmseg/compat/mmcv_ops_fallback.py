@@ -24,7 +24,7 @@ __all__ = ['install_mmcv_ops_fallback', 'MissingCompiledOpError']
 PURE_PYTHON_OPS = {'point_sample': ('point_sample', 'bilinear_grid_sample')}
 
 _INSTALL_HINT = ('install full mmcv: '
-                 '`MMCV=full bash tools/setup_env.sh` (about 17 minutes on '
+                 '`MMCV=full bash tools/setup_env.sh` (about 30 minutes on '
                  '2 cores), see README "Install"')
 
 
