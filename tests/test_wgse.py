@@ -189,6 +189,51 @@ def test_fused_kernel_equals_conv_modules(monkeypatch, kwargs,
         torch.testing.assert_close(fused, modules, rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.parametrize('kwargs', [dict(), dict(num_blocks=2)],
+                         ids=['default', 'long'])
+def test_fused_kernel_on_threads_is_deterministic(monkeypatch, kwargs):
+    """With several torch threads the chunks run side by side: every run
+    gives the same bits, outputs equal the one-thread run's exactly, the
+    gradients up to summation order, and the thread count is restored."""
+    monkeypatch.setattr(fused_band_networks, 'ROWS_PER_CHUNK', 64)
+    model = _seeded(hidden_channels=8, **kwargs).double()
+    x = torch.rand(2, 23, 6, 7, dtype=torch.float64, requires_grad=True)
+    weights = torch.linspace(-1, 1, x.numel(), dtype=x.dtype).view_as(x)
+
+    def run(threads):
+        torch.set_num_threads(threads)
+        model.zero_grad()
+        x.grad = None
+        y = model(x)
+        (y * weights).sum().backward()
+        assert torch.get_num_threads() == threads
+        return [y.detach(), x.grad.clone()] + [
+            p.grad.clone() for p in model.parameters()]
+
+    try:
+        first, second, single = run(2), run(2), run(1)
+    finally:
+        torch.set_num_threads(1)
+    for a, b in zip(first, second):
+        assert torch.equal(a, b)
+    assert torch.equal(first[0], single[0])
+    for a, b in zip(first[1:], single[1:]):
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize('shape', [(0, 41, 4, 4), (1, 41, 0, 5)],
+                         ids=['no-batch', 'no-pixels'])
+def test_zero_sized_input(shape):
+    """An empty batch or frame gives an empty result and zero gradients."""
+    model = _seeded()
+    x = torch.zeros(shape, requires_grad=True)
+    y = model(x)
+    y.sum().backward()
+    assert y.shape == shape and x.grad.shape == shape
+    for p in model.parameters():
+        assert torch.equal(p.grad, torch.zeros_like(p))
+
+
 def test_fused_kernel_gradcheck(monkeypatch):
     """Hand-written backward of the fused kernel, long variant with a
     5-tap kernel, across chunk boundaries, in float64."""

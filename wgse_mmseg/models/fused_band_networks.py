@@ -4,29 +4,35 @@
 temporal convolutions (1 -> 32 -> 32 -> 1 channels, kernel 3) over every
 pixel's wavelet coefficients. As ``nn.Conv1d`` over ``B*H*W`` signals of
 15-72 samples this spends its time moving data, not multiplying. Here each
-convolution is one matrix product on a "padded rows" layout instead:
+convolution is a few matrix products on a "padded rows" layout instead:
 
 * a chunk of ``n`` pixels of one band is a ``(n * S, C)`` matrix, pixel-major,
   each pixel's ``L`` coefficients surrounded by ``p = k // 2`` zero rows
   (``S = L + 2p``), channels last;
-* a convolution is then ``im2col`` (a strided view of ``k`` consecutive
-  rows, copied once) times a ``(k * C_in, C_out)`` weight matrix, bias added
-  in the same ``addmm``; rows that straddle two pixels only ever see the zero
-  padding of both, and are reset to zero afterwards;
-* chunks are sized so that a layer's activations stay in cache.
+* a convolution is then one product per tap on shifted, contiguous row
+  ranges (a 1-channel side is unfolded instead, for a single product), bias
+  added in the first ``addmm``; rows that straddle two pixels only ever see
+  the zero padding of both, and are reset to zero afterwards;
+* chunks are sized so that a layer's activations stay in cache, and every
+  buffer is reused from chunk to chunk (:class:`_Workspace`);
+* with several torch threads, whole chunks run side by side, one per thread
+  (:func:`_for_each_chunk`), instead of splitting each small product.
 
 The backward pass is written out by hand on the same layout. It keeps only
-the outputs of the wide (32 -> 32) convolutions between forward and backward
-and recomputes the cheap ones (the 1 -> 32 input and 32 -> 1 output layers:
-a ``k``-column product each), which halves the memory of keeping all;
+the input and the outputs of the wide (32 -> 32) convolutions between
+forward and backward and recomputes the cheap ones (the 1 -> 32 input and
+32 -> 1 output layers), which halves the memory of keeping all;
 ``recompute=True`` keeps nothing and recomputes each chunk in the backward
 pass (activation checkpointing at chunk granularity: no activation of size
 ``B*H*W*C*32`` outlives the forward pass, for a third more arithmetic).
 
 The result equals ``BandNetwork`` applied per pixel (tests compare both, and
-``gradcheck`` the gradients in float64).
+``gradcheck`` the gradients in float64), and does not depend on timing: a
+thread's chunks are fixed, and its gradient sums are added in thread order.
 """
-from typing import Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
+from concurrent.futures import ThreadPoolExecutor
+from typing import (Callable, Dict, Iterator, List, NamedTuple, Optional,
+                    Sequence, Tuple)
 
 import torch
 from torch import Tensor
@@ -40,54 +46,134 @@ __all__ = ['fused_band_networks', 'ROWS_PER_CHUNK']
 #: 4096 and 65536 clearly slower).
 ROWS_PER_CHUNK = 16384
 
-# A layer: (weight (C_out, C_in, k), bias (C_out,), index of the activation
-# added before its ReLU, or None). Activation 0 is the band's input.
-Layer = Tuple[Tensor, Tensor, Optional[int]]
+class Layer(NamedTuple):
+    """One convolution, its weights laid out for the row products."""
+    taps: Tensor  # (k, C_in, C_out): the forward taps
+    back_taps: Tensor  # (k, C_out, C_in): flipped, for the input gradient
+    bias: Tensor  # (C_out,)
+    residual: Optional[int]  # activation added before the ReLU (0: input)
+
+    @classmethod
+    def from_conv(cls, weight: Tensor, bias: Tensor,
+                  residual: Optional[int]) -> 'Layer':
+        """From a ``(C_out, C_in, k)`` Conv1d weight."""
+        return cls(weight.permute(2, 1, 0).contiguous(),
+                   weight.flip(2).permute(2, 0, 1).contiguous(), bias,
+                   residual)
+
+    @property
+    def wide(self) -> bool:
+        """``C_in, C_out > 1``: a full GEMM to recompute."""
+        return min(self.taps.shape[1:]) > 1
 
 
-def _im2col(rows: Tensor, kernel_size: int) -> Tensor:
+class _Workspace:
+    """Buffers reused from chunk to chunk, one per role.
+
+    A fresh ``(rows, 32)`` activation per chunk and layer is 2 MiB that the
+    kernel faults in on first touch, which measured about as costly as the
+    arithmetic that fills it; so each role (``('act', i)``, ``('grad', i)``,
+    ``'im2col'``, ...) gets one buffer, grown to the largest chunk.
+    """
+
+    def __init__(self, like: Tensor):
+        self._like = like
+        self._flat: Dict[object, Tensor] = {}
+        #: the backward pass's parameter-gradient sums over this
+        #: workspace's chunks (:func:`_for_each_chunk`)
+        self.param_grads: Optional[List[Tensor]] = None
+
+    def __call__(self, role: object, rows: int, columns: int) -> Tensor:
+        """A ``(rows, columns)`` buffer for ``role``, contents undefined."""
+        size = rows * columns
+        flat = self._flat.get(role)
+        if flat is None or flat.numel() < size:
+            flat = self._flat[role] = self._like.new_empty(size)
+        return flat[:size].view(rows, columns)
+
+
+def _im2col(rows: Tensor, kernel_size: int, scratch: _Workspace) -> Tensor:
     """``(R, C)`` -> ``(R - k + 1, k * C)``: row ``r`` is rows ``r..r+k-1``."""
     count, channels = rows.shape
-    return rows.as_strided((count - kernel_size + 1, kernel_size * channels),
-                           (channels, 1)).contiguous()
+    shape = (count - kernel_size + 1, kernel_size * channels)
+    return scratch('im2col', *shape).copy_(
+        rows.as_strided(shape, (channels, 1)))
 
 
-def _conv_rows(src: Tensor, taps: Tensor, out: Tensor,
+def _diagonal(rows: Tensor, count: int) -> Tensor:
+    """``(count + k - 1, k)`` -> the ``(count, k)`` view
+    ``[r, j] = rows[r + j, j]``."""
+    taps = rows.shape[1]
+    return rows.as_strided((count, taps), (taps, taps + 1))
+
+
+def _diagonal_t(columns: Tensor, count: int) -> Tensor:
+    """``(k, count + k - 1)`` -> the ``(count, k)`` view
+    ``[r, j] = columns[j, r + j]``."""
+    return columns.as_strided((count, columns.shape[0]),
+                              (1, columns.shape[1] + 1))
+
+
+def _conv_rows(src: Tensor, taps: Tensor, out: Tensor, scratch: _Workspace,
                bias: Optional[Tensor] = None) -> None:
     """``out[r] = bias + sum_j src[r + j] @ taps[j]`` for every row of ``out``.
 
     Args:
         src: ``(R, C_src)`` rows; ``out`` has ``R - k + 1`` rows.
-        taps: ``(k, C_src, C_dst)``.
+        taps: ``(k, C_src, C_dst)``, contiguous.
         out: ``(R - k + 1, C_dst)``, contiguous, written in place.
 
-    A 1-channel source is unfolded (``im2col``, ``k`` columns) for one
-    product; a wide one is multiplied tap by tap on shifted row ranges,
-    which are contiguous views, so nothing is copied.
+    Every form reads ``src`` once or, for wide layers, ``k`` times from
+    contiguous views, and copies nothing wide:
+
+    * 1-channel source: unfold it (``im2col``, ``k`` columns), one product;
+    * 1-channel output: one product giving every tap's response as a row
+      (``(k, R)``: MKL is several times slower with a ``k``-column result),
+      then the sum of the shifted diagonal ``y[j, r + j]``;
+    * otherwise tap by tap, each a product on a shifted row range.
     """
-    kernel_size, channels = taps.shape[:2]
-    if channels == 1:
-        matrix = taps.reshape(kernel_size, -1)
-        if bias is None:
-            torch.mm(_im2col(src, kernel_size), matrix, out=out)
-        else:
-            torch.addmm(bias, _im2col(src, kernel_size), matrix, out=out)
-        return
+    kernel_size, channels, out_channels = taps.shape
     count = out.shape[0]
-    if bias is None:
-        torch.mm(src[:count], taps[0], out=out)
+    if channels == 1:
+        matrix = taps.view(kernel_size, out_channels)
+        columns = _im2col(src, kernel_size, scratch)
+        if bias is None:
+            torch.mm(columns, matrix, out=out)
+        else:
+            torch.addmm(bias, columns, matrix, out=out)
+    elif out_channels == 1:
+        per_tap = torch.mm(taps.view(kernel_size, channels), src.t(),
+                           out=scratch('per_tap', kernel_size, src.shape[0]))
+        torch.sum(_diagonal_t(per_tap, count), 1, keepdim=True, out=out)
+        if bias is not None:
+            out += bias
     else:
-        torch.addmm(bias, src[:count], taps[0], out=out)
-    for tap in range(1, kernel_size):
-        out.addmm_(src[tap:tap + count], taps[tap])
+        if bias is None:
+            torch.mm(src[:count], taps[0], out=out)
+        else:
+            torch.addmm(bias, src[:count], taps[0], out=out)
+        for tap in range(1, kernel_size):
+            out.addmm_(src[tap:tap + count], taps[tap])
 
 
-def _accumulate_weight_grad(src: Tensor, grad: Tensor,
-                            weight_grad: Tensor) -> None:
-    """``weight_grad[j] += src[j:j+n].T @ grad`` (``(k, C_in, C_out)``)."""
+def _accumulate_weight_grad(src: Tensor, grad: Tensor, weight_grad: Tensor,
+                            scratch: _Workspace) -> None:
+    """``weight_grad[j] += src[j:j+n].T @ grad`` (``(k, C_in, C_out)``),
+    as one product where either side has a single channel."""
     count = grad.shape[0]
-    for tap in range(weight_grad.shape[0]):
-        weight_grad[tap].addmm_(src[tap:tap + count].t(), grad)
+    kernel_size, channels, out_channels = weight_grad.shape
+    if channels == 1:
+        weight_grad.view(kernel_size, out_channels).addmm_(
+            _im2col(src, kernel_size, scratch).t(), grad)
+    elif out_channels == 1:
+        # shifted[r + j, j] = grad[r]: then shifted.T @ src is every tap
+        # (as (k, C_in): a k-column result is several times slower).
+        shifted = scratch('shifted', src.shape[0], kernel_size).zero_()
+        _diagonal(shifted, count).copy_(grad.expand(count, kernel_size))
+        weight_grad.view(kernel_size, channels).addmm_(shifted.t(), src)
+    else:
+        for tap in range(kernel_size):
+            weight_grad[tap].addmm_(src[tap:tap + count].t(), grad)
 
 
 def _zero_padding(rows: Tensor, seg_len: int, pad: int) -> None:
@@ -98,20 +184,18 @@ def _zero_padding(rows: Tensor, seg_len: int, pad: int) -> None:
         segments[:, seg_len - pad:] = 0
 
 
-def _padded_rows(signals: Tensor, pad: int) -> Tensor:
-    """``(n, L)`` -> ``(n * S, 1)``: each pixel's signal between zero rows."""
+def _padded_rows(signals: Tensor, pad: int, out: Tensor) -> Tensor:
+    """``(n, L)`` -> ``out`` ``(n * S, 1)``: each pixel's signal between
+    zero rows."""
     count, length = signals.shape
-    padded = signals.new_zeros(count, length + 2 * pad)
+    padded = out.view(count, length + 2 * pad)
     padded[:, pad:pad + length] = signals
-    return padded.view(-1, 1)
-
-
-def _is_wide(weight: Tensor) -> bool:
-    """A convolution with ``C_in, C_out > 1``: a full GEMM to recompute."""
-    return min(weight.shape[:2]) > 1
+    _zero_padding(out, length + 2 * pad, pad)
+    return out
 
 
 def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
+                   scratch: _Workspace,
                    acts: Optional[List[Optional[Tensor]]] = None,
                    stores: Optional[Dict[int, Tensor]] = None
                    ) -> List[Tensor]:
@@ -119,28 +203,38 @@ def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
 
     Args:
         signals: ``(n, L)`` coefficients of ``n`` pixels.
+        scratch: where activations without a store are written; they are
+            valid until the next chunk.
         acts: activations kept from an earlier pass, ``None`` where dropped;
             only the dropped ones are computed again.
         stores: activation index -> ``(n * S, C)`` buffer to write that
-            activation into (instead of a fresh tensor).
+            activation into, for activations kept beyond the chunk.
 
     Returns:
         ``[input, act_1, ..., act_m]``, each ``(n * S, C)`` with zero padding.
     """
-    seg_len = signals.shape[1] + 2 * pad
+    count, length = signals.shape
+    seg_len = length + 2 * pad
+    rows = count * seg_len
+    stores = stores or {}
+
+    def buffer(index: int, channels: int) -> Tensor:
+        if index in stores:
+            return stores[index]
+        return scratch(('act', index), rows, channels)
+
     if acts is None:
-        acts = [_padded_rows(signals, pad)] + [None] * len(layers)
-    for index, (weight, bias, residual) in enumerate(layers, 1):
+        acts = [_padded_rows(signals, pad, buffer(0, 1))] + [None] * len(
+            layers)
+    for index, layer in enumerate(layers, 1):
         if acts[index] is not None:
             continue
-        rows = acts[index - 1].shape[0]
-        out = (stores or {}).get(index)
-        if out is None:
-            out = signals.new_empty(rows, weight.shape[0])
+        out = buffer(index, layer.taps.shape[2])
         interior = out[pad:rows - pad]
-        _conv_rows(acts[index - 1], weight.permute(2, 1, 0), interior, bias)
-        if residual is not None:
-            interior += acts[residual][pad:rows - pad]
+        _conv_rows(acts[index - 1], layer.taps, interior, scratch,
+                   layer.bias)
+        if layer.residual is not None:
+            interior += acts[layer.residual][pad:rows - pad]
         out.relu_()
         _zero_padding(out, seg_len, pad)
         acts[index] = out
@@ -150,13 +244,14 @@ def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
 def _drop_cheap(acts: List[Tensor], layers: Sequence[Layer]) -> List:
     """Keep the input and the outputs of wide layers; the rest cost a
     ``k``-column product to recompute, not a full GEMM."""
-    return [act if index == 0 or _is_wide(layers[index - 1][0]) else None
+    return [act if index == 0 or layers[index - 1].wide else None
             for index, act in enumerate(acts)]
 
 
 def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
                     layers: Sequence[Layer], param_grads: List[Tensor],
-                    pad: int, need_input_grad: bool) -> Optional[Tensor]:
+                    pad: int, need_input_grad: bool,
+                    scratch: _Workspace) -> Optional[Tensor]:
     """Accumulate one chunk's parameter gradients into ``param_grads``
     (``[dW_1, db_1, dW_2, ...]``, each ``dW`` as ``(k, C_in, C_out)``).
 
@@ -164,38 +259,79 @@ def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
         grad_out: ``(n, L)`` gradient of the band output.
 
     Returns:
-        ``(n, L)`` gradient of the band input, or ``None``.
+        ``(n, L)`` gradient of the band input (valid until the next chunk),
+        or ``None``.
     """
     count, length = grad_out.shape
     seg_len = length + 2 * pad
     rows = count * seg_len
-    grad = grad_out.new_zeros(count, seg_len)
-    grad[:, pad:pad + length] = grad_out
-    grad = grad.view(rows, 1)
+    grad = _padded_rows(grad_out, pad,
+                        scratch(('grad', len(layers)), rows, 1))
     pending = {}  # activation index -> gradient reaching it via a residual
     for index in range(len(layers) - 1, -1, -1):
-        weight, _, residual = layers[index]
-        # ReLU backward; activations are zero on padding rows, so is grad.
-        grad = torch.ops.aten.threshold_backward(grad, acts[index + 1], 0)
+        residual = layers[index].residual
+        # ReLU backward, in place; activations are zero on padding rows, so
+        # is grad.
+        torch.ops.aten.threshold_backward.grad_input(
+            grad, acts[index + 1], 0, grad_input=grad)
         if residual is not None and (residual > 0 or need_input_grad):
             skip = grad if acts[residual].shape[1] > 1 else grad.sum(
                 1, keepdim=True)
             pending[residual] = pending.get(residual, 0) + skip
         param_grads[2 * index + 1] += grad.sum(0)
         _accumulate_weight_grad(acts[index], grad[pad:rows - pad],
-                                param_grads[2 * index])
+                                param_grads[2 * index], scratch)
         if index == 0 and not need_input_grad:
             return None
         # Rows on the padding get values here, but the next ReLU backward
         # (or, for the input, the slice below) discards them.
-        grad_in = grad.new_empty(rows, weight.shape[1])
+        grad_in = scratch(('grad', index), rows, layers[index].taps.shape[1])
         grad_in[:pad] = grad_in[rows - pad:] = 0
-        _conv_rows(grad, weight.flip(2).permute(2, 0, 1),
-                   grad_in[pad:rows - pad])
+        _conv_rows(grad, layers[index].back_taps, grad_in[pad:rows - pad],
+                   scratch)
         if index in pending:
             grad_in += pending.pop(index)
         grad = grad_in
     return grad.view(count, seg_len)[:, pad:pad + length]
+
+
+def _for_each_chunk(task: Callable[[int, _Workspace], None], count: int,
+                    like: Tensor) -> List[_Workspace]:
+    """Run ``task(chunk, workspace)`` for chunks ``0 .. count-1``.
+
+    With ``n = torch.get_num_threads() > 1`` the chunks run on ``n`` threads,
+    each with its own workspace and one torch thread: the chunks are
+    independent, and whole chunks side by side keep the cores busier than
+    splitting each small product and pass in two. Thread ``i`` takes chunks
+    ``i, i + n, ...``, so what each workspace accumulates does not depend on
+    timing. Returns the workspaces, thread by thread.
+    """
+    threads = max(1, min(torch.get_num_threads(), count))
+    workspaces = [_Workspace(like) for _ in range(threads)]
+    if threads == 1:
+        for chunk in range(count):
+            task(chunk, workspaces[0])
+        return workspaces
+
+    def worker(first: int) -> None:
+        torch.set_num_threads(1)
+        with torch.no_grad():  # grad mode is per thread; the kernel's is off
+            for chunk in range(first, count, threads):
+                task(chunk, workspaces[first])
+
+    try:
+        with ThreadPoolExecutor(threads) as pool:
+            list(pool.map(worker, range(threads)))  # re-raises any error
+    finally:
+        torch.set_num_threads(threads)
+    return workspaces
+
+
+def _zero_grads(params: Sequence[Tensor]) -> List[Tensor]:
+    """Zeros for every parameter; weights as ``(k, C_in, C_out)``, the
+    taps' layout, in which their gradients accumulate."""
+    return [p.new_zeros(p.permute(2, 1, 0).shape) if p.dim() == 3
+            else torch.zeros_like(p) for p in params]
 
 
 class _FusedBandNetworks(torch.autograd.Function):
@@ -206,30 +342,40 @@ class _FusedBandNetworks(torch.autograd.Function):
                 residuals: Tuple[Optional[int], ...], pad: int,
                 recompute: bool, *params: Tensor) -> Tensor:
         out = torch.empty_like(coeffs)
-        saved, stores = [], None
-        for band, columns, rows, layers in _chunks(coeffs, lengths,
-                                                   residuals, pad, params):
+        chunks = list(_chunks(coeffs, lengths, residuals, pad, params))
+        saved = None if recompute else [None] * len(chunks)
+        if not recompute:
+            # One buffer per kept activation (the input and the wide layers'
+            # outputs) and band, filled chunk by chunk: no heap fragmented
+            # by thousands of kept pieces.
+            layers = chunks[0][3]
+            kept = [index for index in range(len(layers) + 1)
+                    if index == 0 or layers[index - 1].wide]
+            band_stores = [{
+                index: coeffs.new_empty(
+                    coeffs.shape[0] * (length + 2 * pad),
+                    1 if index == 0 else layers[index - 1].taps.shape[2])
+                for index in kept} for length in lengths]
+
+        def forward_chunk(chunk: int, scratch: _Workspace) -> None:
+            band, columns, rows, layers = chunks[chunk]
             seg_len = band.length + 2 * pad
-            if not recompute and rows.start == 0:
-                # One buffer per kept activation and band, filled chunk by
-                # chunk: no heap fragmented by thousands of kept pieces.
-                band_stores = {
-                    index: coeffs.new_empty(coeffs.shape[0] * seg_len,
-                                            weight.shape[0])
-                    for index, (weight, _, _) in enumerate(layers, 1)
-                    if _is_wide(weight)}
-            if not recompute:
+            stores = None
+            if saved is not None:
                 first, last = rows.start * seg_len, min(
                     rows.stop, coeffs.shape[0]) * seg_len
-                stores = {index: store[first:last]
-                          for index, store in band_stores.items()}
-            acts = _chunk_forward(columns[rows], layers, pad, stores=stores)
+                stores = {index: store[first:last] for index, store in
+                          band_stores[band.index].items()}
+            acts = _chunk_forward(columns[rows], layers, pad, scratch,
+                                  stores=stores)
             out[rows, band.offset] = acts[-1].view(
-                -1, band.length + 2 * pad)[:, pad:pad + band.length]
-            if not recompute:
-                saved.append(_drop_cheap(acts, layers))
+                -1, seg_len)[:, pad:pad + band.length]
+            if saved is not None:
+                saved[chunk] = _drop_cheap(acts, layers)
+
+        _for_each_chunk(forward_chunk, len(chunks), coeffs)
         ctx.lengths, ctx.residuals, ctx.pad = lengths, residuals, pad
-        ctx.saved_acts = None if recompute else saved
+        ctx.saved_acts = saved
         ctx.save_for_backward(coeffs, *params)
         return out
 
@@ -239,23 +385,32 @@ class _FusedBandNetworks(torch.autograd.Function):
         need_input_grad = ctx.needs_input_grad[0]
         grad_coeffs = torch.zeros_like(coeffs) if need_input_grad else None
         grad_out = grad_out.contiguous()
-        # Weight gradients accumulate as (k, C_in, C_out), the taps' layout.
-        param_grads = [p.new_zeros(p.permute(2, 1, 0).shape) if p.dim() == 3
-                       else torch.zeros_like(p) for p in params]
         per_band = 2 * len(ctx.residuals)
         saved, ctx.saved_acts = ctx.saved_acts, None
-        for chunk, (band, columns, rows, layers) in enumerate(_chunks(
-                coeffs, ctx.lengths, ctx.residuals, ctx.pad, params)):
-            acts = _chunk_forward(columns[rows], layers, ctx.pad,
+        chunks = list(_chunks(coeffs, ctx.lengths, ctx.residuals, ctx.pad,
+                              params))
+
+        def backward_chunk(chunk: int, scratch: _Workspace) -> None:
+            band, columns, rows, layers = chunks[chunk]
+            if scratch.param_grads is None:
+                scratch.param_grads = _zero_grads(params)
+            acts = _chunk_forward(columns[rows], layers, ctx.pad, scratch,
                                   saved[chunk] if saved else None)
             if saved:
                 saved[chunk] = None  # free the chunk once used
             first = band.index * per_band
             grad_in = _chunk_backward(
                 acts, grad_out[rows, band.offset], layers,
-                param_grads[first:first + per_band], ctx.pad, need_input_grad)
+                scratch.param_grads[first:first + per_band], ctx.pad,
+                need_input_grad, scratch)
             if need_input_grad:
                 grad_coeffs[rows, band.offset] = grad_in
+
+        workspaces = _for_each_chunk(backward_chunk, len(chunks), coeffs)
+        sums = [w.param_grads for w in workspaces if w.param_grads] or [
+            _zero_grads(params)]  # no pixels, no chunks
+        param_grads = [torch.stack(grads).sum(0) if len(grads) > 1
+                       else grads[0] for grads in zip(*sums)]
         param_grads = [g.permute(2, 1, 0) if g.dim() == 3 else g
                        for g in param_grads]
         return (grad_coeffs, None, None, None, None, *param_grads)
@@ -278,8 +433,9 @@ def _chunks(coeffs: Tensor, lengths: Tuple[int, ...],
     start = 0
     for index, length in enumerate(lengths):
         first = index * per_band
-        layers = [(params[first + 2 * i], params[first + 2 * i + 1], res)
-                  for i, res in enumerate(residuals)]
+        layers = [Layer.from_conv(params[first + 2 * i],
+                                  params[first + 2 * i + 1], residual)
+                  for i, residual in enumerate(residuals)]
         band = _Band(index, slice(start, start + length), length)
         columns = coeffs[:, band.offset]
         step = max(1, ROWS_PER_CHUNK // (length + 2 * pad))

@@ -236,8 +236,8 @@ class WGSE(BaseModule):
         device_type = spikes.device.type
         with torch.autocast(device_type, enabled=False):
             # (B, P, T), P = H*W: pixel-major, one time series per row.
-            signal = spikes.to(dtype).reshape(batch, num_steps, -1).transpose(
-                1, 2)
+            signal = spikes.to(dtype).reshape(batch, num_steps,
+                                              height * width).transpose(1, 2)
             if self.wavelet is None:
                 coeffs, lengths = signal, [num_steps]
             else:
