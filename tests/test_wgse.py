@@ -212,6 +212,9 @@ def test_fused_kernel_on_threads_is_deterministic(monkeypatch, kwargs):
 
     try:
         first, second, single = run(2), run(2), run(1)
+        # More threads (8) than chunks (6 bands): the count is restored.
+        monkeypatch.setattr(fused_band_networks, 'ROWS_PER_CHUNK', 10**6)
+        run(8)
     finally:
         torch.set_num_threads(1)
     for a, b in zip(first, second):

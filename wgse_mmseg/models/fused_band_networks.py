@@ -306,7 +306,8 @@ def _for_each_chunk(task: Callable[[int, _Workspace], None], count: int,
     ``i, i + n, ...``, so what each workspace accumulates does not depend on
     timing. Returns the workspaces, thread by thread.
     """
-    threads = max(1, min(torch.get_num_threads(), count))
+    torch_threads = torch.get_num_threads()
+    threads = max(1, min(torch_threads, count))
     workspaces = [_Workspace(like) for _ in range(threads)]
     if threads == 1:
         for chunk in range(count):
@@ -323,7 +324,7 @@ def _for_each_chunk(task: Callable[[int, _Workspace], None], count: int,
         with ThreadPoolExecutor(threads) as pool:
             list(pool.map(worker, range(threads)))  # re-raises any error
     finally:
-        torch.set_num_threads(threads)
+        torch.set_num_threads(torch_threads)
     return workspaces
 
 
