@@ -175,33 +175,12 @@ class Integrator:
                     device=base.device, dtype=torch.int32).view(-1, 1)
         for begin in range(0, base.numel(), self.tile):
             end = min(begin + self.tile, base.numel())
-            if cumulative is None:
-                self._fire_constant(base[begin:end], begin, end,
-                                    out[:, begin:end])
-                continue
             sums = self._sums[:steps + 1, :end - begin]
             torch.addcmul(self.charge[begin:end], self._index[:steps + 1],
                           base[begin:end], out=sums)
-            sums.addcmul_(cumulative, slope[begin:end])
+            if cumulative is not None:
+                sums.addcmul_(cumulative, slope[begin:end])
             self._fire(sums, begin, end, out, saturated=False)
-
-    def _fire_constant(self, base: torch.Tensor, begin: int, end: int,
-                       spikes: torch.Tensor) -> None:
-        """Spikes ``(K, end - begin)`` of pixels ``begin:end`` under a
-        constant charge ``base`` (below one threshold) per step.
-
-        With ``x_k = x_0 + k * base``, step ``k`` fires exactly when the
-        fraction of ``x_k`` is below ``base``: adding less than a threshold
-        crosses one only if the fraction wraps. Three passes per
-        pixel-step instead of :meth:`_fire`'s four.
-        """
-        steps = spikes.shape[0]
-        fractions = self._sums[:steps, :end - begin]
-        torch.addcmul(self.charge[begin:end], self._index[1:steps + 1], base,
-                      out=fractions)
-        fractions.bitwise_and_(ONE - 1)
-        self.charge[begin:end] = fractions[steps - 1]
-        torch.lt(fractions, base, out=spikes)
 
     def per_step(self, charge: torch.Tensor, saturated: bool,
                  out: torch.Tensor) -> None:
