@@ -16,7 +16,8 @@ convolution is a few matrix products on a "padded rows" layout instead:
 * chunks are sized so that a layer's activations stay in cache, and every
   buffer is reused from chunk to chunk (:class:`_Workspace`);
 * with several torch threads, whole chunks run side by side, one per thread
-  (:func:`_for_each_chunk`), instead of splitting each small product.
+  (:func:`~wgse_mmseg.parallel.for_each_on_threads`), instead of
+  splitting each small product.
 
 The backward pass is written out by hand on the same layout. It keeps only
 the input and the outputs of the wide (32 -> 32) convolutions between
@@ -30,12 +31,12 @@ The result equals ``BandNetwork`` applied per pixel (tests compare both, and
 ``gradcheck`` the gradients in float64), and does not depend on timing: a
 thread's chunks are fixed, and its gradient sums are added in thread order.
 """
-from concurrent.futures import ThreadPoolExecutor
-from typing import (Callable, Dict, Iterator, List, NamedTuple, Optional,
-                    Sequence, Tuple)
+from typing import Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
+
+from ..parallel import for_each_on_threads
 
 __all__ = ['fused_band_networks', 'ROWS_PER_CHUNK']
 
@@ -80,7 +81,7 @@ class _Workspace:
         self._like = like
         self._flat: Dict[object, Tensor] = {}
         #: the backward pass's parameter-gradient sums over this
-        #: workspace's chunks (:func:`_for_each_chunk`)
+        #: workspace's chunks (one workspace per thread)
         self.param_grads: Optional[List[Tensor]] = None
 
     def __call__(self, role: object, rows: int, columns: int) -> Tensor:
@@ -295,39 +296,6 @@ def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
     return grad.view(count, seg_len)[:, pad:pad + length]
 
 
-def _for_each_chunk(task: Callable[[int, _Workspace], None], count: int,
-                    like: Tensor) -> List[_Workspace]:
-    """Run ``task(chunk, workspace)`` for chunks ``0 .. count-1``.
-
-    With ``n = torch.get_num_threads() > 1`` the chunks run on ``n`` threads,
-    each with its own workspace and one torch thread: the chunks are
-    independent, and whole chunks side by side keep the cores busier than
-    splitting each small product and pass in two. Thread ``i`` takes chunks
-    ``i, i + n, ...``, so what each workspace accumulates does not depend on
-    timing. Returns the workspaces, thread by thread.
-    """
-    torch_threads = torch.get_num_threads()
-    threads = max(1, min(torch_threads, count))
-    workspaces = [_Workspace(like) for _ in range(threads)]
-    if threads == 1:
-        for chunk in range(count):
-            task(chunk, workspaces[0])
-        return workspaces
-
-    def worker(first: int) -> None:
-        torch.set_num_threads(1)
-        with torch.no_grad():  # grad mode is per thread; the kernel's is off
-            for chunk in range(first, count, threads):
-                task(chunk, workspaces[first])
-
-    try:
-        with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(worker, range(threads)))  # re-raises any error
-    finally:
-        torch.set_num_threads(torch_threads)
-    return workspaces
-
-
 def _zero_grads(params: Sequence[Tensor]) -> List[Tensor]:
     """Zeros for every parameter; weights as ``(k, C_in, C_out)``, the
     taps' layout, in which their gradients accumulate."""
@@ -374,7 +342,8 @@ class _FusedBandNetworks(torch.autograd.Function):
             if saved is not None:
                 saved[chunk] = _drop_cheap(acts, layers)
 
-        _for_each_chunk(forward_chunk, len(chunks), coeffs)
+        for_each_on_threads(forward_chunk, len(chunks),
+                            lambda: _Workspace(coeffs))
         ctx.lengths, ctx.residuals, ctx.pad = lengths, residuals, pad
         ctx.saved_acts = saved
         ctx.save_for_backward(coeffs, *params)
@@ -407,7 +376,8 @@ class _FusedBandNetworks(torch.autograd.Function):
             if need_input_grad:
                 grad_coeffs[rows, band.offset] = grad_in
 
-        workspaces = _for_each_chunk(backward_chunk, len(chunks), coeffs)
+        workspaces = for_each_on_threads(backward_chunk, len(chunks),
+                                         lambda: _Workspace(coeffs))
         sums = [w.param_grads for w in workspaces if w.param_grads] or [
             _zero_grads(params)]  # no pixels, no chunks
         param_grads = [torch.stack(grads).sum(0) if len(grads) > 1

@@ -24,12 +24,15 @@ pixel fires every step anyway).
 
 Steps are integrated in blocks short enough that ``x`` stays below
 ``2**31`` (:data:`MAX_BLOCK_STEPS`, or :data:`MAX_LINEAR_BLOCK_STEPS` for a
-closed-form block) and, on CPU, in tiles of pixels.
+closed-form block) and, on CPU, in tiles of pixels, which run side by side
+on torch's threads, one thread each.
 """
-from typing import Iterator, NamedTuple, Optional, Tuple
+from typing import Callable, Iterator, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 import torch
+
+from ..parallel import for_each_on_threads
 
 __all__ = ['FRACTION_BITS', 'ONE', 'MAX_STEP_CHARGE', 'MAX_BLOCK_STEPS',
            'MAX_LINEAR_BLOCK_STEPS', 'initial_charge', 'quantise',
@@ -92,6 +95,19 @@ class LinearCharge(NamedTuple):
     slope: Optional[torch.Tensor]
 
 
+class _TileBuffers(NamedTuple):
+    """One thread's working space for a tile: running charge and counts."""
+    sums: torch.Tensor  # (K + 1, tile) int32
+    counts: torch.Tensor  # (K + 1, tile) uint8
+
+    @classmethod
+    def empty(cls, block_steps: int, tile: int,
+              device: torch.device) -> '_TileBuffers':
+        shape = (block_steps + 1, tile)
+        return cls(torch.empty(shape, dtype=torch.int32, device=device),
+                   torch.empty(shape, dtype=torch.uint8, device=device))
+
+
 class Integrator:
     """Integrate-and-fire of ``P`` pixels, block of steps after block.
 
@@ -113,12 +129,32 @@ class Integrator:
         self.tile = num_pixels if device.type == 'cuda' else min(
             num_pixels, _CPU_TILE)
         self.block_steps = block_steps
-        self._sums = torch.empty((block_steps + 1, self.tile),
-                                 dtype=torch.int32, device=device)
-        self._counts = torch.empty((block_steps + 1, self.tile),
-                                   dtype=torch.uint8, device=device)
         self._index = torch.arange(block_steps + 1, dtype=torch.int32,
                                    device=device).view(-1, 1)
+        self._buffers: List[_TileBuffers] = []
+
+    def _for_each_tile(self, task: Callable[[int, int, '_TileBuffers'],
+                                            None]) -> None:
+        """``task(begin, end, buffers)`` for every tile of pixels; on the
+        CPU the tiles run side by side on torch's threads
+        (:func:`~wgse_mmseg.parallel.for_each_on_threads`), each thread with
+        its own buffers, kept for the next call."""
+        pixels = self.charge.numel()
+        spare = iter(self._buffers)
+
+        def make_buffers() -> _TileBuffers:
+            buffers = next(spare, None)
+            if buffers is None:
+                buffers = _TileBuffers.empty(self.block_steps, self.tile,
+                                             self.charge.device)
+                self._buffers.append(buffers)
+            return buffers
+
+        def tile(index: int, buffers: _TileBuffers) -> None:
+            begin = index * self.tile
+            task(begin, min(begin + self.tile, pixels), buffers)
+
+        for_each_on_threads(tile, -(-pixels // self.tile), make_buffers)
 
     @staticmethod
     def linear_charge(first: torch.Tensor, last: Optional[torch.Tensor],
@@ -173,14 +209,16 @@ class Integrator:
             cumulative = torch.from_numpy(
                 np.concatenate([[0], np.cumsum(weights)])).to(
                     device=base.device, dtype=torch.int32).view(-1, 1)
-        for begin in range(0, base.numel(), self.tile):
-            end = min(begin + self.tile, base.numel())
-            sums = self._sums[:steps + 1, :end - begin]
+
+        def tile(begin: int, end: int, buffers: _TileBuffers) -> None:
+            sums = buffers.sums[:steps + 1, :end - begin]
             torch.addcmul(self.charge[begin:end], self._index[:steps + 1],
                           base[begin:end], out=sums)
             if cumulative is not None:
                 sums.addcmul_(cumulative, slope[begin:end])
-            self._fire(sums, begin, end, out, saturated=False)
+            self._fire(sums, begin, end, out, buffers, saturated=False)
+
+        self._for_each_tile(tile)
 
     def per_step(self, charge: torch.Tensor, saturated: bool,
                  out: torch.Tensor) -> None:
@@ -198,24 +236,27 @@ class Integrator:
 
     def _per_step(self, charge: torch.Tensor, saturated: bool,
                   out: torch.Tensor) -> None:
-        steps, pixels = charge.shape
-        for begin in range(0, pixels, self.tile):
-            end = min(begin + self.tile, pixels)
-            sums = self._sums[:steps + 1, :end - begin]
+        steps = charge.shape[0]
+
+        def tile(begin: int, end: int, buffers: _TileBuffers) -> None:
+            sums = buffers.sums[:steps + 1, :end - begin]
             sums[0] = self.charge[begin:end]
             for step in range(steps):
                 torch.add(sums[step], charge[step, begin:end],
                           out=sums[step + 1])
-            self._fire(sums, begin, end, out, saturated)
+            self._fire(sums, begin, end, out, buffers, saturated)
+
+        self._for_each_tile(tile)
 
     def _fire(self, sums: torch.Tensor, begin: int, end: int,
-              out: torch.Tensor, saturated: bool) -> None:
+              out: torch.Tensor, buffers: '_TileBuffers',
+              saturated: bool) -> None:
         """Spikes of pixels ``begin:end`` from their ``(K + 1, tile)``
         running charge; keep the final fraction as the pixels' charge."""
         steps = sums.shape[0] - 1
         torch.bitwise_and(sums[steps], ONE - 1, out=self.charge[begin:end])
         sums.bitwise_right_shift_(FRACTION_BITS)  # thresholds crossed
-        counts = self._counts[:steps + 1, :end - begin]
+        counts = buffers.counts[:steps + 1, :end - begin]
         counts.copy_(sums)
         spikes = out[:, begin:end]
         torch.sub(counts[1:], counts[:-1], out=spikes)
