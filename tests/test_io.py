@@ -439,7 +439,7 @@ def test_write_png_round_trip_and_nothing_on_failure(tmp_path):
         spike_io.write_png(path, image)
         np.testing.assert_array_equal(
             cv2.imread(path, cv2.IMREAD_UNCHANGED), image)
-    with pytest.raises(Exception):  # OpenCV cannot encode an empty image
+    with pytest.raises((OSError, cv2.error)):  # nothing to encode
         spike_io.write_png(str(tmp_path / 'empty.png'),
                            np.zeros((0, 3), np.uint8))
     assert sorted(os.listdir(tmp_path)) == ['out']  # no file, no temp file

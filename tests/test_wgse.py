@@ -237,6 +237,24 @@ def test_zero_sized_input(shape):
         assert torch.equal(p.grad, torch.zeros_like(p))
 
 
+@pytest.mark.parametrize('recompute', [False, True])
+def test_fused_kernel_without_pixels(recompute):
+    """No pixels, no chunks: an empty output and zero gradients, whether
+    the kernel keeps activations or recomputes them."""
+    networks = [BandNetwork(1, 3, 4, 1) for _ in range(2)]
+    residuals = [residual for _, residual in networks[0].layers()]
+    weights = [[(conv.weight, conv.bias) for conv, _ in net.layers()]
+               for net in networks]
+    coeffs = torch.zeros(0, 4 + 6, requires_grad=True)
+    out = fused_band_networks.fused_band_networks(
+        coeffs, [4, 6], weights, residuals, recompute=recompute)
+    out.sum().backward()
+    assert out.shape == (0, 10)
+    for net in networks:
+        for p in net.parameters():
+            assert torch.equal(p.grad, torch.zeros_like(p))
+
+
 def test_fused_kernel_gradcheck(monkeypatch):
     """Hand-written backward of the fused kernel, long variant with a
     5-tap kernel, across chunk boundaries, in float64."""

@@ -47,6 +47,7 @@ __all__ = ['fused_band_networks', 'ROWS_PER_CHUNK']
 #: 4096 and 65536 clearly slower).
 ROWS_PER_CHUNK = 16384
 
+
 class Layer(NamedTuple):
     """One convolution, its weights laid out for the row products."""
     taps: Tensor  # (k, C_in, C_out): the forward taps
@@ -101,18 +102,11 @@ def _im2col(rows: Tensor, kernel_size: int, scratch: _Workspace) -> Tensor:
         rows.as_strided(shape, (channels, 1)))
 
 
-def _diagonal(rows: Tensor, count: int) -> Tensor:
-    """``(count + k - 1, k)`` -> the ``(count, k)`` view
-    ``[r, j] = rows[r + j, j]``."""
-    taps = rows.shape[1]
-    return rows.as_strided((count, taps), (taps, taps + 1))
-
-
-def _diagonal_t(columns: Tensor, count: int) -> Tensor:
+def _diagonal(per_tap: Tensor, count: int) -> Tensor:
     """``(k, count + k - 1)`` -> the ``(count, k)`` view
-    ``[r, j] = columns[j, r + j]``."""
-    return columns.as_strided((count, columns.shape[0]),
-                              (1, columns.shape[1] + 1))
+    ``[r, j] = per_tap[j, r + j]``."""
+    return per_tap.as_strided((count, per_tap.shape[0]),
+                              (1, per_tap.shape[1] + 1))
 
 
 def _conv_rows(src: Tensor, taps: Tensor, out: Tensor, scratch: _Workspace,
@@ -145,7 +139,7 @@ def _conv_rows(src: Tensor, taps: Tensor, out: Tensor, scratch: _Workspace,
     elif out_channels == 1:
         per_tap = torch.mm(taps.view(kernel_size, channels), src.t(),
                            out=scratch('per_tap', kernel_size, src.shape[0]))
-        torch.sum(_diagonal_t(per_tap, count), 1, keepdim=True, out=out)
+        torch.sum(_diagonal(per_tap, count), 1, keepdim=True, out=out)
         if bias is not None:
             out += bias
     else:
@@ -167,11 +161,11 @@ def _accumulate_weight_grad(src: Tensor, grad: Tensor, weight_grad: Tensor,
         weight_grad.view(kernel_size, out_channels).addmm_(
             _im2col(src, kernel_size, scratch).t(), grad)
     elif out_channels == 1:
-        # shifted[r + j, j] = grad[r]: then shifted.T @ src is every tap
+        # shifted[j, r + j] = grad[r]: then shifted @ src is every tap
         # (as (k, C_in): a k-column result is several times slower).
-        shifted = scratch('shifted', src.shape[0], kernel_size).zero_()
+        shifted = scratch('shifted', kernel_size, src.shape[0]).zero_()
         _diagonal(shifted, count).copy_(grad.expand(count, kernel_size))
-        weight_grad.view(kernel_size, channels).addmm_(shifted.t(), src)
+        weight_grad.view(kernel_size, channels).addmm_(shifted, src)
     else:
         for tap in range(kernel_size):
             weight_grad[tap].addmm_(src[tap:tap + count].t(), grad)
@@ -243,8 +237,8 @@ def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
 
 
 def _drop_cheap(acts: List[Tensor], layers: Sequence[Layer]) -> List:
-    """Keep the input and the outputs of wide layers; the rest cost a
-    ``k``-column product to recompute, not a full GEMM."""
+    """Keep the input and the outputs of wide layers; the rest cost one
+    narrow product to recompute, not a full GEMM."""
     return [act if index == 0 or layers[index - 1].wide else None
             for index, act in enumerate(acts)]
 
@@ -313,7 +307,7 @@ class _FusedBandNetworks(torch.autograd.Function):
         out = torch.empty_like(coeffs)
         chunks = list(_chunks(coeffs, lengths, residuals, pad, params))
         saved = None if recompute else [None] * len(chunks)
-        if not recompute:
+        if saved:  # chunks to keep activations of
             # One buffer per kept activation (the input and the wide layers'
             # outputs) and band, filled chunk by chunk: no heap fragmented
             # by thousands of kept pieces.
