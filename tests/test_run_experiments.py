@@ -233,3 +233,20 @@ def test_tiny_grid_end_to_end_and_resume(tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert 'done before, skipped' in proc.stdout
     assert json.loads((run_dir / 'result.json').read_text()) == result
+
+    # a report over more entries and seeds than have run trains nothing
+    proc = subprocess.run(
+        command[:command.index('--seeds')] + [
+            '--seeds', '0', '1', '--max-iters', '1', '--only',
+            'segformer_b0_tfi', 'segformer_b0_raw', '--report-dir',
+            str(report), '--report-only'],
+        cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert 'segformer_b0_raw seed 0: not run (--report-only)' in proc.stdout
+    assert 'segformer_b0_tfi seed 1: not run (--report-only)' in proc.stdout
+    assert not (work / 'segformer_b0_raw').exists()
+    assert not (work / 'segformer_b0_tfi' / 'seed_1').exists()
+    with open(report / 'results.csv') as f:
+        rows = list(csv.DictReader(f))
+    assert [(r['name'], r['seeds']) for r in rows] == [
+        ('segformer_b0_tfi', '1')]

@@ -495,6 +495,10 @@ def parse_args(argv=None):
                         'removed once the run is done)')
     parser.add_argument('--list', action='store_true',
                         help='list the selected entries and exit')
+    parser.add_argument('--report-only', action='store_true',
+                        help='train nothing: report the finished runs of '
+                        'the selected entries and seeds (a grid run in '
+                        'stages with different seeds per entry)')
     return parser.parse_args(argv)
 
 
@@ -523,6 +527,9 @@ def main(argv=None):
         prefix = f'[{index}/{len(runs)}] {run.entry.name} seed {run.seed}:'
         if skip:
             print(f'{prefix} done before, skipped', flush=True)
+            continue
+        if args.report_only:
+            print(f'{prefix} not run (--report-only)', flush=True)
             continue
         print(f'{prefix} running ...', flush=True)
         start = time.perf_counter()
