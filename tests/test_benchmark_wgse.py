@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import pytest
+import torch
 
 pytest.importorskip('pytorch_wavelets')
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
@@ -22,9 +23,10 @@ def test_table_and_json_report_ratios_and_agreement(tmp_path):
     assert 'pytorch_wavelets + per-pixel nn.Conv1d' in proc.stdout
     assert 'output agreement' in proc.stdout
     report = json.loads(out.read_text())
-    assert report['machine']['torch']
+    assert report['machine']['torch'] and report['machine']['device'] == 'cpu'
     assert {r['impl'] for r in report['results']} == {'reference', 'wgse'}
     for row in report['results']:
+        assert row['device'] == 'cpu'
         assert row['median_s'] > 0 and row['peak_mib'] >= 0
         if row['impl'] != 'reference':
             assert row['speedup'] > 0 and 'memory_ratio' in row
@@ -42,3 +44,12 @@ def test_bad_shape_is_a_usage_error():
          '--shapes', '4x41x128'], capture_output=True, text=True)
     assert proc.returncode == 2
     assert 'BxTxHxW' in proc.stderr
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason='a GPU is present')
+def test_cuda_without_a_gpu_is_a_usage_error():
+    proc = subprocess.run(
+        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_wgse.py'),
+         '--device', 'cuda'], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert 'no CUDA device' in proc.stderr

@@ -10,13 +10,15 @@ network weights as the package's ``WGSE``, so outputs must agree. (On the CPU
 whatever ``with_cp`` says, so there is one WGSE row.)
 
 Each measurement runs in a fresh process: peak memory is the growth of the
-process's peak resident set during the first forward+backward after set-up
-(inputs and model already built), time the median (and min-max) wall time of
-``--repeat`` further forward+backward passes after one warm-up.
+process's peak resident set (on ``--device cuda``: of CUDA memory allocated)
+during the first forward+backward after set-up (inputs and model already
+built), time the median (and min-max) wall time of ``--repeat`` further
+forward+backward passes after one warm-up.
 
     python tools/benchmark_wgse.py                          # the issue's shapes
     python tools/benchmark_wgse.py --shapes 4x41x64x64 --repeat 3
     python tools/benchmark_wgse.py --out results.json
+    python tools/benchmark_wgse.py --device cuda --shapes 4x129x256x512
 
 Needs ``pytorch_wavelets`` (``requirements/tests.txt``).
 """
@@ -75,16 +77,22 @@ class ReferenceWGSE(torch.nn.Module):
         return out.reshape(batch, height, width, -1).permute(0, 3, 1, 2)
 
 
-def _build(impl: str, shape: List[int]):
+def _build(impl: str, shape: List[int], device: str):
     import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
     from wgse_mmseg.models import WGSE
     torch.manual_seed(0)
     model = WGSE()
     spikes = (torch.rand(shape, generator=torch.Generator().manual_seed(1))
-              < 0.3).float()
+              < 0.3).float().to(device)
+    model.to(device)
     if impl == 'reference':
         return ReferenceWGSE(model), spikes
     return model, spikes
+
+
+def _synchronize(device: str) -> None:
+    if device == 'cuda':
+        torch.cuda.synchronize()
 
 
 def _step(model, spikes) -> torch.Tensor:
@@ -93,27 +101,37 @@ def _step(model, spikes) -> torch.Tensor:
     return out
 
 
-def worker(impl: str, shape: List[int], repeat: int) -> Dict:
+def worker(impl: str, shape: List[int], repeat: int, device: str) -> Dict:
     """Measure one implementation at one shape (run in a fresh process)."""
-    model, spikes = _build(impl, shape)
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    _step(model, spikes)
-    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before
+    model, spikes = _build(impl, shape, device)
+    if device == 'cuda':
+        _synchronize(device)
+        torch.cuda.reset_peak_memory_stats()
+        before = torch.cuda.memory_allocated()
+        _step(model, spikes)
+        peak_mib = (torch.cuda.max_memory_allocated() - before) / 2**20
+    else:
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        _step(model, spikes)
+        peak_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss -
+                    before) / 1024
     times = []
     for _ in range(repeat):
         model.zero_grad(set_to_none=True)
+        _synchronize(device)
         start = time.perf_counter()
         _step(model, spikes)
+        _synchronize(device)
         times.append(time.perf_counter() - start)
-    return dict(impl=impl, shape=shape, peak_mib=peak_kib / 1024,
+    return dict(impl=impl, shape=shape, device=device, peak_mib=peak_mib,
                 median_s=statistics.median(times), min_s=min(times),
                 max_s=max(times), repeat=repeat)
 
 
-def agreement(shape: List[int]) -> Dict:
+def agreement(shape: List[int], device: str) -> Dict:
     """Max |WGSE - reference| over the output (the reference's extra sample
     for odd T dropped) and the band networks' gradients, same weights."""
-    model, spikes = _build('wgse', shape)
+    model, spikes = _build('wgse', shape, device)
     reference = ReferenceWGSE(model)
     results = []
     for module in (model, reference):
@@ -138,10 +156,13 @@ def _run_worker(args: List[str]) -> Dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def machine() -> Dict:
+def machine(device: str) -> Dict:
     from wgse_mmseg.benchmarking import cpu_model
     import pytorch_wavelets
-    return dict(cpu=cpu_model(), cores=os.cpu_count(), torch=torch.__version__,
+    gpu = {} if device == 'cpu' else dict(
+        gpu=torch.cuda.get_device_name(), cuda=torch.version.cuda)
+    return dict(device=device, **gpu, cpu=cpu_model(), cores=os.cpu_count(),
+                torch=torch.__version__,
                 threads=torch.get_num_threads(),
                 pytorch_wavelets=getattr(pytorch_wavelets, '__version__', '?'),
                 python=platform.python_version(),
@@ -157,21 +178,25 @@ def main(argv=None) -> int:
     parser.add_argument('--repeat', type=int, default=3)
     parser.add_argument('--impls', nargs='+', choices=list(IMPLEMENTATIONS),
                         default=list(IMPLEMENTATIONS))
+    parser.add_argument('--device', choices=['cpu', 'cuda'], default='cpu')
     parser.add_argument('--out', help='also write the results as JSON')
     parser.add_argument('--worker', nargs='+', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
         kind, *rest = args.worker
         if kind == 'agree':
-            result = agreement(_parse_shape(rest[0]))
+            result = agreement(_parse_shape(rest[0]), args.device)
         else:
-            result = worker(kind, _parse_shape(rest[0]), int(rest[1]))
+            result = worker(kind, _parse_shape(rest[0]), int(rest[1]),
+                            args.device)
         print(json.dumps(result))
         return 0
     if args.repeat < 1:
         parser.error('--repeat must be >= 1')
+    if args.device == 'cuda' and not torch.cuda.is_available():
+        parser.error('--device cuda: torch sees no CUDA device here')
 
-    info = machine()
+    info = machine(args.device)
     print('WGSE forward+backward (db8, 5 levels, zero mode, kernel 3, '
           '32 channels)')
     print(' | '.join(f'{k}: {v}' for k, v in info.items()))
@@ -183,7 +208,8 @@ def main(argv=None) -> int:
     rows, checks = [], []
     for shape in args.shapes:
         text = 'x'.join(map(str, shape))
-        results = {impl: _run_worker([impl, text, str(args.repeat)])
+        results = {impl: _run_worker([impl, text, str(args.repeat),
+                                      '--device', args.device])
                    for impl in args.impls}
         base = results.get('reference')
         for impl, res in results.items():
@@ -200,14 +226,16 @@ def main(argv=None) -> int:
                   f'{res["peak_mib"]:>9.0f} {speed:>9} {mem:>7}')
             rows.append(res)
         if 'reference' in args.impls:
-            check = _run_worker(['agree', text])
+            check = _run_worker(['agree', text, '--device', args.device])
             checks.append(check)
             print(f'{"":>14} output agreement: max |WGSE - reference| = '
                   f'{check["max_abs_output_diff"]:.2e} (outputs up to '
                   f'{check["max_output"]:.2f}); band-network gradients: max '
                   f'relative difference {check["max_rel_grad_diff"]:.2e}')
+    peak = ('CUDA memory allocated' if args.device == 'cuda' else
+            'peak RSS')
     print('speed-up: reference median / median; memory: peak / reference '
-          'peak (peak = growth of peak RSS during one forward+backward)')
+          f'peak (peak = growth of {peak} during one forward+backward)')
     if args.out:
         with open(args.out, 'w') as f:
             json.dump(dict(machine=info, results=rows, agreement=checks), f,
