@@ -38,18 +38,15 @@ def test_table_and_json_report_ratios_and_agreement(tmp_path):
         assert check['max_rel_grad_diff'] < 1e-3
 
 
-def test_bad_shape_is_a_usage_error():
+@pytest.mark.parametrize('args, message', [
+    (['--shapes', '4x41x128'], 'BxTxHxW'),
+    pytest.param(['--device', 'cuda'], 'no CUDA device',
+                 marks=pytest.mark.skipif(torch.cuda.is_available(),
+                                          reason='a GPU is present')),
+])
+def test_usage_errors(args, message):
     proc = subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_wgse.py'),
-         '--shapes', '4x41x128'], capture_output=True, text=True)
+        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_wgse.py')] + args,
+        capture_output=True, text=True)
     assert proc.returncode == 2
-    assert 'BxTxHxW' in proc.stderr
-
-
-@pytest.mark.skipif(torch.cuda.is_available(), reason='a GPU is present')
-def test_cuda_without_a_gpu_is_a_usage_error():
-    proc = subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_wgse.py'),
-         '--device', 'cuda'], capture_output=True, text=True)
-    assert proc.returncode == 2
-    assert 'no CUDA device' in proc.stderr
+    assert message in proc.stderr
