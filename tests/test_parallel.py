@@ -51,12 +51,12 @@ def test_no_items():
 
 def test_simulator_same_spikes_on_one_and_two_threads(threads):
     frames = torch.rand(3, 40, 70, generator=torch.Generator().manual_seed(0))
+    # tiles of 16384 pixels: 40x70 is one tile, so stack a wider one
+    wide = frames.repeat(1, 1, 8).numpy()
     results = []
     for num_threads in (1, 2):
         threads(num_threads)
         for effects in (None, {'shot_noise': {}}):
-            # tiles of 16384 pixels: 40x70 is one tile, so stack a wider one
-            wide = frames.repeat(1, 1, 8).numpy()
             results.append(simulate_spikes(wide, 41, effects=effects,
                                            seed=5)[0])
     for single, double in zip(results[:2], results[2:]):
