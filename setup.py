@@ -11,7 +11,7 @@ import os.path as osp
 import shutil
 import sys
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 ROOT = osp.dirname(osp.abspath(__file__))
 MIM_DIRS = ('configs', 'tools')
@@ -65,5 +65,14 @@ if __name__ == '__main__':
             'tqdm',
         ],
         extras_require={'tests': ['pytest>=7', 'hypothesis>=6.80'], 'mim': ['openmim==0.3.8']},
+        # The simulator's one-pass CPU kernel. Optional: without a C compiler
+        # the install goes on and the simulator runs its torch path (the same
+        # spikes, slower); wgse_mmseg.simulation.fixed_point.COMPILED_KERNEL
+        # says which.
+        ext_modules=[
+            Extension('wgse_mmseg.simulation._integrate_and_fire',
+                      ['wgse_mmseg/simulation/_integrate_and_fire.c'],
+                      extra_compile_args=['-O3'], optional=True)
+        ],
         zip_safe=False,
     )

@@ -3,6 +3,7 @@ and meaning, determinism, scenes and input errors."""
 import json
 import math
 import re
+import shutil
 
 import cv2
 import numpy as np
@@ -16,6 +17,7 @@ from wgse_mmseg.simulation import (EFFECTS, READOUT_HZ, frames_to_intensity,
                                    simulate_spikes)
 from wgse_mmseg.simulation.camera_motion import CameraMotion
 from wgse_mmseg.simulation.effect import SensorEffect, SimulationContext
+from wgse_mmseg.simulation import fixed_point
 from wgse_mmseg.simulation.fixed_point import ONE, Integrator, quantise
 from wgse_mmseg.simulation.interpolation import FlowLight
 from wgse_mmseg.simulation.light import LinearLight
@@ -167,6 +169,74 @@ def test_integrator_closed_form_equals_per_step_sums(seed, steps, level):
     summed.per_step(*quantise(charge.expand(steps, -1)), per_step)
     assert torch.equal(linear, per_step)
     assert torch.equal(closed.charge, summed.charge)
+
+
+needs_kernel = pytest.mark.skipif(not fixed_point.COMPILED_KERNEL,
+                                  reason='compiled kernel not built')
+
+
+@pytest.mark.skipif(shutil.which('cc') is None, reason='no C compiler')
+def test_compiled_kernel_is_built_where_a_compiler_is():
+    """``setup.py`` builds it as optional: a failed build must not go
+    unnoticed where it could have succeeded."""
+    assert fixed_point.COMPILED_KERNEL
+
+
+def _integrate_both_ways(pixels, seed, run):
+    """``run(integrator, out)`` with the compiled kernel and with the torch
+    path, tiles of 16 pixels side by side on two threads: both spikes and
+    both carried charges."""
+    results = []
+    for compiled in (True, False):
+        integrator = Integrator(pixels, seed, 'cpu')
+        integrator.compiled = compiled
+        integrator.tile = 16
+        out = torch.full((run.steps, pixels), 7, dtype=torch.uint8)
+        threads = torch.get_num_threads()
+        torch.set_num_threads(2)
+        try:
+            run(integrator, out)
+        finally:
+            torch.set_num_threads(threads)
+        results.append((out, integrator.charge))
+    return results
+
+
+@needs_kernel
+@given(seed=st.integers(0, 2**20), steps=st.integers(1, 150),
+       pixels=st.integers(1, 70), still=st.booleans())
+def test_compiled_linear_equals_torch_path(seed, steps, pixels, still):
+    generator = torch.Generator().manual_seed(seed)
+    first, last = torch.rand((2, pixels), generator=generator) * 0.999
+    weights = np.random.default_rng(seed).integers(0, 8, steps)
+
+    def run(integrator, out):
+        integrator.linear(integrator.linear_charge(
+            first, None if still else last, 7), weights, out)
+
+    run.steps = steps
+    (spikes, charge), (expected, expected_charge) = _integrate_both_ways(
+        pixels, seed, run)
+    assert torch.equal(spikes, expected)
+    assert torch.equal(charge, expected_charge)
+
+
+@needs_kernel
+@given(seed=st.integers(0, 2**20), steps=st.integers(1, 80),
+       pixels=st.integers(1, 70), top=st.floats(0.01, 3.0))
+def test_compiled_per_step_equals_torch_path(seed, steps, pixels, top):
+    """Including saturated steps (``top > 1``)."""
+    charge = torch.rand((steps, pixels), generator=torch.Generator(
+    ).manual_seed(seed)) * top
+
+    def run(integrator, out):
+        integrator.per_step(*quantise(charge), out)
+
+    run.steps = steps
+    (spikes, carried), (expected, expected_carried) = _integrate_both_ways(
+        pixels, seed, run)
+    assert torch.equal(spikes, expected)
+    assert torch.equal(carried, expected_carried)
 
 
 def test_quantise_keeps_the_fraction_of_saturated_steps():
@@ -450,6 +520,22 @@ def test_same_seed_same_stream(frames, effects):
     assert np.array_equal(first, second) and meta == again
     other, _ = simulate_spikes(frames, 40, effects=effects, seed=12)
     assert not np.array_equal(first, other)
+
+
+@needs_kernel
+@pytest.mark.parametrize('frames, effects', [
+    (_image((30, 41)), None),
+    (_video(3, (30, 41)), None),
+    (_video(3, (30, 41)), _EVERYTHING),
+], ids=['still', 'video', 'all-video'])
+def test_compiled_kernel_and_torch_path_simulate_the_same(
+        frames, effects, monkeypatch):
+    compiled, meta = simulate_spikes(frames, 129, threshold=1 / 0.6,
+                                     effects=effects, seed=5)
+    monkeypatch.setattr(fixed_point, 'COMPILED_KERNEL', False)
+    expected, expected_meta = simulate_spikes(
+        frames, 129, threshold=1 / 0.6, effects=effects, seed=5)
+    assert np.array_equal(compiled, expected) and meta == expected_meta
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason='needs a GPU')

@@ -8,7 +8,9 @@ Prints two tables:
    run (``vs NumPy loop``: its time over the row's time). Inputs are a
    procedural street scene (:func:`wgse_mmseg.synthetic.
    render_street_scene`): ``still`` is its middle frame, ``video`` its
-   ``--frames`` frames spread over the stream.
+   ``--frames`` frames spread over the stream. Where the compiled CPU
+   kernel is built, the base model also runs on the torch path (as without
+   it, and as on a GPU); both must give the same spikes.
 2. Time to load one ``--load-shape`` sample (default 129x512x1024) from
    each format with :func:`wgse_mmseg.io.load_spikes` (files just written,
    so from the page cache: decoding, not the disk), against simulating it.
@@ -22,13 +24,14 @@ default size runs in about a minute on two cores; the full-size run is::
 count, so the ratio compares algorithms, not core counts).
 """
 import argparse
+import contextlib
 import os
 import os.path as osp
 import platform
 import statistics
 import tempfile
 import time
-from typing import Callable, List, NamedTuple
+from typing import Callable, Iterator, List, NamedTuple
 
 import cv2
 import numpy as np
@@ -36,7 +39,7 @@ import torch
 
 from wgse_mmseg.benchmarking import cpu_model
 from wgse_mmseg.io import load_spikes, save_spikes
-from wgse_mmseg.simulation import simulate_spikes
+from wgse_mmseg.simulation import fixed_point, simulate_spikes
 from wgse_mmseg.synthetic import render_street_scene
 
 THRESHOLD = 1 / 0.6  # the REDS convention: white fires 0.6 spikes per step
@@ -93,7 +96,21 @@ def median_time(run: Callable[[], object], repeat: int) -> Timing:
     return Timing(statistics.median(walls), statistics.median(cpus), result)
 
 
+@contextlib.contextmanager
+def torch_path(enabled: bool) -> Iterator[None]:
+    """Integrate with the torch path even where the compiled kernel is
+    built (as an install without a C compiler does), for comparison."""
+    built = fixed_point.COMPILED_KERNEL
+    fixed_point.COMPILED_KERNEL = built and not enabled
+    try:
+        yield
+    finally:
+        fixed_point.COMPILED_KERNEL = built
+
+
 def header(args) -> List[str]:
+    kernel = ('compiled CPU kernel' if fixed_point.COMPILED_KERNEL and
+              args.device == 'cpu' else 'torch path')
     return [
         f'machine: {platform.machine()}, {cpu_model()}, '
         f'{os.cpu_count()} logical CPUs, {platform.system()} '
@@ -102,7 +119,8 @@ def header(args) -> List[str]:
         f'numpy {np.__version__}, opencv {cv2.__version__}; torch threads '
         f'{torch.get_num_threads()}; device {args.device}',
         f'sample {args.height}x{args.width}, T={args.steps}, threshold '
-        f'1/0.6; median of {args.repeat} runs',
+        f'1/0.6; median of {args.repeat} runs; integrate-and-fire: '
+        f'{kernel}',
     ]
 
 
@@ -120,6 +138,11 @@ def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
     cases = [
         ('base model', 'still', None),
         ('base model', 'video', None),
+    ]
+    if fixed_point.COMPILED_KERNEL and args.device == 'cpu':
+        cases += [('base model, torch path', 'still', None),
+                  ('base model, torch path', 'video', None)]
+    cases += [
         ('+ interpolation (flow)', 'video',
          dict(interpolation=dict(method='flow'))),
         ('+ camera_motion', 'still', dict(camera_motion={})),
@@ -133,11 +156,19 @@ def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
               hot_pixels={}, jitter={})),
     ]
     for case, name, effects in cases:
-        timing = median_time(
-            lambda: simulate_spikes(inputs[name], args.steps, THRESHOLD,
-                                    effects=effects, seed=0,
-                                    device=args.device), args.repeat)
+        with torch_path(case.endswith('torch path')):
+            timing = median_time(
+                lambda: simulate_spikes(inputs[name], args.steps, THRESHOLD,
+                                        effects=effects, seed=0,
+                                        device=args.device), args.repeat)
         rows.append((case, name, timing, timing.result[0]))
+    base = {name: spikes for case, name, _, spikes in rows
+            if case == 'base model'}
+    for case, name, _, spikes in rows:
+        if case.endswith('torch path') and not np.array_equal(
+                spikes, base[name]):
+            raise RuntimeError(f'{name}: the torch path and the compiled '
+                               f'kernel simulated different spikes')
     pixel_steps = args.height * args.width * args.steps
     lines = [f'{"case":29s} {"input":6s} {"wall ms":>9s} {"cpu ms":>9s} '
              f'{"Mpx-steps/s":>12s} {"vs NumPy loop":>14s} '

@@ -26,6 +26,14 @@ Steps are integrated in blocks short enough that ``x`` stays below
 ``2**31`` (:data:`MAX_BLOCK_STEPS`, or :data:`MAX_LINEAR_BLOCK_STEPS` for a
 closed-form block) and, on CPU, in tiles of pixels, which run side by side
 on torch's threads, one thread each.
+
+On the CPU a compiled kernel (``_integrate_and_fire.c``, built by
+``setup.py``) integrates a tile in one pass instead of the torch path's four
+(sums, counts, narrowing, difference): step by step it adds the step's
+charge, reads the spike and keeps the fraction, which gives the same spikes
+and carried charge bit for bit. Where it was not built (no C compiler)
+:data:`COMPILED_KERNEL` is ``False`` and the torch path runs, as it does on
+the GPU.
 """
 from typing import Callable, Iterator, List, NamedTuple, Optional, Tuple
 
@@ -34,9 +42,17 @@ import torch
 
 from ..parallel import for_each_on_threads
 
+try:
+    from . import _integrate_and_fire
+except ImportError:  # installed without a C compiler: the torch path runs
+    _integrate_and_fire = None
+
 __all__ = ['FRACTION_BITS', 'ONE', 'MAX_STEP_CHARGE', 'MAX_BLOCK_STEPS',
-           'MAX_LINEAR_BLOCK_STEPS', 'initial_charge', 'quantise',
-           'LinearCharge', 'Integrator']
+           'MAX_LINEAR_BLOCK_STEPS', 'COMPILED_KERNEL', 'initial_charge',
+           'quantise', 'LinearCharge', 'Integrator']
+
+#: Whether the compiled CPU kernel is installed (see the module docstring).
+COMPILED_KERNEL = _integrate_and_fire is not None
 
 FRACTION_BITS = 24
 ONE = 1 << FRACTION_BITS
@@ -119,13 +135,16 @@ class Integrator:
             longer than the overflow bounds) are integrated in parts.
 
     Each call takes the charge of the next ``K`` steps and writes their
-    ``(K, P)`` uint8 0/1 spikes into ``out``.
+    ``(K, P)`` uint8 0/1 spikes into ``out``. On the CPU the compiled kernel
+    does the work when :data:`COMPILED_KERNEL` is true when the integrator is
+    made.
     """
 
     def __init__(self, num_pixels: int, seed: int, device,
                  block_steps: int = MAX_BLOCK_STEPS):
         device = torch.device(device)
         self.charge = initial_charge(num_pixels, seed).to(device)
+        self.compiled = COMPILED_KERNEL and device.type == 'cpu'
         self.tile = num_pixels if device.type == 'cuda' else min(
             num_pixels, _CPU_TILE)
         self.block_steps = block_steps
@@ -138,11 +157,14 @@ class Integrator:
         """``task(begin, end, buffers)`` for every tile of pixels; on the
         CPU the tiles run side by side on torch's threads
         (:func:`~wgse_mmseg.parallel.for_each_on_threads`), each thread with
-        its own buffers, kept for the next call."""
+        its own buffers, kept for the next call (``None`` for the compiled
+        kernel, which needs none)."""
         pixels = self.charge.numel()
         spare = iter(self._buffers)
 
-        def make_buffers() -> _TileBuffers:
+        def make_buffers() -> Optional[_TileBuffers]:
+            if self.compiled:
+                return None
             buffers = next(spare, None)
             if buffers is None:
                 buffers = _TileBuffers.empty(self.block_steps, self.tile,
@@ -202,6 +224,9 @@ class Integrator:
 
     def _linear(self, charge: LinearCharge, weights: np.ndarray,
                 out: torch.Tensor) -> None:
+        if self.compiled:
+            self._linear_compiled(charge, weights, out)
+            return
         steps = len(weights)
         base, slope = charge
         cumulative = None
@@ -217,6 +242,24 @@ class Integrator:
             if cumulative is not None:
                 sums.addcmul_(cumulative, slope[begin:end])
             self._fire(sums, begin, end, out, buffers, saturated=False)
+
+        self._for_each_tile(tile)
+
+    def _linear_compiled(self, charge: LinearCharge, weights: np.ndarray,
+                         out: torch.Tensor) -> None:
+        """:meth:`_linear` with the compiled kernel: each step adds
+        ``base + weights[k] * slope`` (at most ``|last - first|``)."""
+        base, slope = (None if t is None else t.contiguous()
+                       for t in charge)
+        weights = torch.from_numpy(np.ascontiguousarray(weights, np.int32))
+        _check_spike_rows(out, len(weights), self.charge.numel())
+
+        def tile(begin: int, end: int, _) -> None:
+            _integrate_and_fire.fire_linear(
+                _address(self.charge, begin), _address(base, begin),
+                0 if slope is None else _address(slope, begin),
+                weights.data_ptr(), len(weights), end - begin,
+                _address(out, begin), out.stride(0))
 
         self._for_each_tile(tile)
 
@@ -237,6 +280,15 @@ class Integrator:
     def _per_step(self, charge: torch.Tensor, saturated: bool,
                   out: torch.Tensor) -> None:
         steps = charge.shape[0]
+        if self.compiled:  # saturation needs nothing: one spike at most
+            charge = charge.to(torch.int32).contiguous()
+            _check_spike_rows(out, steps, self.charge.numel())
+            self._for_each_tile(
+                lambda begin, end, _: _integrate_and_fire.fire_per_step(
+                    _address(self.charge, begin), _address(charge, begin),
+                    charge.stride(0), steps, end - begin,
+                    _address(out, begin), out.stride(0)))
+            return
 
         def tile(begin: int, end: int, buffers: _TileBuffers) -> None:
             sums = buffers.sums[:steps + 1, :end - begin]
@@ -262,3 +314,21 @@ class Integrator:
         torch.sub(counts[1:], counts[:-1], out=spikes)
         if saturated:  # a step of 1 + frac(a) may cross twice
             spikes.clamp_(max=1)
+
+
+def _address(tensor: torch.Tensor, element: int) -> int:
+    """Address of element ``element`` of a ``(P,)`` tensor or of column
+    ``element`` of a ``(K, P)`` tensor's first row."""
+    return tensor.data_ptr() + element * tensor.element_size()
+
+
+def _check_spike_rows(out: torch.Tensor, steps: int, pixels: int) -> None:
+    """What the compiled kernel assumes of ``out``: a ``(steps, pixels)``
+    uint8 CPU tensor with contiguous rows."""
+    if (out.dtype != torch.uint8 or out.device.type != 'cpu'
+            or tuple(out.shape) != (steps, pixels)
+            or (pixels > 1 and out.stride(1) != 1)):
+        raise ValueError(
+            f'spikes must be a ({steps}, {pixels}) uint8 CPU tensor with '
+            f'contiguous rows, got {tuple(out.shape)} {out.dtype} on '
+            f'{out.device} with strides {out.stride()}')
