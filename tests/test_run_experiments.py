@@ -234,7 +234,9 @@ def test_tiny_grid_end_to_end_and_resume(tmp_path):
     assert 'done before, skipped' in proc.stdout
     assert json.loads((run_dir / 'result.json').read_text()) == result
 
-    # a report over more entries and seeds than have run trains nothing
+    # a report over more entries and seeds than have run trains nothing,
+    # and needs no dataset (reporting where the data is not)
+    data.rename(tmp_path / 'data_moved')
     proc = subprocess.run(
         command[:command.index('--seeds')] + [
             '--seeds', '0', '1', '--max-iters', '1', '--only',

@@ -512,7 +512,8 @@ def main(argv=None):
         for entry in entries:
             print(f'{entry.name:32s} {describe(entry.enhancer)}')
         return 0
-    if not osp.isdir(osp.join(args.data_root, 'spike', 'train')):
+    if not args.report_only and not osp.isdir(
+            osp.join(args.data_root, 'spike', 'train')):
         raise SystemExit(
             f'{args.data_root}/spike/train does not exist. Make the embedded '
             f'dataset with: python tools/make_synthetic_dataset.py '
