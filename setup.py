@@ -65,14 +65,15 @@ if __name__ == '__main__':
             'tqdm',
         ],
         extras_require={'tests': ['pytest>=7', 'hypothesis>=6.80'], 'mim': ['openmim==0.3.8']},
-        # The simulator's one-pass CPU kernel. Optional: without a C compiler
-        # the install goes on and the simulator runs its torch path (the same
-        # spikes, slower); wgse_mmseg.simulation.fixed_point.COMPILED_KERNEL
-        # says which.
+        # Two small CPU kernels: the simulator's one-pass integrate-and-fire
+        # and WGSE's band networks. Optional: without a C compiler the
+        # install goes on and each falls back to its torch path (the same
+        # results, slower): see simulation.fixed_point.COMPILED_KERNEL and
+        # models.compiled_band_networks.KERNEL_BUILT.
         ext_modules=[
-            Extension('wgse_mmseg.simulation._integrate_and_fire',
-                      ['wgse_mmseg/simulation/_integrate_and_fire.c'],
+            Extension(f'wgse_mmseg.{name}', [f'wgse_mmseg/{name.replace(".", "/")}.c'],
                       extra_compile_args=['-O3'], optional=True)
+            for name in ('simulation._integrate_and_fire', 'models._band_networks')
         ],
         zip_safe=False,
     )

@@ -24,6 +24,7 @@ from mmengine.model import BaseModule
 from torch.utils.checkpoint import checkpoint
 
 from mmseg.registry import MODELS
+from . import compiled_band_networks
 from .fused_band_networks import fused_band_networks
 from ..wavelets import (analysis_matrix, band_lengths, check_mode, get_wavelet,
                         synthesis_matrix)
@@ -192,13 +193,17 @@ class WGSE(BaseModule):
         weights = [[(conv.weight, conv.bias) for conv, _ in plan]
                    for plan in plans]
         residuals = [residual for _, residual in plans[0]]
+        rows = coeffs.reshape(-1, coeffs.shape[2])
         with torch.autocast(coeffs.device.type, enabled=False):
-            # Recomputing each chunk in the backward measured as fast as
-            # keeping activations, for a third of the memory
-            # (docs/wgse_speed.md), so it always does.
-            out = fused_band_networks(coeffs.reshape(-1, coeffs.shape[2]),
-                                      lengths, weights, residuals,
-                                      recompute=True)
+            if compiled_band_networks.applies(rows, weights, residuals):
+                out = compiled_band_networks.compiled_band_networks(
+                    rows, lengths, weights, residuals)
+            else:
+                # Recomputing each chunk in the backward measured as fast
+                # as keeping activations, for a third of the memory
+                # (docs/wgse_speed.md), so it always does.
+                out = fused_band_networks(rows, lengths, weights, residuals,
+                                          recompute=True)
         return out.view(coeffs.shape)
 
     def _module_bands(self, coeffs: torch.Tensor, lengths: List[int],

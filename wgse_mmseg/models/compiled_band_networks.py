@@ -1,0 +1,211 @@
+"""WGSE's 1-D band networks as one compiled CPU kernel.
+
+``_band_networks.c`` (built by ``setup.py``) runs the paper's band network
+shape, float32, kernel 3, 32 hidden channels, any number of blocks, with
+AVX2/FMA register-blocked products whose bias, residual and ReLU are fused
+in, over groups of pixels whose activations stay in the L2 cache; its
+backward pass recomputes a group's activations in cache and accumulates the
+parameter gradients in double. It computes no gradient for the
+coefficients: WGSE's input is spike data.
+
+:func:`applies` says whether a call can use it; otherwise
+:func:`~wgse_mmseg.models.fused_band_networks.fused_band_networks` (torch
+operations, any width, kernel, dtype, and the input gradient) runs. Both
+compute the function of :class:`~wgse_mmseg.models.wgse.BandNetwork`;
+tests compare them.
+
+Calls are split into chunks of about :data:`ROWS_PER_CALL` rows of one
+band, which run side by side on torch's threads
+(:func:`~wgse_mmseg.parallel.for_each_on_threads`) with the GIL released;
+each thread sums its gradients in its own buffer, and the buffers are added
+in thread order, so results do not depend on timing.
+"""
+from typing import List, Optional, Sequence, Tuple
+
+import torch
+from torch import Tensor
+
+from ..parallel import for_each_on_threads
+
+try:
+    from . import _band_networks
+except ImportError:  # installed without a C compiler
+    _band_networks = None
+
+__all__ = ['KERNEL_BUILT', 'ROWS_PER_CALL', 'applies',
+           'compiled_band_networks']
+
+#: Whether the extension was built (it runs only where :func:`applies`).
+KERNEL_BUILT = _band_networks is not None
+#: Rows (pixel coefficients plus two padding rows per pixel) per call: the
+#: kernel works through them in cache-sized groups itself.
+ROWS_PER_CALL = 16384
+KERNEL_SIZE = 3
+CHANNELS = 32
+
+
+def applies(coeffs: Tensor, weights: Sequence[Sequence[Tuple[Tensor,
+                                                               Tensor]]],
+            residuals: Sequence[Optional[int]]) -> bool:
+    """Whether :func:`compiled_band_networks` can run these band networks:
+    the kernel is built and the CPU has AVX2 and FMA, float32 on the CPU,
+    kernel 3 and 32 channels, no residual into the first or last layer, and
+    no gradient wanted for ``coeffs``."""
+    if not KERNEL_BUILT or not _band_networks.supported():
+        return False
+    if coeffs.device.type != 'cpu' or coeffs.dtype != torch.float32:
+        return False
+    if torch.is_grad_enabled() and coeffs.requires_grad:
+        return False
+    if residuals[0] is not None or residuals[-1] is not None:
+        return False
+    for band in weights:
+        for index, (weight, bias) in enumerate(band):
+            expected = (1 if index == len(band) - 1 else CHANNELS,
+                        1 if index == 0 else CHANNELS, KERNEL_SIZE)
+            if tuple(weight.shape) != expected or \
+                    weight.dtype != torch.float32:
+                return False
+    return len(weights[0]) >= 2
+
+
+def _pack(band: Sequence[Tuple[Tensor, Tensor]]) -> Tensor:
+    """One band's parameters in the kernel's layout (``_band_networks.c``):
+    per layer, the forward taps ``(k * C_in, C_out)``, the bias and, for
+    wide layers, the flipped transposed taps ``(k * C_out, C_in)``."""
+    parts = []
+    for index, (weight, bias) in enumerate(band):
+        parts += [weight.detach().permute(2, 1, 0).reshape(-1),
+                  bias.detach().reshape(-1)]
+        if 0 < index < len(band) - 1:
+            parts.append(weight.detach().flip(2).permute(2, 0, 1).reshape(-1))
+    return torch.cat(parts).contiguous()
+
+
+def _grad_size(band: Sequence[Tuple[Tensor, Tensor]]) -> int:
+    return sum(weight.numel() + bias.numel() for weight, bias in band)
+
+
+def _unpack_grads(flat: Tensor, band: Sequence[Tuple[Tensor, Tensor]]
+                  ) -> List[Tensor]:
+    """``[dW_1, db_1, ...]`` in the parameters' shapes and dtypes from the
+    kernel's ``(k * C_in, C_out)`` layout."""
+    grads, start = [], 0
+    for weight, bias in band:
+        out_channels, in_channels, kernel_size = weight.shape
+        taps = flat[start:start + weight.numel()].view(
+            kernel_size, in_channels, out_channels)
+        start += weight.numel()
+        grads += [taps.permute(2, 1, 0).to(weight.dtype),
+                  flat[start:start + bias.numel()].to(bias.dtype)]
+        start += bias.numel()
+    return grads
+
+
+class _Bands:
+    """Per-band arguments of the kernel, and the chunks of a call."""
+
+    def __init__(self, coeffs: Tensor, lengths: Sequence[int],
+                 weights: Sequence[Sequence[Tuple[Tensor, Tensor]]],
+                 residuals: Sequence[Optional[int]]):
+        self.coeffs = coeffs
+        self.lengths = list(lengths)
+        self.offsets = [sum(self.lengths[:i]) for i in range(len(lengths))]
+        self.params = [_pack(band) for band in weights]
+        self.residuals = torch.tensor(
+            [-1 if r is None else r for r in residuals], dtype=torch.int64)
+        self.layers = len(residuals)
+        self.grad_sizes = [_grad_size(band) for band in weights]
+        self.chunks = []  # (band, first pixel, pixels)
+        pixels = coeffs.shape[0]
+        for band, length in enumerate(self.lengths):
+            step = max(1, ROWS_PER_CALL // (length + 2))
+            self.chunks += [(band, first, min(step, pixels - first))
+                            for first in range(0, pixels, step)]
+
+    def run(self, chunk: int, out: Optional[Tensor] = None,
+            grad_out: Optional[Tensor] = None,
+            grads: Optional[Tensor] = None) -> None:
+        """Forward into ``out``, or backward of ``grad_out`` into the
+        double ``grads`` (every band's, side by side)."""
+        band, first, pixels = self.chunks[chunk]
+        stride = self.coeffs.stride(0)
+        element = self.coeffs.element_size()
+
+        def address(tensor: Optional[Tensor]) -> int:
+            if tensor is None:
+                return 0
+            return tensor.data_ptr() + element * (
+                first * stride + self.offsets[band])
+
+        grad_address = 0
+        if grads is not None:
+            grad_address = grads.data_ptr() + grads.element_size() * sum(
+                self.grad_sizes[:band])
+        _band_networks.run(
+            address(self.coeffs), stride, address(grad_out), stride,
+            address(out), stride, pixels, self.lengths[band], self.layers,
+            self.residuals.data_ptr(), self.params[band].data_ptr(),
+            grad_address)
+
+
+class _CompiledBandNetworks(torch.autograd.Function):
+    """Autograd wrapper; see :func:`compiled_band_networks`."""
+
+    @staticmethod
+    def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
+                weights: Tuple[Tuple[Tuple[Tensor, Tensor], ...], ...],
+                residuals: Tuple[Optional[int], ...],
+                *params: Tensor) -> Tensor:
+        bands = _Bands(coeffs, lengths, weights, residuals)
+        out = torch.empty_like(coeffs)
+        for_each_on_threads(lambda chunk, _: bands.run(chunk, out=out),
+                            len(bands.chunks), lambda: None)
+        ctx.bands, ctx.weights = bands, weights
+        return out
+
+    @staticmethod
+    def backward(ctx, grad_out: Tensor):
+        bands, weights = ctx.bands, ctx.weights
+        grad_out = grad_out.contiguous()
+        total = sum(bands.grad_sizes)
+
+        def backward_chunk(chunk: int, grads: Tensor) -> None:
+            bands.run(chunk, grad_out=grad_out, grads=grads)
+
+        sums = for_each_on_threads(
+            backward_chunk, len(bands.chunks),
+            lambda: torch.zeros(total, dtype=torch.float64))
+        flat = sums[0]
+        for more in sums[1:]:
+            flat = flat + more
+        grads = []
+        for band, start in zip(weights, [sum(bands.grad_sizes[:i]) for i in
+                                         range(len(weights))]):
+            grads += _unpack_grads(flat[start:start + _grad_size(band)],
+                                   band)
+        return (None, None, None, None, *grads)
+
+
+def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
+                           weights: Sequence[Sequence[Tuple[Tensor,
+                                                             Tensor]]],
+                           residuals: Sequence[Optional[int]]) -> Tensor:
+    """Run one temporal CNN per band over every pixel's coefficients.
+
+    Arguments and result as
+    :func:`~wgse_mmseg.models.fused_band_networks.fused_band_networks`
+    (``coeffs`` ``(N, C)``, bands side by side); only where
+    :func:`applies`. Gradients flow to the parameters, not to ``coeffs``.
+    """
+    if not applies(coeffs, weights, residuals):
+        raise ValueError('the compiled band network kernel does not apply '
+                         'here (see compiled_band_networks.applies)')
+    if len(weights) != len(lengths) or sum(lengths) != coeffs.shape[1]:
+        raise ValueError(
+            f'{len(weights)} band networks and bands of lengths {lengths} '
+            f'do not fit coefficients shaped {tuple(coeffs.shape)}')
+    weights = tuple(tuple((w, b) for w, b in band) for band in weights)
+    params = [t for band in weights for layer in band for t in layer]
+    return _CompiledBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
+                                       weights, tuple(residuals), *params)
