@@ -24,7 +24,8 @@ def test_table_and_json_report_ratios_and_agreement(tmp_path):
     assert 'output agreement' in proc.stdout
     report = json.loads(out.read_text())
     assert report['machine']['torch'] and report['machine']['device'] == 'cpu'
-    assert {r['impl'] for r in report['results']} == {'reference', 'wgse'}
+    assert {r['impl'] for r in report['results']} == {
+        'reference', 'wgse', 'wgse_torch_kernel'}
     for row in report['results']:
         assert row['device'] == 'cpu'
         assert row['median_s'] > 0 and row['peak_mib'] >= 0

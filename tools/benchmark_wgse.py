@@ -5,9 +5,12 @@ The reference is the public WGSE implementation's design, rebuilt here only:
 every pixel's time series ``(B*H*W, 1, T)``, one ``nn.Conv1d`` band network
 per band on the whole batch, ``DWT1DInverse`` back (``T + 1`` samples for odd
 ``T``; the extra one is dropped for the comparison). It uses the same band
-network weights as the package's ``WGSE``, so outputs must agree. (On the CPU
-``WGSE`` runs its fused kernel, which recomputes activations chunk by chunk
-whatever ``with_cp`` says, so there is one WGSE row.)
+network weights as the package's ``WGSE``, so outputs must agree. On the CPU
+``WGSE`` runs its band networks as the compiled kernel
+(``wgse_mmseg.models.compiled_band_networks``) where it is built, and the
+row ``WGSE, torch kernel`` runs the torch-operation kernel an install
+without a C compiler gets; both recompute activations in the backward pass
+whatever ``with_cp`` says, so there is no separate checkpointing row.
 
 Each measurement runs in a fresh process: peak memory is the growth of the
 process's peak resident set (on ``--device cuda``: of CUDA memory allocated)
@@ -38,7 +41,10 @@ import torch
 IMPLEMENTATIONS = {
     'reference': 'pytorch_wavelets + per-pixel nn.Conv1d',
     'wgse': 'wgse_mmseg WGSE',
+    'wgse_torch_kernel': 'wgse_mmseg WGSE, torch kernel',
 }
+#: Rows that exist on the CPU only: the band networks' CPU kernels.
+CPU_ONLY = ('wgse_torch_kernel', )
 DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
 
 
@@ -87,6 +93,10 @@ def _build(impl: str, shape: List[int], device: str):
     model.to(device)
     if impl == 'reference':
         return ReferenceWGSE(model), spikes
+    if impl == 'wgse_torch_kernel':
+        # what an install without the compiled extension runs
+        from wgse_mmseg.models import compiled_band_networks
+        compiled_band_networks.KERNEL_BUILT = False
     return model, spikes
 
 
@@ -177,7 +187,8 @@ def main(argv=None) -> int:
                         ' '.join(DEFAULT_SHAPES))
     parser.add_argument('--repeat', type=int, default=3)
     parser.add_argument('--impls', nargs='+', choices=list(IMPLEMENTATIONS),
-                        default=list(IMPLEMENTATIONS))
+                        help='rows to run (default: all; on cuda, all but '
+                        'the CPU kernel rows)')
     parser.add_argument('--device', choices=['cpu', 'cuda'], default='cpu')
     parser.add_argument('--out', help='also write the results as JSON')
     parser.add_argument('--worker', nargs='+', help=argparse.SUPPRESS)
@@ -195,6 +206,9 @@ def main(argv=None) -> int:
         parser.error('--repeat must be >= 1')
     if args.device == 'cuda' and not torch.cuda.is_available():
         parser.error('--device cuda: torch sees no CUDA device here')
+    if args.impls is None:
+        args.impls = [impl for impl in IMPLEMENTATIONS
+                      if args.device == 'cpu' or impl not in CPU_ONLY]
 
     info = machine(args.device)
     print('WGSE forward+backward (db8, 5 levels, zero mode, kernel 3, '

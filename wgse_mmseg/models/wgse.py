@@ -131,16 +131,18 @@ class WGSE(BaseModule):
             2 is the paper's "long" variant.
         with_cp: recompute band activations in the backward pass instead of
             storing them (activation checkpointing): less memory, more time.
-            The fused CPU kernel (``dim=1``) always recomputes, chunk by
-            chunk: on the CPU that measured as fast and about a third of the
+            The CPU kernels (``dim=1``) always recompute, chunk by chunk:
+            on the CPU that measured as fast and about a third of the
             memory.
         init_cfg: mmengine initialisation config.
 
     The transform runs in float32 (float64 for float64 input) even under
-    autocast. On the CPU, ``dim=1`` runs all band networks as one fused,
-    cache-blocked kernel (:mod:`~wgse_mmseg.models.fused_band_networks`),
-    also in float32/float64; elsewhere the band networks are ``nn.Conv``
-    modules that follow autocast. Both compute the same function.
+    autocast. On the CPU, ``dim=1`` runs all band networks as one compiled
+    kernel (:mod:`~wgse_mmseg.models.compiled_band_networks`: float32,
+    kernel 3, 32 channels, no input gradient) where it applies, else as the
+    fused torch kernel (:mod:`~wgse_mmseg.models.fused_band_networks`,
+    float32/float64); elsewhere the band networks are ``nn.Conv`` modules
+    that follow autocast. All compute the same function.
     """
 
     def __init__(self, dim: int = 1, wavelet: Optional[str] = 'db8',
@@ -188,7 +190,8 @@ class WGSE(BaseModule):
     def _fused_bands(self, coeffs: torch.Tensor,
                      lengths: List[int]) -> torch.Tensor:
         """All band networks on ``(B, P, C)`` pixel-major coefficients
-        (``P = H*W``) with the fused CPU kernel; same shape out."""
+        (``P = H*W``) with a CPU kernel (compiled where it applies, else the
+        torch one); same shape out."""
         plans = [net.layers() for net in self.band_networks]
         weights = [[(conv.weight, conv.bias) for conv, _ in plan]
                    for plan in plans]
@@ -251,7 +254,7 @@ class WGSE(BaseModule):
                 analysis, synthesis, lengths = self._matrices(
                     num_steps, spikes.device, dtype)
                 coeffs = torch.matmul(signal, analysis.t())  # (B, P, C)
-        # The fused kernel is opaque to tracing (FLOP counters, jit.trace).
+        # The CPU kernels are opaque to tracing (FLOP counters, jit.trace).
         if self.dim == 1 and device_type == 'cpu' and \
                 not torch.jit.is_tracing():
             enhanced = self._fused_bands(coeffs, lengths)
