@@ -356,6 +356,27 @@ def test_stability_float32_vs_float64(model_pair, steps):
                                atol=1e-4)
 
 
+@pytest.mark.parametrize('steps', STEPS)
+def test_stability_of_parameter_gradients(model_pair, steps):
+    """Spikes that need no gradient, as in training: on the CPU the
+    compiled kernel where it is built. Output and every parameter gradient
+    finite and close to float64."""
+    model, model64 = model_pair
+    x = _streams(steps)
+    grads = []
+    for net, inp in ((model, x), (model64, x.double())):
+        net.zero_grad()
+        y = net(inp)
+        assert torch.isfinite(y).all()
+        y.square().sum().backward()
+        grads.append([p.grad for p in net.parameters()])
+    for grad, grad64 in zip(*grads):
+        assert torch.isfinite(grad).all()
+        scale = max(1.0, grad64.abs().max().item())
+        torch.testing.assert_close(grad.double() / scale, grad64 / scale,
+                                   rtol=0, atol=1e-4)
+
+
 def _cpu_autocast_supports(dtype):
     try:
         with torch.autocast('cpu', dtype=dtype):
