@@ -20,6 +20,7 @@ band, which run side by side on torch's threads
 each thread sums its gradients in its own buffer, and the buffers are added
 in thread order, so results do not depend on timing.
 """
+from itertools import accumulate
 from typing import List, Optional, Sequence, Tuple
 
 import torch
@@ -110,12 +111,17 @@ class _Bands:
                  residuals: Sequence[Optional[int]]):
         self.coeffs = coeffs
         self.lengths = list(lengths)
-        self.offsets = [sum(self.lengths[:i]) for i in range(len(lengths))]
+        #: first column of each band in ``coeffs``
+        self.offsets = list(accumulate(self.lengths, initial=0))[:-1]
         self.params = [_pack(band) for band in weights]
         self.residuals = torch.tensor(
             [-1 if r is None else r for r in residuals], dtype=torch.int64)
         self.layers = len(residuals)
-        self.grad_sizes = [_grad_size(band) for band in weights]
+        #: each band's slice of the gradient buffer (all bands side by side)
+        ends = list(accumulate(_grad_size(band) for band in weights))
+        self.grad_slices = [slice(end - _grad_size(band), end)
+                            for band, end in zip(weights, ends)]
+        self.grad_total = ends[-1] if ends else 0
         self.chunks = []  # (band, first pixel, pixels)
         pixels = coeffs.shape[0]
         for band, length in enumerate(self.lengths):
@@ -140,8 +146,8 @@ class _Bands:
 
         grad_address = 0
         if grads is not None:
-            grad_address = grads.data_ptr() + grads.element_size() * sum(
-                self.grad_sizes[:band])
+            grad_address = grads.data_ptr() + grads.element_size() * \
+                self.grad_slices[band].start
         _band_networks.run(
             address(self.coeffs), stride, address(grad_out), stride,
             address(out), stride, pixels, self.lengths[band], self.layers,
@@ -168,22 +174,19 @@ class _CompiledBandNetworks(torch.autograd.Function):
     def backward(ctx, grad_out: Tensor):
         bands, weights = ctx.bands, ctx.weights
         grad_out = grad_out.contiguous()
-        total = sum(bands.grad_sizes)
 
         def backward_chunk(chunk: int, grads: Tensor) -> None:
             bands.run(chunk, grad_out=grad_out, grads=grads)
 
         sums = for_each_on_threads(
             backward_chunk, len(bands.chunks),
-            lambda: torch.zeros(total, dtype=torch.float64))
+            lambda: torch.zeros(bands.grad_total, dtype=torch.float64))
         flat = sums[0]
         for more in sums[1:]:
             flat = flat + more
         grads = []
-        for band, start in zip(weights, [sum(bands.grad_sizes[:i]) for i in
-                                         range(len(weights))]):
-            grads += _unpack_grads(flat[start:start + _grad_size(band)],
-                                   band)
+        for band, where in zip(weights, bands.grad_slices):
+            grads += _unpack_grads(flat[where], band)
         return (None, None, None, None, *grads)
 
 
