@@ -65,6 +65,15 @@ typedef struct {
     double *wide_f[MAX_LAYERS], *wide_b[MAX_LAYERS];
 } Grads;
 
+/* Where layer l (0 .. layers-1) starts in the packed layout of the file
+ * comment: 4 * C floats for layer 0, then per wide layer its taps and bias
+ * and, for parameters (not gradients), its flipped taps. */
+static int64_t layer_offset(int l, int with_back)
+{
+    return l == 0 ? 0 : 4 * C + (int64_t)(l - 1) *
+                                   (KC * C + C + (with_back ? KC * C : 0));
+}
+
 static void unpack(Net *net, const float *params, int layers,
                    const int64_t *residual)
 {
@@ -72,29 +81,26 @@ static void unpack(Net *net, const float *params, int layers,
     net->residual = residual;
     net->first_w = params;
     net->first_b = params + 3 * C;
-    params += 4 * C;
     for (int l = 1; l < layers - 1; ++l) {
-        net->wide_f[l] = params;
-        net->wide_b[l] = params + KC * C;
-        net->wide_back[l] = params + KC * C + C;
-        params += 2 * KC * C + C;
+        const float *layer = params + layer_offset(l, 1);
+        net->wide_f[l] = layer;
+        net->wide_b[l] = layer + KC * C;
+        net->wide_back[l] = layer + KC * C + C;
     }
-    net->last_w = params;
-    net->last_b = params + KC;
+    net->last_w = params + layer_offset(layers - 1, 1);
+    net->last_b = net->last_w + KC;
 }
 
 static void unpack_grads(Grads *grads, double *buffer, int layers)
 {
     grads->first_w = buffer;
     grads->first_b = buffer + 3 * C;
-    buffer += 4 * C;
     for (int l = 1; l < layers - 1; ++l) {
-        grads->wide_f[l] = buffer;
-        grads->wide_b[l] = buffer + KC * C;
-        buffer += KC * C + C;
+        grads->wide_f[l] = buffer + layer_offset(l, 0);
+        grads->wide_b[l] = grads->wide_f[l] + KC * C;
     }
-    grads->last_w = buffer;
-    grads->last_b = buffer + KC;
+    grads->last_w = buffer + layer_offset(layers - 1, 0);
+    grads->last_b = grads->last_w + KC;
 }
 
 /* Epilogue of a wide product, applied to an accumulator of 8 channels
