@@ -1,10 +1,12 @@
 """The compiled band network kernel against the band networks run as
 ``nn.Conv1d`` modules in float64, its fallbacks and its determinism."""
+import copy
 import shutil
 
 import pytest
 import torch
-from hypothesis import given, settings
+import torch.nn.functional as F
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from wgse_mmseg.models import WGSE, compiled_band_networks
@@ -37,19 +39,34 @@ def _reference(networks, coeffs, lengths, grad_out):
     outs, grads = [], []
     for net, band, grad in zip(networks, coeffs.split(lengths, 1),
                                grad_out.split(lengths, 1)):
-        double = [p.detach().double().requires_grad_()
-                  for p in net.parameters()]
-        copy = BandNetwork(1, net.layers()[0][0].kernel_size[0],
-                           net.layers()[0][0].out_channels,
-                           len(net.output_convs)).double()
-        with torch.no_grad():
-            for p, q in zip(copy.parameters(), double):
-                p.copy_(q)
-        out = copy(band.double().unsqueeze(1)).squeeze(1)
+        double = copy.deepcopy(net).double()
+        out = double(band.double().unsqueeze(1)).squeeze(1)
         grads += torch.autograd.grad((out * grad.double()).sum(),
-                                     list(copy.parameters()))
+                                     list(double.parameters()))
         outs.append(out.detach())
     return torch.cat(outs, 1), grads
+
+
+#: Pre-activations closer to zero than this may land on the other side of
+#: a ReLU in float32 (measured: a float64 pre-activation of 4e-8 did), where
+#: the gradient jumps; examples with one are not compared.
+KINK_MARGIN = 1e-5
+
+
+def _smallest_preactivation(networks, coeffs, lengths):
+    """The smallest |input of a ReLU| over all bands, in float64."""
+    smallest = float('inf')
+    with torch.no_grad():
+        for net, band in zip(networks, coeffs.split(lengths, 1)):
+            acts = [band.double().unsqueeze(1)]
+            for conv, residual in net.layers():
+                pre = F.conv1d(acts[-1], conv.weight.double(),
+                               conv.bias.double(), padding=conv.padding)
+                if residual is not None:
+                    pre = pre + acts[residual]
+                smallest = min(smallest, pre.abs().min().item())
+                acts.append(F.relu(pre))
+    return smallest
 
 
 def _compiled(weights, residuals, coeffs, lengths, grad_out):
@@ -68,14 +85,15 @@ def test_equals_conv_modules(seed, pixels, lengths, num_blocks,
                              rows_per_call):
     """Outputs and every parameter gradient, float32 against float64
     modules, for chunks from one pixel to all and band lengths from one
-    coefficient to more than a cache-sized group holds."""
+    coefficient to more than a cache-sized group holds (away from ReLU
+    kinks, where float32 and float64 may take different sides)."""
+    networks, weights, residuals = _networks(len(lengths), num_blocks, seed)
+    generator = torch.Generator().manual_seed(seed)
+    coeffs = torch.randn(pixels, sum(lengths), generator=generator)
+    grad_out = torch.randn(pixels, sum(lengths), generator=generator)
+    assume(_smallest_preactivation(networks, coeffs, lengths) > KINK_MARGIN)
     compiled_band_networks.ROWS_PER_CALL = rows_per_call
     try:
-        networks, weights, residuals = _networks(len(lengths), num_blocks,
-                                                 seed)
-        generator = torch.Generator().manual_seed(seed)
-        coeffs = torch.randn(pixels, sum(lengths), generator=generator)
-        grad_out = torch.randn(pixels, sum(lengths), generator=generator)
         out, grads = _compiled(weights, residuals, coeffs, lengths,
                                grad_out)
     finally:
