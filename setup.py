@@ -69,7 +69,7 @@ if __name__ == '__main__':
         # and WGSE's band networks. Optional: without a C compiler the
         # install goes on and each falls back to its torch path (the same
         # results, slower): see simulation.fixed_point.COMPILED_KERNEL and
-        # models.compiled_band_networks.KERNEL_BUILT.
+        # models.compiled_band_networks.COMPILED_KERNEL.
         ext_modules=[
             Extension(f'wgse_mmseg.{name}', [f'wgse_mmseg/{name.replace(".", "/")}.c'],
                       extra_compile_args=['-O3'], optional=True)

@@ -14,7 +14,7 @@ from wgse_mmseg.models.wgse import BandNetwork
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 needs_kernel = pytest.mark.skipif(
-    not compiled_band_networks.KERNEL_BUILT
+    not compiled_band_networks.COMPILED_KERNEL
     or not compiled_band_networks._band_networks.supported(),
     reason='compiled kernel not built, or the CPU lacks AVX2/FMA')
 
@@ -137,7 +137,7 @@ def test_wgse_uses_it_and_agrees_with_the_torch_kernel(num_blocks,
                         lambda *a: calls.append(1) or original(*a))
     results = []
     for built in (True, False):
-        monkeypatch.setattr(compiled_band_networks, 'KERNEL_BUILT', built)
+        monkeypatch.setattr(compiled_band_networks, 'COMPILED_KERNEL', built)
         model.zero_grad()
         y = model(x)
         y.square().mean().backward()
@@ -209,4 +209,4 @@ def test_threads_give_the_same_bits():
 def test_built_where_a_compiler_is():
     """The extension is optional in ``setup.py``: a failed build must not
     go unnoticed where it could have succeeded."""
-    assert compiled_band_networks.KERNEL_BUILT
+    assert compiled_band_networks.COMPILED_KERNEL

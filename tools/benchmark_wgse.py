@@ -96,7 +96,7 @@ def _build(impl: str, shape: List[int], device: str):
     if impl == 'wgse_torch_kernel':
         # what an install without the compiled extension runs
         from wgse_mmseg.models import compiled_band_networks
-        compiled_band_networks.KERNEL_BUILT = False
+        compiled_band_networks.COMPILED_KERNEL = False
     return model, spikes
 
 

@@ -33,11 +33,11 @@ try:
 except ImportError:  # installed without a C compiler
     _band_networks = None
 
-__all__ = ['KERNEL_BUILT', 'ROWS_PER_CALL', 'applies',
+__all__ = ['COMPILED_KERNEL', 'ROWS_PER_CALL', 'applies',
            'compiled_band_networks']
 
 #: Whether the extension was built (it runs only where :func:`applies`).
-KERNEL_BUILT = _band_networks is not None
+COMPILED_KERNEL = _band_networks is not None
 #: Rows (pixel coefficients plus two padding rows per pixel) per call: the
 #: kernel works through them in cache-sized groups itself.
 ROWS_PER_CALL = 16384
@@ -52,7 +52,7 @@ def applies(coeffs: Tensor, weights: Sequence[Sequence[Tuple[Tensor,
     the kernel is built and the CPU has AVX2 and FMA, float32 on the CPU,
     kernel 3 and 32 channels, no residual into the first or last layer, and
     no gradient wanted for ``coeffs``."""
-    if not KERNEL_BUILT or not _band_networks.supported():
+    if not COMPILED_KERNEL or not _band_networks.supported():
         return False
     if coeffs.device.type != 'cpu' or coeffs.dtype != torch.float32:
         return False
