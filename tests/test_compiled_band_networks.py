@@ -14,9 +14,8 @@ from wgse_mmseg.models.wgse import BandNetwork
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 needs_kernel = pytest.mark.skipif(
-    not compiled_band_networks.COMPILED_KERNEL
-    or not compiled_band_networks._band_networks.supported(),
-    reason='compiled kernel not built, or the CPU lacks AVX2/FMA')
+    compiled_band_networks.unavailable() is not None,
+    reason=str(compiled_band_networks.unavailable()))
 
 
 def _networks(num_bands, num_blocks, seed=0, hidden=32, kernel=3):
@@ -128,6 +127,8 @@ def test_long_bands_span_several_groups():
 @pytest.mark.parametrize('num_blocks', [1, 2], ids=['paper', 'long'])
 def test_wgse_uses_it_and_agrees_with_the_torch_kernel(num_blocks,
                                                        monkeypatch):
+    """'auto' on the CPU runs the compiled kernel; the 'torch' backend
+    computes the same."""
     torch.manual_seed(0)
     model = WGSE(num_blocks=num_blocks)
     x = (torch.rand(2, 41, 9, 11) < 0.4).float()
@@ -136,13 +137,15 @@ def test_wgse_uses_it_and_agrees_with_the_torch_kernel(num_blocks,
     monkeypatch.setattr(compiled_band_networks, 'compiled_band_networks',
                         lambda *a: calls.append(1) or original(*a))
     results = []
-    for built in (True, False):
-        monkeypatch.setattr(compiled_band_networks, 'COMPILED_KERNEL', built)
+    for backend in ('auto', 'torch'):
+        model.backend = backend
         model.zero_grad()
         y = model(x)
         y.square().mean().backward()
         results.append([y.detach()] + [p.grad.clone()
                                        for p in model.parameters()])
+        assert model.backend_in_use == ('compiled' if backend == 'auto'
+                                        else 'torch')
     assert calls == [1]
     for compiled, torch_kernel in zip(*results):
         torch.testing.assert_close(compiled, torch_kernel, rtol=1e-4,
@@ -153,23 +156,25 @@ def test_wgse_uses_it_and_agrees_with_the_torch_kernel(num_blocks,
                                   'kernel-5'])
 @needs_kernel
 def test_falls_back_where_it_does_not_apply(case):
-    """Other dtypes, widths and kernels, and a gradient for the input, run
-    the torch kernel: :func:`applies` says no."""
+    """Other dtypes, widths and kernels, and a gradient for the input:
+    :func:`unsupported` says why, and the kernel refuses to run."""
     _, weights, residuals = _networks(
         2, 1, hidden=8 if case == 'hidden-8' else 32,
         kernel=5 if case == 'kernel-5' else 3)
     coeffs = torch.randn(4, 10, dtype=torch.float64 if case == 'float64'
                          else torch.float32,
                          requires_grad=case == 'input-grad')
-    assert not compiled_band_networks.applies(coeffs, weights, residuals)
+    reason = compiled_band_networks.unsupported(coeffs, weights, residuals)
+    assert reason
     with pytest.raises(ValueError, match='does not apply'):
         compiled_band_networks.compiled_band_networks(coeffs, [4, 6],
                                                       weights, residuals)
     plain = torch.randn(4, 10)
     if case in ('hidden-8', 'kernel-5'):
-        assert not compiled_band_networks.applies(plain, weights, residuals)
+        assert compiled_band_networks.unsupported(plain, weights, residuals)
     else:
-        assert compiled_band_networks.applies(plain, weights, residuals)
+        assert compiled_band_networks.unsupported(plain, weights,
+                                                  residuals) is None
 
 
 @needs_kernel

@@ -8,10 +8,11 @@ backward pass recomputes a group's activations in cache and accumulates the
 parameter gradients in double. It computes no gradient for the
 coefficients: WGSE's input is spike data.
 
-:func:`applies` says whether a call can use it; otherwise
+:func:`unsupported` says why a call cannot use it; WGSE's ``'auto'``
+backend (:mod:`~wgse_mmseg.models.band_network_backends`) then runs
 :func:`~wgse_mmseg.models.fused_band_networks.fused_band_networks` (torch
-operations, any width, kernel, dtype, and the input gradient) runs. Both
-compute the function of :class:`~wgse_mmseg.models.wgse.BandNetwork`;
+operations, any width, kernel, dtype, device, and the input gradient).
+Both compute the function of :class:`~wgse_mmseg.models.wgse.BandNetwork`;
 tests compare them.
 
 Calls are split into chunks of about :data:`ROWS_PER_CALL` rows of one
@@ -33,10 +34,11 @@ try:
 except ImportError:  # installed without a C compiler
     _band_networks = None
 
-__all__ = ['COMPILED_KERNEL', 'ROWS_PER_CALL', 'applies',
+__all__ = ['COMPILED_KERNEL', 'ROWS_PER_CALL', 'unavailable', 'unsupported',
            'compiled_band_networks']
 
-#: Whether the extension was built (it runs only where :func:`applies`).
+#: Whether the extension was built (it runs where :func:`unsupported`
+#: finds nothing against it).
 COMPILED_KERNEL = _band_networks is not None
 #: Rows (pixel coefficients plus two padding rows per pixel) per call: the
 #: kernel works through them in cache-sized groups itself.
@@ -45,29 +47,45 @@ KERNEL_SIZE = 3
 CHANNELS = 32
 
 
-def applies(coeffs: Tensor, weights: Sequence[Sequence[Tuple[Tensor,
-                                                               Tensor]]],
-            residuals: Sequence[Optional[int]]) -> bool:
-    """Whether :func:`compiled_band_networks` can run these band networks:
-    the kernel is built and the CPU has AVX2 and FMA, float32 on the CPU,
-    kernel 3 and 32 channels, no residual into the first or last layer, and
-    no gradient wanted for ``coeffs``."""
-    if not COMPILED_KERNEL or not _band_networks.supported():
-        return False
+def unavailable() -> Optional[str]:
+    """Why this installation cannot run the kernel at all, or ``None``."""
+    if not COMPILED_KERNEL:
+        return ('the compiled extension was not built (installed without a '
+                'C compiler)')
+    if not _band_networks.supported():
+        return 'this CPU lacks AVX2/FMA'
+    return None
+
+
+def unsupported(coeffs: Tensor,
+                weights: Sequence[Sequence[Tuple[Tensor, Tensor]]],
+                residuals: Sequence[Optional[int]]) -> Optional[str]:
+    """Why :func:`compiled_band_networks` cannot run these band networks, or
+    ``None`` where it can: it needs the extension built and a CPU with AVX2
+    and FMA, float32 on the CPU, kernel 3 and 32 channels, at least two
+    layers, no residual into the first or last layer, and no gradient
+    wanted for ``coeffs``."""
+    reason = unavailable()
+    if reason:
+        return reason
     if coeffs.device.type != 'cpu' or coeffs.dtype != torch.float32:
-        return False
+        return (f'it runs float32 CPU tensors, got {coeffs.dtype} on '
+                f'{coeffs.device.type}')
     if torch.is_grad_enabled() and coeffs.requires_grad:
-        return False
-    if residuals[0] is not None or residuals[-1] is not None:
-        return False
+        return 'it computes no gradient for its input'
+    if len(weights[0]) < 2 or residuals[0] is not None or \
+            residuals[-1] is not None:
+        return 'it runs residual layers followed by output convolutions only'
     for band in weights:
         for index, (weight, bias) in enumerate(band):
             expected = (1 if index == len(band) - 1 else CHANNELS,
                         1 if index == 0 else CHANNELS, KERNEL_SIZE)
             if tuple(weight.shape) != expected or \
                     weight.dtype != torch.float32:
-                return False
-    return len(weights[0]) >= 2
+                return (f'it runs kernel {KERNEL_SIZE} and {CHANNELS} '
+                        f'float32 channels, got a weight shaped '
+                        f'{tuple(weight.shape)} ({weight.dtype})')
+    return None
 
 
 def _pack(band: Sequence[Tuple[Tensor, Tensor]]) -> Tensor:
@@ -199,11 +217,12 @@ def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
     Arguments and result as
     :func:`~wgse_mmseg.models.fused_band_networks.fused_band_networks`
     (``coeffs`` ``(N, C)``, bands side by side); only where
-    :func:`applies`. Gradients flow to the parameters, not to ``coeffs``.
+    :func:`unsupported` returns ``None``. Gradients flow to the parameters, not to ``coeffs``.
     """
-    if not applies(coeffs, weights, residuals):
-        raise ValueError('the compiled band network kernel does not apply '
-                         'here (see compiled_band_networks.applies)')
+    reason = unsupported(coeffs, weights, residuals)
+    if reason:
+        raise ValueError(f'the compiled band network kernel does not apply '
+                         f'here: {reason}')
     if len(weights) != len(lengths) or sum(lengths) != coeffs.shape[1]:
         raise ValueError(
             f'{len(weights)} band networks and bands of lengths {lengths} '

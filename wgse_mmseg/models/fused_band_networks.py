@@ -1,4 +1,5 @@
-"""The 1-D band networks of WGSE as one fused, cache-blocked CPU kernel.
+"""The 1-D band networks of WGSE as one fused, chunked torch kernel: the
+``'torch'`` backend of WGSE, on any device.
 
 :class:`~wgse_mmseg.models.wgse.BandNetwork` with ``dim=1`` runs a few tiny
 temporal convolutions (1 -> 32 -> 32 -> 1 channels, kernel 3) over every
@@ -15,9 +16,12 @@ convolution is a few matrix products on a "padded rows" layout instead:
   the zero padding of both, and are reset to zero afterwards;
 * chunks are sized so that a layer's activations stay in cache, and every
   buffer is reused from chunk to chunk (:class:`_Workspace`);
-* with several torch threads, whole chunks run side by side, one per thread
-  (:func:`~wgse_mmseg.parallel.for_each_on_threads`), instead of
-  splitting each small product.
+* on the CPU, with several torch threads, whole chunks run side by side,
+  one per thread (:func:`~wgse_mmseg.parallel.for_each_on_threads`),
+  instead of splitting each small product; on other devices (CUDA, MPS)
+  chunks are :data:`DEVICE_ROWS_PER_CHUNK` rows, large enough to keep the
+  device busy, and run one after the other, so the memory of a chunk's
+  activations is bounded whatever the batch.
 
 The backward pass is written out by hand on the same layout. It keeps only
 the input and the outputs of the wide (32 -> 32) convolutions between
@@ -38,7 +42,7 @@ from torch import Tensor
 
 from ..parallel import for_each_on_threads
 
-__all__ = ['fused_band_networks', 'ROWS_PER_CHUNK']
+__all__ = ['fused_band_networks', 'ROWS_PER_CHUNK', 'DEVICE_ROWS_PER_CHUNK']
 
 #: Rows (pixel-coefficients) per chunk: 16384 rows x 32 channels x 4 bytes
 #: is 2 MiB per activation, so a chunk's layers stay in the L2/L3 caches
@@ -46,6 +50,23 @@ __all__ = ['fused_band_networks', 'ROWS_PER_CHUNK']
 #: (measured: 8192-32768 rows within 10% of each other on an AMD EPYC,
 #: 4096 and 65536 clearly slower).
 ROWS_PER_CHUNK = 16384
+#: Rows per chunk off the CPU: a ``(rows, 32)`` float32 activation is
+#: 64 MiB, so a chunk's workspace (about ten such buffers) stays under
+#: 1 GiB while each kernel launch covers half a million rows.
+DEVICE_ROWS_PER_CHUNK = 1 << 19
+
+
+def _for_each_chunk(task, count: int, like: Tensor) -> List['_Workspace']:
+    """Run ``task(chunk, workspace)`` for every chunk: side by side on
+    torch's threads on the CPU, one after the other with one workspace
+    elsewhere (a workspace per thread would multiply device memory)."""
+    if like.device.type == 'cpu':
+        return for_each_on_threads(task, count, lambda: _Workspace(like))
+    workspace = _Workspace(like)
+    with torch.no_grad():
+        for chunk in range(count):
+            task(chunk, workspace)
+    return [workspace]
 
 
 class Layer(NamedTuple):
@@ -336,8 +357,7 @@ class _FusedBandNetworks(torch.autograd.Function):
             if saved is not None:
                 saved[chunk] = _drop_cheap(acts, layers)
 
-        for_each_on_threads(forward_chunk, len(chunks),
-                            lambda: _Workspace(coeffs))
+        _for_each_chunk(forward_chunk, len(chunks), coeffs)
         ctx.lengths, ctx.residuals, ctx.pad = lengths, residuals, pad
         ctx.saved_acts = saved
         ctx.save_for_backward(coeffs, *params)
@@ -370,8 +390,7 @@ class _FusedBandNetworks(torch.autograd.Function):
             if need_input_grad:
                 grad_coeffs[rows, band.offset] = grad_in
 
-        workspaces = for_each_on_threads(backward_chunk, len(chunks),
-                                         lambda: _Workspace(coeffs))
+        workspaces = _for_each_chunk(backward_chunk, len(chunks), coeffs)
         sums = [w.param_grads for w in workspaces if w.param_grads] or [
             _zero_grads(params)]  # no pixels, no chunks
         param_grads = [torch.stack(grads).sum(0) if len(grads) > 1
@@ -403,7 +422,9 @@ def _chunks(coeffs: Tensor, lengths: Tuple[int, ...],
                   for i, residual in enumerate(residuals)]
         band = _Band(index, slice(start, start + length), length)
         columns = coeffs[:, band.offset]
-        step = max(1, ROWS_PER_CHUNK // (length + 2 * pad))
+        rows = ROWS_PER_CHUNK if coeffs.device.type == 'cpu' else \
+            DEVICE_ROWS_PER_CHUNK
+        step = max(1, rows // (length + 2 * pad))
         for row in range(0, coeffs.shape[0], step):
             yield band, columns, slice(row, row + step), layers
         start += length

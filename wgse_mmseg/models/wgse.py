@@ -21,11 +21,9 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 from mmengine.model import BaseModule
-from torch.utils.checkpoint import checkpoint
 
 from mmseg.registry import MODELS
-from . import compiled_band_networks
-from .fused_band_networks import fused_band_networks
+from .band_network_backends import get_backend, resolve_backend
 from ..wavelets import (analysis_matrix, band_lengths, check_mode, get_wavelet,
                         synthesis_matrix)
 
@@ -82,6 +80,10 @@ class BandNetwork(nn.Module):
                 f'kernel_size must be odd and positive, got {kernel_size}')
         if num_blocks < 1:
             raise ValueError(f'num_blocks must be >= 1, got {num_blocks}')
+        self.dim = dim
+        self.kernel_size = kernel_size
+        self.hidden_channels = hidden_channels
+        self.num_blocks = num_blocks
         self.residual_layers = nn.Sequential(*[
             _ResidualLayer(dim, 1 if i == 0 else hidden_channels,
                            hidden_channels, kernel_size)
@@ -129,26 +131,30 @@ class WGSE(BaseModule):
         hidden_channels: width of the band networks.
         num_blocks: residual layers (and output convolutions) per band;
             2 is the paper's "long" variant.
-        with_cp: recompute band activations in the backward pass instead of
-            storing them (activation checkpointing): less memory, more time.
-            The CPU kernels (``dim=1``) always recompute, chunk by chunk:
-            on the CPU that measured as fast and about a third of the
-            memory.
+        backend: what runs the band networks: ``'auto'``, ``'torch'``,
+            ``'compiled'`` or ``'triton'``
+            (:mod:`~wgse_mmseg.models.band_network_backends`). ``'auto'``
+            picks the Triton kernel for CUDA inputs and the compiled kernel
+            for CPU inputs where they can run, else ``'torch'``; a named
+            backend that cannot run is an error. Every backend recomputes
+            hidden activations in the backward pass.
         init_cfg: mmengine initialisation config.
 
+    Attributes:
+        backend_in_use: the backend that ran the last forward pass
+            (``None`` before the first).
+
     The transform runs in float32 (float64 for float64 input) even under
-    autocast. On the CPU, ``dim=1`` runs all band networks as one compiled
-    kernel (:mod:`~wgse_mmseg.models.compiled_band_networks`: float32,
-    kernel 3, 32 channels, no input gradient) where it applies, else as the
-    fused torch kernel (:mod:`~wgse_mmseg.models.fused_band_networks`,
-    float32/float64); elsewhere the band networks are ``nn.Conv`` modules
-    that follow autocast. All compute the same function.
+    autocast; so do the ``torch`` and ``compiled`` backends' ``dim=1``
+    kernels. The Triton kernel rounds the operands of its hidden products
+    to autocast's dtype (or TF32, as torch's flags allow), and the
+    ``nn.Conv3d`` modules of ``dim`` 2 and 3 follow autocast.
     """
 
     def __init__(self, dim: int = 1, wavelet: Optional[str] = 'db8',
                  level: int = 5, mode: str = 'zero', kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1,
-                 with_cp: bool = False, init_cfg=None):
+                 backend: str = 'auto', init_cfg=None):
         super().__init__(init_cfg=init_cfg)
         if dim not in (1, 2, 3):
             raise ValueError(f'dim must be 1, 2 or 3, got {dim}')
@@ -161,12 +167,14 @@ class WGSE(BaseModule):
         self.wavelet = wavelet
         self.level = level
         self.mode = mode
-        self.with_cp = with_cp
         num_bands = 1 if wavelet is None else level + 1
         self.band_networks = nn.ModuleList([
             BandNetwork(dim, kernel_size, hidden_channels, num_blocks)
             for _ in range(num_bands)
         ])
+        get_backend(backend, self.band_networks)  # a clear error, early
+        self.backend = backend
+        self.backend_in_use: Optional[str] = None
         self._transforms = {}
 
     def _matrices(self, num_steps: int, device: torch.device,
@@ -187,54 +195,6 @@ class WGSE(BaseModule):
                 lengths)
         return self._transforms[key]
 
-    def _fused_bands(self, coeffs: torch.Tensor,
-                     lengths: List[int]) -> torch.Tensor:
-        """All band networks on ``(B, P, C)`` pixel-major coefficients
-        (``P = H*W``) with a CPU kernel (compiled where it applies, else the
-        torch one); same shape out."""
-        plans = [net.layers() for net in self.band_networks]
-        weights = [[(conv.weight, conv.bias) for conv, _ in plan]
-                   for plan in plans]
-        residuals = [residual for _, residual in plans[0]]
-        rows = coeffs.reshape(-1, coeffs.shape[2])
-        with torch.autocast(coeffs.device.type, enabled=False):
-            if compiled_band_networks.applies(rows, weights, residuals):
-                out = compiled_band_networks.compiled_band_networks(
-                    rows, lengths, weights, residuals)
-            else:
-                # Recomputing each chunk in the backward measured as fast
-                # as keeping activations, for a third of the memory
-                # (docs/wgse_speed.md), so it always does.
-                out = fused_band_networks(rows, lengths, weights, residuals,
-                                          recompute=True)
-        return out.view(coeffs.shape)
-
-    def _module_bands(self, coeffs: torch.Tensor, lengths: List[int],
-                      spatial: Tuple[int, int]) -> torch.Tensor:
-        """All band networks on ``(B, P, C)`` coefficients as ``nn.Conv``
-        modules (``dim`` 2 and 3, and ``dim=1`` off the CPU); the networks
-        follow autocast. Same shape out."""
-        batch, pixels, _ = coeffs.shape
-        outs = []
-        for network, band in zip(self.band_networks,
-                                 coeffs.split(lengths, dim=2)):
-            length = band.shape[2]
-            if self.dim == 1:
-                signals = band.reshape(batch * pixels, 1, length)
-            else:
-                signals = band.transpose(1, 2).reshape(batch, 1, length,
-                                                       *spatial)
-            if self.with_cp and torch.is_grad_enabled():
-                out = checkpoint(network, signals, use_reentrant=False)
-            else:
-                out = network(signals)
-            if self.dim == 1:
-                out = out.reshape(batch, pixels, length)
-            else:
-                out = out.reshape(batch, length, pixels).transpose(1, 2)
-            outs.append(out.to(coeffs.dtype))
-        return torch.cat(outs, dim=2)
-
     def forward(self, spikes: torch.Tensor) -> torch.Tensor:
         """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats."""
         if spikes.dim() != 4:
@@ -254,12 +214,10 @@ class WGSE(BaseModule):
                 analysis, synthesis, lengths = self._matrices(
                     num_steps, spikes.device, dtype)
                 coeffs = torch.matmul(signal, analysis.t())  # (B, P, C)
-        # The CPU kernels are opaque to tracing (FLOP counters, jit.trace).
-        if self.dim == 1 and device_type == 'cpu' and \
-                not torch.jit.is_tracing():
-            enhanced = self._fused_bands(coeffs, lengths)
-        else:
-            enhanced = self._module_bands(coeffs, lengths, (height, width))
+        backend = resolve_backend(self.backend, self.band_networks, coeffs)
+        self.backend_in_use = backend.name
+        enhanced = backend.run(self.band_networks, coeffs, lengths,
+                               (height, width))
         with torch.autocast(device_type, enabled=False):
             if self.wavelet is not None:
                 enhanced = torch.matmul(enhanced, synthesis.t())  # (B, P, T)

@@ -1,0 +1,228 @@
+"""WGSE's band-network backends: choosing one, clear errors, and every
+backend against the band networks run as float64 ``nn.Conv1d`` modules
+(outputs, input gradients, every parameter gradient). The Triton kernel
+runs in triton's CPU interpreter (``TRITON_INTERPRET=1``, set in
+``conftest.py``)."""
+import copy
+
+import pytest
+import torch
+
+from mmseg.registry import MODELS
+from wgse_mmseg.models import WGSE, band_network_backends, \
+    compiled_band_networks, triton_band_networks
+
+pytestmark = pytest.mark.usefixtures('single_thread')
+
+needs_triton = pytest.mark.skipif(
+    triton_band_networks.unavailable() is not None,
+    reason=str(triton_band_networks.unavailable()))
+needs_compiled = pytest.mark.skipif(
+    compiled_band_networks.unavailable() is not None,
+    reason=str(compiled_band_networks.unavailable()))
+
+
+def _model(seed=0, **kwargs):
+    torch.manual_seed(seed)
+    model = WGSE(**kwargs)
+    # Larger biases than the default init keep many ReLUs open, so the
+    # gradients are not mostly zero.
+    with torch.no_grad():
+        for net in model.band_networks:
+            for conv, _ in net.layers():
+                conv.bias.uniform_(-0.2, 0.4)
+    return model
+
+
+def _run(model, spikes, input_grad):
+    """Output, input gradient (or None) and parameter gradients of
+    ``sum(out * w)`` for a fixed ``w``."""
+    model.zero_grad()
+    spikes = spikes.detach().requires_grad_(input_grad)
+    out = model(spikes)
+    weights = torch.linspace(-1, 1, out.numel(), dtype=out.dtype)
+    (out * weights.view_as(out)).sum().backward()
+    return [out.detach(), spikes.grad] + [p.grad for p in model.parameters()]
+
+
+def _reference(model, spikes, input_grad):
+    """The same model in float64 with the band networks as ``nn.Conv1d``
+    modules, one signal per pixel (``torch.jit``-free, chunk-free)."""
+    double = copy.deepcopy(model).double()
+    double.backend = 'torch'
+    original = band_network_backends.TorchBackend.run
+    band_network_backends.TorchBackend.run = \
+        lambda self, nets, coeffs, lengths, spatial: \
+        band_network_backends._module_bands(nets, coeffs, lengths, spatial)
+    try:
+        return _run(double, spikes.double(), input_grad)
+    finally:
+        band_network_backends.TorchBackend.run = original
+
+
+def _assert_close(got, want, tol, what):
+    """Each tensor within ``tol`` of the largest magnitude in it, or of a
+    hundredth of the largest in any (a gradient that cancels to ~0 has no
+    meaningful relative error)."""
+    largest = max(w.abs().max().item() for w in want
+                  if w is not None and w.numel())
+    for index, (g, w) in enumerate(zip(got, want)):
+        if w is None:
+            assert g is None, (what, index)
+            continue
+        scale = max(w.abs().max().item(), 1e-2 * largest)
+        err = (g.double() - w).abs().max().item() / scale
+        assert err <= tol, f'{what}: tensor {index} off by {err:.2e}'
+
+
+def _spikes(batch, steps, height, width, seed=1):
+    generator = torch.Generator().manual_seed(seed)
+    return (torch.rand(batch, steps, height, width, generator=generator)
+            < 0.4).float()
+
+
+# ------------------------------------------------------------- choosing
+def test_unknown_backend_lists_the_choices():
+    with pytest.raises(ValueError) as error:
+        WGSE(backend='cuda')
+    for name in ('auto', 'torch', 'compiled', 'triton', "'cuda'"):
+        assert name in str(error.value)
+
+
+@pytest.mark.parametrize('backend, kwargs, reason', [
+    ('compiled', dict(dim=2), 'dim=1'),
+    ('triton', dict(dim=3), 'dim=1'),
+    ('triton', dict(num_blocks=2), 'num_blocks=1'),
+    ('triton', dict(hidden_channels=8), 'hidden_channels'),
+])
+def test_a_backend_that_cannot_run_the_variant_fails_when_built(
+        backend, kwargs, reason):
+    if band_network_backends.BACKENDS[backend].unavailable():
+        pytest.skip(f'{backend} unavailable here')
+    with pytest.raises(ValueError, match=reason):
+        MODELS.build(dict(type='WGSE', backend=backend, **kwargs))
+
+
+def test_an_unavailable_backend_says_why(monkeypatch):
+    monkeypatch.setattr(triton_band_networks, 'unavailable',
+                        lambda: 'triton does not import (test)')
+    with pytest.raises(ValueError, match=r'does not import \(test\)'):
+        WGSE(backend='triton')
+    assert WGSE(backend='auto').backend == 'auto'
+
+
+@needs_triton
+def test_triton_on_a_cpu_tensor_outside_the_interpreter(monkeypatch):
+    model = WGSE(backend='triton')
+    monkeypatch.setenv('TRITON_INTERPRET', '0')
+    with pytest.raises(ValueError, match='cuda tensors'):
+        model(torch.zeros(1, 9, 2, 2))
+
+
+@needs_compiled
+def test_compiled_refuses_what_it_cannot_compute():
+    """float64, or a gradient for the input: a named backend does not fall
+    back; ``'auto'`` does, and says which ran."""
+    model = WGSE(backend='compiled')
+    with pytest.raises(ValueError, match='float32'):
+        model(torch.zeros(1, 9, 2, 2, dtype=torch.float64))
+    with pytest.raises(ValueError, match='no gradient for its input'):
+        model(torch.zeros(1, 9, 2, 2, requires_grad=True))
+    model.backend = 'auto'
+    model(torch.zeros(1, 9, 2, 2, requires_grad=True))
+    assert model.backend_in_use == 'torch'
+    model(torch.zeros(1, 9, 2, 2))
+    assert model.backend_in_use == 'compiled'
+
+
+@pytest.mark.parametrize('kwargs', [dict(dim=2), dict(kernel_size=5),
+                                    dict(hidden_channels=8)])
+def test_auto_on_cpu_runs_torch_where_the_kernels_do_not_apply(kwargs):
+    model = WGSE(**kwargs)
+    assert model.backend_in_use is None
+    model(torch.zeros(1, 9, 2, 2))
+    assert model.backend_in_use == 'torch'
+
+
+# ------------------------------------------------------- agreement
+AVAILABLE = [name for name, backend in band_network_backends.BACKENDS.items()
+             if backend.unavailable() is None]
+# (B, T, H, W): odd T; T shorter than db8's 16-tap filter; pixel counts
+# that are not a multiple of the Triton tiles (64 forward, 32 backward)
+# and span several of them.
+SHAPES = [(1, 41, 5, 7), (2, 3, 3, 5), (1, 9, 9, 11)]
+
+
+@pytest.mark.parametrize('shape', SHAPES, ids=lambda s: 'x'.join(map(str, s)))
+@pytest.mark.parametrize('backend', AVAILABLE)
+def test_every_backend_matches_float64_modules(backend, shape):
+    model = _model(backend=backend)
+    spikes = _spikes(*shape)
+    input_grad = backend != 'compiled'  # it computes no input gradient
+    got = _run(model, spikes, input_grad)
+    assert model.backend_in_use == backend
+    _assert_close(got, _reference(model, spikes, input_grad),
+                  triton_band_networks.TOLERANCES['ieee'], backend)
+
+
+@pytest.mark.parametrize('backend', AVAILABLE)
+def test_every_backend_without_pixels(backend):
+    model = _model(backend=backend)
+    out = model(torch.zeros(0, 9, 4, 4))
+    out.sum().backward()
+    assert out.shape == (0, 9, 4, 4)
+    for p in model.parameters():
+        assert torch.equal(p.grad, torch.zeros_like(p))
+
+
+@needs_triton
+@pytest.mark.parametrize('hidden', triton_band_networks.HIDDEN_CHANNELS)
+def test_triton_widths_and_no_wavelet(hidden):
+    """Every width the kernel takes, and the TRCNN-only variant (one band
+    of ``T`` coefficients)."""
+    for kwargs in (dict(hidden_channels=hidden),
+                   dict(hidden_channels=hidden, wavelet=None)):
+        model = _model(backend='triton', **kwargs)
+        spikes = _spikes(1, 13, 3, 3, seed=hidden)
+        _assert_close(_run(model, spikes, True),
+                      _reference(model, spikes, True), 1e-4, str(kwargs))
+
+
+@needs_triton
+@pytest.mark.parametrize('dtype', [torch.float16, torch.bfloat16],
+                         ids=['fp16', 'bf16'])
+def test_triton_under_autocast_within_its_stated_tolerance(dtype):
+    """Under autocast the hidden products take fp16/bf16 operands; output
+    and gradients stay within :data:`TOLERANCES` of float64."""
+    model = _model(backend='triton')
+    spikes = _spikes(1, 41, 5, 7)
+    precision = {torch.float16: 'fp16', torch.bfloat16: 'bf16'}[dtype]
+    with torch.autocast('cpu', dtype=dtype):
+        assert triton_band_networks.dot_precision('cpu') == precision
+        got = _run(model, spikes, True)
+    assert got[0].dtype == torch.float32
+    _assert_close(got, _reference(model, spikes, True),
+                  triton_band_networks.TOLERANCES[precision], precision)
+
+
+def test_dot_precision_follows_torch_flags(monkeypatch):
+    monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', True)
+    assert triton_band_networks.dot_precision('cpu') == 'tf32'
+    monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
+    assert triton_band_networks.dot_precision('cpu') == 'ieee'
+
+
+@needs_triton
+@pytest.mark.parametrize('call, match', [
+    (lambda w: triton_band_networks.triton_band_networks(
+        torch.zeros(2, 5), [2, 2], w), 'do not fit'),
+    (lambda w: triton_band_networks.triton_band_networks(
+        torch.zeros(2, 4, dtype=torch.float64), [2, 2], w), 'float32'),
+    (lambda w: triton_band_networks.triton_band_networks(
+        torch.zeros(2, 4), [2, 2], w, precision='fp8'), 'precision'),
+], ids=['lengths', 'dtype', 'precision'])
+def test_triton_function_rejects_bad_arguments(call, match):
+    model = _model(level=1, wavelet='haar')
+    weights, _ = band_network_backends._weights(model.band_networks)
+    with pytest.raises(ValueError, match=match):
+        call(weights)

@@ -1,0 +1,257 @@
+"""The backends that run WGSE's band networks, behind one interface.
+
+A backend takes the band networks (:class:`~wgse_mmseg.models.wgse.BandNetwork`,
+one per wavelet band) and every pixel's wavelet coefficients ``(B, P, C)``
+(``P = H*W`` pixels, the bands side by side along ``C``) and returns the
+networks' outputs in the same layout. All compute the same function; they
+differ in where they run and how fast:
+
+* ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
+  every variant. ``dim=1`` runs the chunked kernel of
+  :mod:`~wgse_mmseg.models.fused_band_networks`; ``dim`` 2 and 3 run the
+  ``nn.Conv3d`` modules one band and sample at a time.
+* ``'compiled'``: the C kernel of
+  :mod:`~wgse_mmseg.models.compiled_band_networks`: CPU with AVX2/FMA,
+  where the extension was built; float32, the paper's width and kernel.
+* ``'triton'``: the kernel of :mod:`~wgse_mmseg.models.triton_band_networks`:
+  CUDA, where triton imports; the paper's network shape.
+
+``'auto'`` picks ``triton`` for CUDA tensors and ``compiled`` for CPU
+tensors where they can run the call, and ``torch`` otherwise. Naming a
+backend that cannot run a call is an error that says why and lists the
+choices; nothing falls back silently then.
+
+Every backend keeps training memory ``O(B*T*H*W)``: hidden activations are
+recomputed in the backward pass, chunk by chunk (``torch``, ``compiled``) or
+tile by tile (``triton``), never kept for all pixels at once.
+"""
+from typing import List, Optional, Sequence, Tuple
+
+import torch
+from torch import Tensor, nn
+from torch.utils.checkpoint import checkpoint
+
+from . import compiled_band_networks, triton_band_networks
+from .fused_band_networks import fused_band_networks
+
+__all__ = ['BACKENDS', 'CHOICES', 'BandNetworkBackend', 'get_backend',
+           'resolve_backend']
+
+Weights = List[List[Tuple[Tensor, Tensor]]]
+
+
+def _weights(networks: Sequence[nn.Module]
+             ) -> Tuple[Weights, List[Optional[int]]]:
+    """Per band, per convolution ``(weight, bias)``; the residual plan."""
+    plans = [net.layers() for net in networks]
+    weights = [[(conv.weight, conv.bias) for conv, _ in plan]
+               for plan in plans]
+    return weights, [residual for _, residual in plans[0]]
+
+
+class BandNetworkBackend:
+    """One way to run the band networks. Subclasses set :attr:`name` and
+    override :meth:`run` and the checks that apply to them."""
+
+    #: the name a config gives (``WGSE(backend=...)``)
+    name = ''
+
+    def unavailable(self) -> Optional[str]:
+        """Why this installation cannot run the backend at all, or
+        ``None``."""
+        return None
+
+    def unsupported(self, networks: Sequence[nn.Module]) -> Optional[str]:
+        """Why it cannot run these networks (whatever the input), or
+        ``None``."""
+        return None
+
+    def unsupported_call(self, networks: Sequence[nn.Module],
+                         coeffs: Tensor) -> Optional[str]:
+        """Why it cannot run these networks on ``coeffs`` (device, dtype,
+        gradients), or ``None``."""
+        return None
+
+    def cannot_run(self, networks: Sequence[nn.Module],
+                   coeffs: Optional[Tensor] = None) -> Optional[str]:
+        """The first reason of the three checks, or ``None``."""
+        return self.unavailable() or self.unsupported(networks) or (
+            None if coeffs is None else
+            self.unsupported_call(networks, coeffs))
+
+    def run(self, networks: Sequence[nn.Module], coeffs: Tensor,
+            lengths: Sequence[int], spatial: Tuple[int, int]) -> Tensor:
+        """The band networks on ``coeffs`` ``(B, P, C)``, bands of
+        ``lengths`` side by side, pixels of a ``spatial`` ``(H, W)``
+        frame; same shape and dtype out."""
+        raise NotImplementedError
+
+
+class TorchBackend(BandNetworkBackend):
+    """torch operations: every variant, dtype and device."""
+
+    name = 'torch'
+
+    def run(self, networks, coeffs, lengths, spatial):
+        if networks[0].dim == 1 and not torch.jit.is_tracing():
+            weights, residuals = _weights(networks)
+            rows = coeffs.reshape(-1, coeffs.shape[2])
+            with torch.autocast(coeffs.device.type, enabled=False):
+                out = fused_band_networks(rows, lengths, weights, residuals,
+                                          recompute=True)
+            return out.view(coeffs.shape)
+        # nn.Conv modules: dim 2 and 3, and under tracing (FLOP counters,
+        # jit.trace see the convolutions). They follow autocast.
+        return _module_bands(networks, coeffs, lengths, spatial)
+
+
+def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
+                  lengths: Sequence[int],
+                  spatial: Tuple[int, int]) -> Tensor:
+    """The networks as ``nn.Conv`` modules on ``(B, P, C)`` coefficients.
+
+    ``dim=1`` runs every pixel as a ``(1, L)`` signal; ``dim`` 2 and 3 run
+    one sample's band as a ``(1, 1, L, H, W)`` volume at a time and, when
+    gradients are wanted, recompute its activations in the backward pass
+    (``torch.utils.checkpoint``), so only one sample's band activations
+    exist at once.
+    """
+    batch, pixels, _ = coeffs.shape
+    train = torch.is_grad_enabled() and (coeffs.requires_grad or any(
+        p.requires_grad for net in networks for p in net.parameters()))
+    outs = []
+    for network, band in zip(networks, coeffs.split(list(lengths), dim=2)):
+        length = band.shape[2]
+        if network.dim == 1:
+            out = network(band.reshape(batch * pixels, 1, length))
+            outs.append(out.reshape(batch, pixels, length).to(coeffs.dtype))
+            continue
+        samples = []
+        for sample in band.transpose(1, 2).reshape(batch, 1, length,
+                                                   *spatial).split(1):
+            samples.append(checkpoint(network, sample, use_reentrant=False)
+                           if train else network(sample))
+        out = torch.cat(samples) if samples else band.new_empty(
+            0, 1, length, *spatial)
+        outs.append(out.reshape(batch, length, pixels).transpose(1, 2)
+                    .to(coeffs.dtype))
+    return torch.cat(outs, dim=2)
+
+
+class CompiledBackend(BandNetworkBackend):
+    """The compiled C kernel: CPU, float32, the paper's width and kernel."""
+
+    name = 'compiled'
+
+    def unavailable(self):
+        return compiled_band_networks.unavailable()
+
+    def unsupported(self, networks):
+        if networks[0].dim != 1:
+            return f'it runs dim=1 band networks, not dim={networks[0].dim}'
+        return None
+
+    def unsupported_call(self, networks, coeffs):
+        weights, residuals = _weights(networks)
+        return compiled_band_networks.unsupported(
+            coeffs.reshape(-1, coeffs.shape[2]), weights, residuals)
+
+    def run(self, networks, coeffs, lengths, spatial):
+        weights, residuals = _weights(networks)
+        with torch.autocast(coeffs.device.type, enabled=False):
+            out = compiled_band_networks.compiled_band_networks(
+                coeffs.reshape(-1, coeffs.shape[2]), lengths, weights,
+                residuals)
+        return out.view(coeffs.shape)
+
+
+class TritonBackend(BandNetworkBackend):
+    """The Triton kernel: CUDA, float32 in and out, the paper's network
+    shape; its products follow autocast and torch's TF32 flag."""
+
+    name = 'triton'
+
+    def unavailable(self):
+        return triton_band_networks.unavailable()
+
+    def unsupported(self, networks):
+        net = networks[0]
+        return triton_band_networks.unsupported_network(
+            net.dim, net.kernel_size, net.hidden_channels, net.num_blocks)
+
+    def unsupported_call(self, networks, coeffs):
+        return triton_band_networks.unsupported_tensor(coeffs)
+
+    def run(self, networks, coeffs, lengths, spatial):
+        weights, _ = _weights(networks)
+        precision = triton_band_networks.dot_precision(coeffs.device.type)
+        with torch.autocast(coeffs.device.type, enabled=False):
+            out = triton_band_networks.triton_band_networks(
+                coeffs.reshape(-1, coeffs.shape[2]), lengths, weights,
+                precision)
+        return out.view(coeffs.shape)
+
+
+#: name -> backend, in the order ``'auto'`` prefers them last to first
+BACKENDS = {backend.name: backend for backend in (
+    TorchBackend(), CompiledBackend(), TritonBackend())}
+#: what ``WGSE(backend=...)`` accepts
+CHOICES = ('auto', ) + tuple(BACKENDS)
+#: ``'auto'``'s first choice per device type; ``torch`` where it cannot run
+_AUTO = {'cuda': 'triton', 'cpu': 'compiled'}
+
+
+def _choices() -> str:
+    lines = []
+    for name, backend in BACKENDS.items():
+        reason = backend.unavailable()
+        lines.append(f'{name!r}' + (f' (unavailable: {reason})'
+                                     if reason else ''))
+    return "'auto', " + ', '.join(lines)
+
+
+def get_backend(name: str, networks: Sequence[nn.Module]
+                ) -> Optional[BandNetworkBackend]:
+    """Check a configured backend name against the networks before any
+    input is seen.
+
+    Returns:
+        The backend, or ``None`` for ``'auto'``.
+
+    Raises:
+        ValueError: an unknown name, or a backend that this installation
+            or these networks rule out, with the reason and the choices.
+    """
+    if name == 'auto':
+        return None
+    if name not in BACKENDS:
+        raise ValueError(f'backend must be one of {_choices()}; got '
+                         f'{name!r}')
+    reason = BACKENDS[name].cannot_run(networks)
+    if reason:
+        raise ValueError(f'backend={name!r} cannot run these band networks: '
+                         f'{reason}. Choices: {_choices()}')
+    return BACKENDS[name]
+
+
+def resolve_backend(name: str, networks: Sequence[nn.Module],
+                    coeffs: Tensor) -> BandNetworkBackend:
+    """The backend that runs ``networks`` on ``coeffs`` ``(B, P, C)`` for
+    the configured ``name`` (``'auto'`` or one of :data:`BACKENDS`).
+
+    Raises:
+        ValueError: a named backend cannot run this call (say, ``'triton'``
+            on a CPU tensor); the message says why and lists the choices.
+    """
+    backend = get_backend(name, networks)
+    if backend is None:
+        preferred = BACKENDS.get(_AUTO.get(coeffs.device.type, 'torch'))
+        if preferred.cannot_run(networks, coeffs) is None:
+            return preferred
+        return BACKENDS['torch']
+    reason = backend.unsupported_call(networks, coeffs)
+    if reason:
+        raise ValueError(
+            f'backend={name!r} cannot run on {coeffs.dtype} coefficients on '
+            f'{coeffs.device}: {reason}. Choices: {_choices()}')
+    return backend

@@ -1,0 +1,214 @@
+"""WGSE's 1-D band networks as a Triton kernel (CUDA).
+
+Runs the paper's band network (``num_blocks=1``: conv ``1 -> H``, conv
+``H -> H`` plus the input, conv ``H -> 1``, each followed by ReLU; kernel 3)
+for every pixel, a tile of :data:`FORWARD_BLOCK` pixels per program, the
+weights read once per program and the ``H x H`` layer on tensor cores
+(``tl.dot``). The backward pass recomputes each tile's activations while it
+streams the gradient, so nothing of size ``pixels x H`` is ever kept: the
+only memory beyond the input, output and their gradients is one row of
+parameter-gradient sums per program. Kernels: :mod:`._triton_band_kernels`.
+
+Precision of the ``H x H`` products (:func:`dot_precision`): under autocast
+their operands are rounded to its dtype (fp16 or bf16); otherwise TF32 where
+``torch.backends.cudnn.allow_tf32`` allows it (the flag torch applies to
+convolutions, on by default), else full float32. Everything else, and every
+accumulation, is float32. The tolerances against float32 that the tests
+hold are :data:`TOLERANCES`.
+
+Triton's interpreter (``TRITON_INTERPRET=1`` in the environment before
+triton is first imported) runs the same kernels on CPU tensors; the tests
+use it, since CI has no GPU.
+"""
+import os
+from typing import List, Optional, Sequence, Tuple
+
+import torch
+from torch import Tensor
+
+try:
+    import triton
+
+    from . import _triton_band_kernels as kernels
+    _IMPORT_ERROR = None
+except ImportError as error:  # triton is not installed (CPU-only torch)
+    triton = kernels = None
+    _IMPORT_ERROR = str(error)
+
+__all__ = ['FORWARD_BLOCK', 'BACKWARD_BLOCK', 'HIDDEN_CHANNELS',
+           'TOLERANCES', 'dot_precision', 'interpreting', 'unavailable',
+           'unsupported_network', 'unsupported_tensor',
+           'triton_band_networks']
+
+#: Pixels per program in the forward and backward kernels; ``tl.dot``
+#: needs at least 16 rows. The backward holds about four times the forward's
+#: tiles in registers, hence its smaller tile.
+FORWARD_BLOCK = 64
+BACKWARD_BLOCK = 32
+#: Hidden widths the kernels take (``tl.dot`` needs powers of two >= 16).
+HIDDEN_CHANNELS = (16, 32, 64)
+#: Largest error against float64, relative to the largest magnitude of the
+#: output or of each gradient, that the tests allow per
+#: :func:`dot_precision` (measured over six seeds at 1x41x5x7: fp16 up to
+#: 1.8e-2, bf16 up to 1.7e-1, on the gradients; fp32 about 1e-6). TF32
+#: keeps fp16's 10 mantissa bits, bf16 7.
+TOLERANCES = {'ieee': 1e-4, 'tf32': 3e-2, 'fp16': 3e-2, 'bf16': 2.5e-1}
+
+
+def interpreting() -> bool:
+    """Whether triton runs kernels in its CPU interpreter."""
+    return os.environ.get('TRITON_INTERPRET', '0') not in ('', '0')
+
+
+def unavailable() -> Optional[str]:
+    """Why the Triton kernel cannot run in this installation, or ``None``."""
+    if triton is None:
+        return f'triton does not import ({_IMPORT_ERROR})'
+    return None
+
+
+def unsupported_network(dim: int, kernel_size: int, hidden_channels: int,
+                        num_blocks: int) -> Optional[str]:
+    """Why the kernel cannot run a band network of this shape, or ``None``."""
+    if dim != 1:
+        return f'it runs dim=1 band networks, not dim={dim}'
+    if kernel_size != 3 or num_blocks != 1:
+        return (f'it runs the paper\'s network (kernel_size=3, '
+                f'num_blocks=1), not kernel_size={kernel_size}, '
+                f'num_blocks={num_blocks}')
+    if hidden_channels not in HIDDEN_CHANNELS:
+        return (f'it runs hidden_channels in {HIDDEN_CHANNELS}, not '
+                f'{hidden_channels}')
+    return None
+
+
+def unsupported_tensor(coeffs: Tensor) -> Optional[str]:
+    """Why the kernel cannot run on ``coeffs``, or ``None``: float32 CUDA
+    tensors (CPU tensors under the interpreter)."""
+    device = 'cpu' if interpreting() else 'cuda'
+    if coeffs.device.type != device:
+        return (f'it runs on {device} tensors' +
+                ('' if interpreting() else
+                 ' (CPU tensors only under TRITON_INTERPRET=1)'))
+    if coeffs.dtype != torch.float32:
+        return f'it runs float32, not {coeffs.dtype}'
+    return None
+
+
+def dot_precision(device_type: str) -> str:
+    """The precision of the ``H x H`` products for a call made now:
+    ``'fp16'`` or ``'bf16'`` under autocast, else ``'tf32'`` where
+    ``torch.backends.cudnn.allow_tf32``, else ``'ieee'``."""
+    if torch.is_autocast_enabled(device_type):
+        dtype = torch.get_autocast_dtype(device_type)
+        return {torch.float16: 'fp16', torch.bfloat16: 'bf16'}.get(
+            dtype, 'ieee')
+    return 'tf32' if torch.backends.cudnn.allow_tf32 else 'ieee'
+
+
+def _band_params(params: Sequence[Tensor], band: int) -> List[Tensor]:
+    return [p.contiguous() for p in params[6 * band:6 * band + 6]]
+
+
+class _TritonBandNetworks(torch.autograd.Function):
+    """Autograd wrapper; see :func:`triton_band_networks`."""
+
+    @staticmethod
+    def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
+                precision: str, *params: Tensor) -> Tensor:
+        pixels, columns = coeffs.shape
+        hidden = params[0].shape[0]
+        out = torch.empty_like(coeffs)
+        offset = 0
+        for band, length in enumerate(lengths):
+            if pixels:
+                grid = (triton.cdiv(pixels, FORWARD_BLOCK), )
+                kernels.band_forward[grid](
+                    coeffs, out, columns, offset, pixels,
+                    *_band_params(params, band), LENGTH=length,
+                    HIDDEN=hidden, BLOCK=FORWARD_BLOCK, PRECISION=precision,
+                    num_warps=4)
+            offset += length
+        ctx.lengths, ctx.precision = lengths, precision
+        ctx.save_for_backward(coeffs, *params)
+        return out
+
+    @staticmethod
+    def backward(ctx, grad_out: Tensor):
+        coeffs, *params = ctx.saved_tensors
+        pixels, columns = coeffs.shape
+        hidden = params[0].shape[0]
+        input_grad = ctx.needs_input_grad[0]
+        grad_out = grad_out.contiguous()
+        grad_coeffs = torch.empty_like(coeffs) if input_grad else None
+        programs = triton.cdiv(pixels, BACKWARD_BLOCK)
+        grads, offset = [], 0
+        for band, length in enumerate(ctx.lengths):
+            band_params = _band_params(params, band)
+            sizes = [p.numel() for p in band_params]
+            partial = coeffs.new_empty(programs, sum(sizes))
+            if programs:
+                kernels.band_backward[(programs, )](
+                    coeffs, grad_out, coeffs if grad_coeffs is None else
+                    grad_coeffs, partial, columns, offset, pixels,
+                    *band_params, LENGTH=length, HIDDEN=hidden,
+                    BLOCK=BACKWARD_BLOCK, PRECISION=ctx.precision,
+                    INPUT_GRAD=input_grad, num_warps=4)
+            total = partial.sum(0)
+            grads += [g.view_as(p) for g, p in
+                      zip(total.split(sizes), band_params)]
+            offset += length
+        return (grad_coeffs, None, None, *grads)
+
+
+def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
+                         weights: Sequence[Sequence[Tuple[Tensor, Tensor]]],
+                         precision: str = 'ieee') -> Tensor:
+    """Run one band network per band over every pixel's coefficients.
+
+    Args:
+        coeffs: ``(N, C)`` float32 coefficients of ``N`` pixels, the bands
+            side by side (``C = sum(lengths)``), on CUDA (on the CPU under
+            the interpreter).
+        lengths: ``L`` of each band.
+        weights: per band, the three convolutions' ``(weight, bias)``:
+            ``(H, 1, 3)``, ``(H, H, 3)``, ``(1, H, 3)`` and ``(H,)``,
+            ``(H,)``, ``(1,)``, float32.
+        precision: of the ``H x H`` products (:func:`dot_precision`).
+
+    Returns:
+        ``(N, C)``: each band's network output in place of its input.
+        Gradients flow to ``coeffs`` and every parameter.
+    """
+    reason = unavailable() or unsupported_tensor(coeffs)
+    if reason:
+        raise ValueError(f'the Triton band network kernel cannot run here: '
+                         f'{reason}')
+    if precision not in TOLERANCES:
+        raise ValueError(f'precision must be one of {list(TOLERANCES)}, got '
+                         f'{precision!r}')
+    if len(weights) != len(lengths) or sum(lengths) != coeffs.shape[1] or \
+            min(lengths, default=1) < 1:
+        raise ValueError(
+            f'{len(weights)} band networks and bands of lengths '
+            f'{list(lengths)} do not fit coefficients shaped '
+            f'{tuple(coeffs.shape)}')
+    hidden = weights[0][0][0].shape[0]
+    expected = [(hidden, 1, 3), (hidden, ), (hidden, hidden, 3), (hidden, ),
+                (1, hidden, 3), (1, )]
+    params = [t for band in weights for layer in band for t in layer]
+    for band in weights:
+        shapes = [tuple(t.shape) for layer in band for t in layer]
+        if shapes != expected:
+            raise ValueError(f'the Triton kernel runs conv 1->H, H->H, H->1 '
+                             f'(kernel 3) band networks: expected parameter '
+                             f'shapes {expected}, got {shapes}')
+        reason = unsupported_network(1, 3, hidden, 1)
+        if reason:
+            raise ValueError(f'the Triton band network kernel: {reason}')
+    if any(p.dtype != torch.float32 or p.device != coeffs.device
+           for p in params):
+        raise ValueError('the Triton kernel needs float32 parameters on '
+                         f'{coeffs.device}')
+    return _TritonBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
+                                     precision, *params)
