@@ -40,7 +40,8 @@ def test_cli_prints_the_table_and_writes_json(tmp_path):
         cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     table = proc.stdout
-    for header in ('params (M)', 'GFLOPs', 'enh. GFLOPs', 'latency ms (b1)',
+    for header in ('params (M)', 'enh. backend', 'GFLOPs', 'enh. GFLOPs',
+                   'latency ms (b1)',
                    'throughput img/s', 'train step ms', 'enh. share',
                    'peak mem MB'):
         assert header in table
@@ -55,6 +56,10 @@ def test_cli_prints_the_table_and_writes_json(tmp_path):
     wgse = MODELS.build(dict(type='WGSE', dim=2, wavelet='db8', level=5,
                              mode='zero', kernel_size=3, hidden_channels=32))
     assert result['enhancer'] == 'WGSE'
+    assert result['enhancer_backend'] == 'torch'  # dim=2: nn.Conv3d
+    row, = [line for line in table.splitlines()
+            if line.startswith('| segformer_b0_wgse')]
+    assert row.split('|')[6].strip() == 'torch'  # the 'enh. backend' cell
     assert result['enhancer_params'] == count(wgse)
     assert result['num_steps'] == 9 and result['crop'] == [32, 64]
     assert result['batch_size'] == 4
@@ -103,6 +108,12 @@ def test_flops_split_between_enhancer_and_segmentor():
     with_wgse = count_flops(raw, 9, (32, 64))
     assert with_wgse['enhancer'] > 0
     assert with_wgse['total'] == base['total'] + with_wgse['enhancer']
+
+    # dim=1 with backend='auto': the compiled kernel is opaque to tracing,
+    # so while tracing 'auto' runs the nn.Conv1d modules, which are counted
+    raw.data_preprocessor.enhancer = MODELS.build(dict(type='WGSE'))
+    wgse_1d = count_flops(raw, 9, (32, 64))
+    assert wgse_1d['enhancer'] > 0 and wgse_1d['note'] is None
 
 
 class Untraceable(nn.Module):

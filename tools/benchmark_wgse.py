@@ -5,18 +5,19 @@ The reference is the public WGSE implementation's design, rebuilt here only:
 every pixel's time series ``(B*H*W, 1, T)``, one ``nn.Conv1d`` band network
 per band on the whole batch, ``DWT1DInverse`` back (``T + 1`` samples for odd
 ``T``; the extra one is dropped for the comparison). It uses the same band
-network weights as the package's ``WGSE``, so outputs must agree. On the CPU
-``WGSE`` runs its band networks as the compiled kernel
-(``wgse_mmseg.models.compiled_band_networks``) where it is built, and the
-row ``WGSE, torch kernel`` runs the torch-operation kernel an install
-without a C compiler gets; both recompute activations in the backward pass
-whatever ``with_cp`` says, so there is no separate checkpointing row.
+network weights as the package's ``WGSE``, so outputs must agree. Each
+further row is ``WGSE`` with one band-network backend
+(``wgse_mmseg.models.band_network_backends``): by default every backend
+that can run on ``--device`` here (CPU: ``torch`` and, where the extension
+is built, ``compiled``; CUDA: ``torch`` and, where triton imports,
+``triton``). Every backend recomputes hidden activations in the backward
+pass.
 
 Each measurement runs in a fresh process: peak memory is the growth of the
 process's peak resident set (on ``--device cuda``: of CUDA memory allocated)
 during the first forward+backward after set-up (inputs and model already
-built), time the median (and min-max) wall time of ``--repeat`` further
-forward+backward passes after one warm-up.
+built), also per pixel (``B*H*W``); time the median (and min-max) wall time
+of ``--repeat`` further forward+backward passes after one warm-up.
 
     python tools/benchmark_wgse.py                          # the issue's shapes
     python tools/benchmark_wgse.py --shapes 4x41x64x64 --repeat 3
@@ -40,11 +41,10 @@ import torch
 
 IMPLEMENTATIONS = {
     'reference': 'pytorch_wavelets + per-pixel nn.Conv1d',
-    'wgse': 'wgse_mmseg WGSE',
-    'wgse_torch_kernel': 'wgse_mmseg WGSE, torch kernel',
+    'torch': "WGSE, backend='torch'",
+    'compiled': "WGSE, backend='compiled'",
+    'triton': "WGSE, backend='triton'",
 }
-#: Rows that exist on the CPU only: the band networks' CPU kernels.
-CPU_ONLY = ('wgse_torch_kernel', )
 DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
 
 
@@ -69,6 +69,8 @@ class ReferenceWGSE(torch.nn.Module):
         self.dwt = DWT1DForward(J=model.level, wave=model.wavelet, mode='zero')
         self.idwt = DWT1DInverse(wave=model.wavelet, mode='zero')
         self.band_networks = model.band_networks
+        #: the WGSE module whose band networks this shares (not a submodule)
+        self.__dict__['wgse'] = model
 
     def forward(self, spikes: torch.Tensor) -> torch.Tensor:
         batch, steps, height, width = spikes.shape
@@ -83,20 +85,26 @@ class ReferenceWGSE(torch.nn.Module):
         return out.reshape(batch, height, width, -1).permute(0, 3, 1, 2)
 
 
+def available_backends(device: str) -> List[str]:
+    """The backends that can run WGSE's default network on ``device``."""
+    import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
+    from wgse_mmseg.models import WGSE, band_network_backends
+    networks = WGSE().band_networks
+    probe = torch.zeros(1, 1, sum(1 for _ in networks), device=device)
+    return [name for name, backend in band_network_backends.BACKENDS.items()
+            if backend.cannot_run(networks, probe) is None]
+
+
 def _build(impl: str, shape: List[int], device: str):
     import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
     from wgse_mmseg.models import WGSE
     torch.manual_seed(0)
-    model = WGSE()
+    model = WGSE(backend='auto' if impl == 'reference' else impl)
     spikes = (torch.rand(shape, generator=torch.Generator().manual_seed(1))
               < 0.3).float().to(device)
     model.to(device)
     if impl == 'reference':
-        return ReferenceWGSE(model), spikes
-    if impl == 'wgse_torch_kernel':
-        # what an install without the compiled extension runs
-        from wgse_mmseg.models import compiled_band_networks
-        compiled_band_networks.COMPILED_KERNEL = False
+        return ReferenceWGSE(model).to(device), spikes
     return model, spikes
 
 
@@ -133,7 +141,10 @@ def worker(impl: str, shape: List[int], repeat: int, device: str) -> Dict:
         _step(model, spikes)
         _synchronize(device)
         times.append(time.perf_counter() - start)
-    return dict(impl=impl, shape=shape, device=device, peak_mib=peak_mib,
+    pixels = shape[0] * shape[2] * shape[3]
+    return dict(impl=impl, backend=getattr(model, 'backend_in_use', None),
+                shape=shape, device=device, peak_mib=peak_mib,
+                kib_per_pixel=peak_mib * 1024 / pixels,
                 median_s=statistics.median(times), min_s=min(times),
                 max_s=max(times), repeat=repeat)
 
@@ -141,8 +152,8 @@ def worker(impl: str, shape: List[int], repeat: int, device: str) -> Dict:
 def agreement(shape: List[int], device: str) -> Dict:
     """Max |WGSE - reference| over the output (the reference's extra sample
     for odd T dropped) and the band networks' gradients, same weights."""
-    model, spikes = _build('wgse', shape, device)
-    reference = ReferenceWGSE(model)
+    reference, spikes = _build('reference', shape, device)
+    model = reference.wgse
     results = []
     for module in (model, reference):
         model.zero_grad(set_to_none=True)
@@ -153,8 +164,9 @@ def agreement(shape: List[int], device: str) -> Dict:
     (out, grads), (ref_out, ref_grads) = results
     grad_err = max(((g - r).abs().max() / r.abs().max().clamp_min(1e-12)
                     ).item() for g, r in zip(grads, ref_grads))
-    return dict(shape=shape, max_abs_output_diff=(out - ref_out).abs().max()
-                .item(), max_output=ref_out.abs().max().item(),
+    return dict(shape=shape, backend=model.backend_in_use,
+                max_abs_output_diff=(out - ref_out).abs().max().item(),
+                max_output=ref_out.abs().max().item(),
                 max_rel_grad_diff=grad_err)
 
 
@@ -187,8 +199,8 @@ def main(argv=None) -> int:
                         ' '.join(DEFAULT_SHAPES))
     parser.add_argument('--repeat', type=int, default=3)
     parser.add_argument('--impls', nargs='+', choices=list(IMPLEMENTATIONS),
-                        help='rows to run (default: all; on cuda, all but '
-                        'the CPU kernel rows)')
+                        help='rows to run (default: the reference and every '
+                        'backend that can run on --device here)')
     parser.add_argument('--device', choices=['cpu', 'cuda'], default='cpu')
     parser.add_argument('--out', help='also write the results as JSON')
     parser.add_argument('--worker', nargs='+', help=argparse.SUPPRESS)
@@ -206,17 +218,22 @@ def main(argv=None) -> int:
         parser.error('--repeat must be >= 1')
     if args.device == 'cuda' and not torch.cuda.is_available():
         parser.error('--device cuda: torch sees no CUDA device here')
+    backends = available_backends(args.device)
     if args.impls is None:
-        args.impls = [impl for impl in IMPLEMENTATIONS
-                      if args.device == 'cpu' or impl not in CPU_ONLY]
+        args.impls = ['reference'] + backends
+    missing = [impl for impl in args.impls
+               if impl != 'reference' and impl not in backends]
+    if missing:
+        parser.error(f'--impls {" ".join(missing)}: cannot run on '
+                     f'{args.device} here (available: {", ".join(backends)})')
 
     info = machine(args.device)
     print('WGSE forward+backward (db8, 5 levels, zero mode, kernel 3, '
           '32 channels)')
     print(' | '.join(f'{k}: {v}' for k, v in info.items()))
     header = (f'{"shape":>14} {"implementation":<40} {"median s":>9} '
-              f'{"min-max s":>13} {"peak MiB":>9} {"speed-up":>9} '
-              f'{"memory":>7}')
+              f'{"min-max s":>13} {"peak MiB":>9} {"KiB/px":>7} '
+              f'{"speed-up":>9} {"memory":>7}')
     print(header)
     print('-' * len(header))
     rows, checks = [], []
@@ -237,12 +254,14 @@ def main(argv=None) -> int:
             print(f'{text:>14} {IMPLEMENTATIONS[impl]:<40} '
                   f'{res["median_s"]:>9.3f} '
                   f'{res["min_s"]:>6.3f}-{res["max_s"]:<6.3f} '
-                  f'{res["peak_mib"]:>9.0f} {speed:>9} {mem:>7}')
+                  f'{res["peak_mib"]:>9.0f} {res["kib_per_pixel"]:>7.1f} '
+                  f'{speed:>9} {mem:>7}')
             rows.append(res)
         if 'reference' in args.impls:
             check = _run_worker(['agree', text, '--device', args.device])
             checks.append(check)
-            print(f'{"":>14} output agreement: max |WGSE - reference| = '
+            print(f'{"":>14} output agreement ({check["backend"]}): max '
+                  f'|WGSE - reference| = '
                   f'{check["max_abs_output_diff"]:.2e} (outputs up to '
                   f'{check["max_output"]:.2f}); band-network gradients: max '
                   f'relative difference {check["max_rel_grad_diff"]:.2e}')

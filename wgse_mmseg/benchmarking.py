@@ -439,7 +439,10 @@ def benchmark_config(config: str, device: str = 'cpu',
     enhancer_cfg = cfg.model.data_preprocessor.get('enhancer')
     return dict(
         config=config, enhancer=None if enhancer_cfg is None else
-        enhancer_cfg.get('type'), num_steps=num_steps, crop=list(size),
+        enhancer_cfg.get('type'),
+        # what ran the enhancer's band networks in the training steps
+        enhancer_backend=getattr(_enhancer(model), 'backend_in_use', None),
+        num_steps=num_steps, crop=list(size),
         batch_size=batch_size, params=parameters['total'],
         enhancer_params=parameters['enhancer'], flops=flops['total'],
         enhancer_flops=flops['enhancer'],
@@ -523,7 +526,7 @@ def format_results(results: Sequence[Dict[str, Any]]) -> str:
     """The benchmark table (Markdown) of one or more results of
     :func:`benchmark_config`, with the environment beneath it."""
     headers = ['config', 'T', 'crop', 'params (M)', 'enh. params',
-               'GFLOPs', 'enh. GFLOPs', 'latency ms (b1)',
+               'enh. backend', 'GFLOPs', 'enh. GFLOPs', 'latency ms (b1)',
                'throughput img/s', 'train step ms', 'enh. share',
                'peak mem MB']
     rows = []
@@ -534,7 +537,8 @@ def format_results(results: Sequence[Dict[str, Any]]) -> str:
             os.path.splitext(os.path.basename(r['config']))[0],
             r['num_steps'], '{}x{}'.format(*r['crop']),
             f"{r['params'] / 1e6:.3f}", r['enhancer_params'],
-            _giga(r['flops']), _giga(r['enhancer_flops']),
+            r.get('enhancer_backend') or '-', _giga(r['flops']),
+            _giga(r['enhancer_flops']),
             _timing(r['latency_ms']),
             _timing(r['throughput_img_s'], 2) + f" (b{r['batch_size']})",
             _timing(r['train_step_ms']) + f" (b{r['batch_size']})", share,

@@ -17,7 +17,8 @@ differ in where they run and how fast:
   CUDA, where triton imports; the paper's network shape.
 
 ``'auto'`` picks ``triton`` for CUDA tensors and ``compiled`` for CPU
-tensors where they can run the call, and ``torch`` otherwise. Naming a
+tensors where they can run the call, and ``torch`` otherwise (and while
+``torch.jit`` traces, so that FLOP counters see the convolutions). Naming a
 backend that cannot run a call is an error that says why and lists the
 choices; nothing falls back silently then.
 
@@ -245,6 +246,8 @@ def resolve_backend(name: str, networks: Sequence[nn.Module],
     """
     backend = get_backend(name, networks)
     if backend is None:
+        if torch.jit.is_tracing():  # FLOP counters, jit.trace: see convs
+            return BACKENDS['torch']
         preferred = BACKENDS.get(_AUTO.get(coeffs.device.type, 'torch'))
         if preferred.cannot_run(networks, coeffs) is None:
             return preferred
