@@ -68,12 +68,12 @@ if __name__ == '__main__':
         # Two small CPU kernels: the simulator's one-pass integrate-and-fire
         # and WGSE's band networks. Optional: without a C compiler the
         # install goes on and each falls back to its torch path (the same
-        # results, slower): see simulation.fixed_point.COMPILED_KERNEL and
-        # models.compiled_band_networks.COMPILED_KERNEL.
+        # results, slower): see core.simulation.fixed_point.COMPILED_KERNEL
+        # and core.wgse.compiled_band_networks.COMPILED_KERNEL.
         ext_modules=[
             Extension(f'wgse_mmseg.{name}', [f'wgse_mmseg/{name.replace(".", "/")}.c'],
                       extra_compile_args=['-O3'], optional=True)
-            for name in ('simulation._integrate_and_fire', 'models._band_networks')
+            for name in ('core.simulation._integrate_and_fire', 'core.wgse._band_networks')
         ],
         zip_safe=False,
     )

@@ -8,7 +8,7 @@ import sys
 import pytest
 import torch
 
-from wgse_mmseg.models import compiled_band_networks
+from wgse_mmseg.core.wgse import compiled_band_networks
 
 pytest.importorskip('pytorch_wavelets')
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))

@@ -15,8 +15,8 @@ from wgse_mmseg.datasets.cityscapes_conversion import (
     CITYSCAPES_LABELS, LABEL_ID_TO_TRAIN_ID, ConversionSettings,
     convert_cityscapes, find_samples, labelids_to_trainids, load_scene,
     resize_nearest, sample_effects, sample_seed)
-from wgse_mmseg.io import load_spikes
-from wgse_mmseg.simulation import simulate_spikes
+from wgse_mmseg.core.io import load_spikes
+from wgse_mmseg.core.simulation import simulate_spikes
 
 REPO_ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 SIZE = (64, 128)  # source frames, H x W

@@ -1,7 +1,10 @@
 """mmcv.ops fallback (mmcv-lite) and weights-only loading of checkpoints."""
 import importlib.util
 import io
+import os
 import pickle
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -79,3 +82,34 @@ def test_getattr_stays_restricted_to_history_buffer_statistics():
     buffer.seek(0)
     with pytest.raises(pickle.UnpicklingError, match='getattr'):
         torch.load(buffer, weights_only=True)
+
+
+def test_patches_are_applied_once_and_can_be_turned_off():
+    """``WGSE_MMSEG_NO_COMPAT=1``: torch's allowlist is left alone and no
+    ``mmcv.ops`` stand-in is installed; core still imports (and under
+    mmcv-lite the MMSeg layer's absence is explained, not a crash)."""
+    code = (
+        'import sys, warnings, torch\n'
+        'before = len(torch.serialization.get_safe_globals())\n'
+        'with warnings.catch_warnings(record=True) as caught:\n'
+        '    warnings.simplefilter("always")\n'
+        '    import wgse_mmseg\n'
+        'from wgse_mmseg.compat import apply_compat\n'
+        'assert apply_compat() is False\n'
+        'assert len(torch.serialization.get_safe_globals()) == before\n'
+        'ops = sys.modules.get("mmcv.ops")\n'
+        'assert not getattr(ops, "__wgse_fallback__", False)\n'
+        'print([str(w.message) for w in caught if "MMSeg layer" in '
+        'str(w.message)])\n'
+        'wgse_mmseg.core.WGSE()(torch.zeros(1, 9, 2, 2))\n')
+    env = dict(os.environ, WGSE_MMSEG_NO_COMPAT='1')
+    proc = subprocess.run([sys.executable, '-c', code], capture_output=True,
+                          text=True, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    if importlib.util.find_spec('mmcv._ext') is None:  # mmcv-lite
+        assert 'WGSE_MMSEG_NO_COMPAT is set' in proc.stdout
+    # and by default, applying again changes nothing
+    from wgse_mmseg.compat import apply_compat
+    count = len(torch.serialization.get_safe_globals())
+    assert apply_compat() is True
+    assert len(torch.serialization.get_safe_globals()) == count

@@ -16,7 +16,7 @@ from mmseg.registry import MODELS
 from mmseg.structures import SegDataSample
 from wgse_mmseg.config import load_config
 from wgse_mmseg.datasets import SpikeCityscapesDataset
-from wgse_mmseg.io import save_spikes
+from wgse_mmseg.core.io import save_spikes
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 EXAMPLE = osp.join(ROOT, 'configs', 'examples', 'deeplabv3plus_r18_wgse.py')

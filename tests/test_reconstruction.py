@@ -24,12 +24,12 @@ from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
                                    gaussian_window, psnr, ssim)
 from wgse_mmseg.evaluation.reconstruction_benchmark import (benchmark,
                                                             format_table)
-from wgse_mmseg.io import load_spikes, save_spikes
+from wgse_mmseg.core.io import load_spikes, save_spikes
 from wgse_mmseg.models.reconstruction import (DEFAULT_WEIGHTS,
                                               SpikeReconstructor,
                                               export_weights,
                                               load_reconstructor)
-from wgse_mmseg.reconstruction_baselines import tfi, tfp
+from wgse_mmseg.core.reconstruction_baselines import tfi, tfp
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 

@@ -9,7 +9,7 @@ from mmcv.transforms import Compose
 from mmseg.registry import TRANSFORMS
 from wgse_mmseg.datasets import (LoadSpikeFromFile, SpikeRandomCrop,
                                  SpikeRandomFlip)
-from wgse_mmseg.io import load_spikes, save_spikes
+from wgse_mmseg.core.io import load_spikes, save_spikes
 
 T = 129
 

@@ -19,7 +19,7 @@ from mmengine.config import DictAction
 
 from wgse_mmseg.benchmarking import (benchmark_config, format_results,
                                      run_isolated)
-from wgse_mmseg.io import atomic_output
+from wgse_mmseg.core.io import atomic_output
 
 
 def parse_args():

@@ -12,7 +12,7 @@ Prints two tables:
    kernel is built, the base model also runs on the torch path (as without
    it, and as on a GPU); both must give the same spikes.
 2. Time to load one ``--load-shape`` sample (default 129x512x1024) from
-   each format with :func:`wgse_mmseg.io.load_spikes` (files just written,
+   each format with :func:`wgse_mmseg.core.io.load_spikes` (files just written,
    so from the page cache: decoding, not the disk), against simulating it.
 
 Each time is the median of ``--repeat`` runs after one warm-up run. The
@@ -37,12 +37,12 @@ import cv2
 import numpy as np
 import torch
 
-from wgse_mmseg.benchmarking import cpu_model
-from wgse_mmseg.io import load_spikes, save_spikes
-from wgse_mmseg.simulation import fixed_point, simulate_spikes
+from wgse_mmseg.core.constants import REDS_THRESHOLD
+from wgse_mmseg.core.io import load_spikes, save_spikes
+from wgse_mmseg.core.machine import cpu_model
+from wgse_mmseg.core.simulation import fixed_point, simulate_spikes
 from wgse_mmseg.synthetic import render_street_scene
 
-THRESHOLD = 1 / 0.6  # the REDS convention: white fires 0.6 spikes per step
 LOAD_FORMATS = ('.dat', '.spk', '.npy', '.npz')
 
 
@@ -131,7 +131,7 @@ def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
     rows = []
     for name, frames in inputs.items():
         timing = median_time(
-            lambda: numpy_step_loop(frames, args.steps, THRESHOLD, 0),
+            lambda: numpy_step_loop(frames, args.steps, REDS_THRESHOLD, 0),
             args.repeat)
         reference[name] = timing.wall
         rows.append(('NumPy step loop', name, timing, timing.result))
@@ -158,7 +158,7 @@ def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
     for case, name, effects in cases:
         with torch_path(case.endswith('torch path')):
             timing = median_time(
-                lambda: simulate_spikes(inputs[name], args.steps, THRESHOLD,
+                lambda: simulate_spikes(inputs[name], args.steps, REDS_THRESHOLD,
                                         effects=effects, seed=0,
                                         device=args.device), args.repeat)
         rows.append((case, name, timing, timing.result[0]))
@@ -189,7 +189,7 @@ def load_rows(args, still: np.ndarray) -> List[str]:
     frame = cv2.resize(still[0], (width, height),
                        interpolation=cv2.INTER_LINEAR)[None]
     simulated = median_time(
-        lambda: simulate_spikes(frame, steps, THRESHOLD, seed=0,
+        lambda: simulate_spikes(frame, steps, REDS_THRESHOLD, seed=0,
                                 device=args.device), args.repeat)
     spikes = simulated.result[0]
     lines = [f'{"T x H x W = " + "x".join(map(str, args.load_shape)):29s} '

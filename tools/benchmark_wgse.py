@@ -7,7 +7,7 @@ per band on the whole batch, ``DWT1DInverse`` back (``T + 1`` samples for odd
 ``T``; the extra one is dropped for the comparison). It uses the same band
 network weights as the package's ``WGSE``, so outputs must agree. Each
 further row is ``WGSE`` with one band-network backend
-(``wgse_mmseg.models.band_network_backends``): by default every backend
+(``wgse_mmseg.core.wgse.band_network_backends``): by default every backend
 that can run on ``--device`` here (CPU: ``torch`` and, where the extension
 is built, ``compiled``; CUDA: ``torch`` and, where triton imports,
 ``triton``). Every backend recomputes hidden activations in the backward
@@ -88,7 +88,7 @@ class ReferenceWGSE(torch.nn.Module):
 def available_backends(device: str) -> List[str]:
     """The backends that can run WGSE's default network on ``device``."""
     import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
-    from wgse_mmseg.models import WGSE, band_network_backends
+    from wgse_mmseg.core.wgse import WGSE, band_network_backends
     networks = WGSE().band_networks
     probe = torch.zeros(1, 1, sum(1 for _ in networks), device=device)
     return [name for name, backend in band_network_backends.BACKENDS.items()
@@ -97,7 +97,7 @@ def available_backends(device: str) -> List[str]:
 
 def _build(impl: str, shape: List[int], device: str):
     import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
-    from wgse_mmseg.models import WGSE
+    from wgse_mmseg.core.wgse import WGSE
     torch.manual_seed(0)
     model = WGSE(backend='auto' if impl == 'reference' else impl)
     spikes = (torch.rand(shape, generator=torch.Generator().manual_seed(1))
@@ -179,7 +179,7 @@ def _run_worker(args: List[str]) -> Dict:
 
 
 def machine(device: str) -> Dict:
-    from wgse_mmseg.benchmarking import cpu_model
+    from wgse_mmseg.core.machine import cpu_model
     import pytorch_wavelets
     gpu = {} if device == 'cpu' else dict(
         gpu=torch.cuda.get_device_name(), cuda=torch.version.cuda)

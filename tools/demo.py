@@ -4,7 +4,7 @@
         [--device cpu] [--opacity 0.5] [--height H --width W]
         [--cfg-options num_steps=41 ...]
 
-``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.io` reads (``.spk``, ``.npy``,
+``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.spk``, ``.npy``,
 ``.npz``; ``.dat`` needs ``--height``/``--width`` or a ``<file>.json`` side
 file). It goes through the config's test pipeline, so ``LoadSpikeFromFile``
 takes the window of ``num_steps`` frames centred on the middle frame, exactly
@@ -34,7 +34,7 @@ from mmengine.runner import load_checkpoint
 from mmseg.apis import init_model
 from wgse_mmseg.config import load_config
 from wgse_mmseg.datasets import SpikeCityscapesDataset
-from wgse_mmseg.io import write_png
+from wgse_mmseg.core.io import write_png
 
 
 def parse_args():

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from reconstruct import to_uint8, window_start
-from wgse_mmseg.io import SpikeFileError, load_spikes, spike_shape, write_png
+from wgse_mmseg.core.io import SpikeFileError, load_spikes, spike_shape, write_png
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
                                               reconstruction_method)
 

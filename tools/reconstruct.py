@@ -4,7 +4,7 @@
         [--checkpoint CKPT] [--height H --width W] [--frames 150,...]
         [--num-steps 41] [--device cpu]
 
-``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.io` reads (``.dat``, ``.spk``,
+``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat``, ``.spk``,
 ``.npy``, ``.npz``; a ``.dat`` needs ``--height``/``--width`` or a
 ``<file>.json`` side file). For each requested centre frame (default: the
 middle frame) the window of ``--num-steps`` frames centred on it goes through
@@ -24,7 +24,7 @@ import sys
 import numpy as np
 
 from wgse_mmseg.evaluation import entropy_2d
-from wgse_mmseg.io import SpikeFileError, load_spikes, spike_shape, write_png
+from wgse_mmseg.core.io import SpikeFileError, load_spikes, spike_shape, write_png
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
                                               reconstruction_method)
 

@@ -35,7 +35,7 @@ from typing import Any, Dict, List, NamedTuple, Optional, Tuple
 from mmengine.config import Config
 
 from wgse_mmseg.benchmarking import markdown_table, validation_cost
-from wgse_mmseg.io import atomic_output
+from wgse_mmseg.core.io import atomic_output
 
 REPO_ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 METRICS = ('mIoU', 'mAcc', 'aAcc')

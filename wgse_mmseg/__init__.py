@@ -1,16 +1,50 @@
 """wgse_mmseg: spike-camera data and WGSE for MMSegmentation.
 
-Importing the package registers everything with MMSeg's registries
-(``custom_imports=dict(imports=['wgse_mmseg'])`` in a config does the same).
-Where mmcv's compiled ops are missing (mmcv-lite), it first supplies the few
-``mmcv.ops`` names MMSeg imports at module level, and says so once.
+Two layers:
+
+* :mod:`wgse_mmseg.core` needs only torch and numpy: spike I/O, wavelets,
+  representations, WGSE and its kernels, the simulator;
+* the MMSeg layer (:mod:`.datasets`, :mod:`.models`, :mod:`.evaluation`)
+  registers them, and the datasets, transforms, data preprocessor and
+  metrics, with MMSeg's registries.
+
+Importing the package imports core and, where mmengine, mmsegmentation and
+mmcv are installed, the MMSeg layer, so that
+``custom_imports=dict(imports=['wgse_mmseg'])`` in a config registers
+everything; before that it applies the compatibility patches of
+:mod:`wgse_mmseg.compat` (once per process; ``WGSE_MMSEG_NO_COMPAT=1``
+turns them off). Without that stack the MMSeg layer's names raise an
+ImportError that says what to install.
 """
-from .compat import allow_mmengine_checkpoints, install_mmcv_ops_fallback
+import warnings
+
+from . import core
+from ._openmmlab import missing_openmmlab, require_openmmlab
 from .version import __version__
 
-install_mmcv_ops_fallback()
-allow_mmengine_checkpoints()
+_MMSEG_LAYER = ('datasets', 'evaluation', 'models')
+#: why the MMSeg layer did not import although the stack is installed
+_LAYER_ERROR = None
 
-from . import datasets, evaluation, models  # noqa: E402  (registers the modules)
+if not missing_openmmlab():
+    from .compat import OPT_OUT, apply_compat
+    applied = apply_compat()
+    try:
+        from . import datasets, evaluation, models  # noqa: F401 (registers)
+    except ImportError as error:  # e.g. mmcv-lite with the patches off
+        _LAYER_ERROR = (f'the MMSeg layer of wgse_mmseg did not import: '
+                        f'{error}' + ('' if applied else
+                                      f' ({OPT_OUT} is set: MMSeg then '
+                                      f'needs full mmcv)'))
+        warnings.warn(_LAYER_ERROR + '; wgse_mmseg.core still works')
 
-__all__ = ["__version__", "datasets", "evaluation", "models"]
+
+def __getattr__(name):
+    if name in _MMSEG_LAYER:  # only reached where the layer is missing
+        if _LAYER_ERROR:
+            raise ImportError(_LAYER_ERROR)
+        require_openmmlab(f'wgse_mmseg.{name}')
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+
+
+__all__ = ['__version__', 'core', 'datasets', 'evaluation', 'models']

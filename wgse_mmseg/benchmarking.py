@@ -68,9 +68,9 @@ from mmengine.structures import PixelData
 from mmseg.registry import DATASETS, MODELS
 from mmseg.structures import SegDataSample
 from .config import load_config
+from .core.machine import cpu_model
 
 __all__ = [
-    'cpu_model',
     'summarize', 'time_calls', 'make_spike_batch', 'build_model',
     'inference_parameters', 'count_flops', 'measure_latency',
     'measure_throughput', 'measure_train_step', 'measure_enhancer_step',
@@ -353,18 +353,6 @@ def measure_enhancer_step(model: nn.Module, num_steps: int,
     seconds = time_calls(step, device, repeat, warmup)
     enhancer.zero_grad(set_to_none=True)
     return summarize([1e3 * s for s in seconds])
-
-
-def cpu_model() -> str:
-    """The CPU's model name (``/proc/cpuinfo``), else what platform says."""
-    try:
-        with open('/proc/cpuinfo') as f:
-            for line in f:
-                if line.startswith('model name'):
-                    return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def _package_version(name: str, *alternatives: str) -> str:

@@ -3,7 +3,7 @@
 Each sample is a street-like scene (sky, buildings with windows, vegetation,
 poles and signs, sidewalk, road with lane marks) with cars and pedestrians
 moving across it. The scene is rendered at several instants, turned into a
-spike stream by :func:`wgse_mmseg.simulation.simulate_spikes`, and labelled
+spike stream by :func:`wgse_mmseg.core.simulation.simulate_spikes`, and labelled
 with Cityscapes train ids at the middle instant, where the stream is centred.
 Everything is seeded: the same arguments give the same files.
 """
@@ -14,8 +14,9 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .io import save_spikes, write_png
-from .simulation import simulate_spikes
+from .core.constants import REDS_THRESHOLD
+from .core.io import save_spikes, write_png
+from .core.simulation import simulate_spikes
 
 __all__ = ['render_street_scene', 'make_synthetic_dataset']
 
@@ -122,7 +123,7 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                            num_val: int = 12, height: int = 128,
                            width: int = 256, num_steps: int = 41,
                            num_frames: int = 5,
-                           threshold: float = 1 / 0.6, seed: int = 0,
+                           threshold: float = REDS_THRESHOLD, seed: int = 0,
                            progress: bool = True) -> int:
     """Write a Spike-Cityscapes-layout dataset to ``out_dir``.
 

@@ -1,5 +1,42 @@
-"""Adapters between the pinned OpenMMLab stack and this machine's torch/mmcv."""
+"""The compatibility patches the MMSeg layer needs, in one place.
+
+Two changes to the process, both made by :func:`apply_compat`, which
+``import wgse_mmseg`` calls once before it imports MMSeg:
+
+* :func:`install_mmcv_ops_fallback`: where mmcv's compiled ops are missing
+  (mmcv-lite), a stand-in ``mmcv.ops`` with the few names MMSeg imports at
+  module level (nothing is replaced under full mmcv);
+* :func:`allow_mmengine_checkpoints`: torch's weights-only unpickler learns
+  exactly the classes mmengine checkpoints hold, so resuming works under
+  torch >= 2.6 with weights-only loading still on.
+
+``WGSE_MMSEG_NO_COMPAT=1`` in the environment turns both off (then MMSeg
+needs full mmcv, and resuming a checkpoint needs
+``torch.serialization.add_safe_globals`` done by the user).
+:mod:`wgse_mmseg.core` applies neither.
+"""
+import os
+
 from .checkpoint_safety import allow_mmengine_checkpoints
 from .mmcv_ops_fallback import install_mmcv_ops_fallback
 
-__all__ = ['allow_mmengine_checkpoints', 'install_mmcv_ops_fallback']
+__all__ = ['apply_compat', 'allow_mmengine_checkpoints',
+           'install_mmcv_ops_fallback', 'OPT_OUT']
+
+#: the environment variable that turns the patches off
+OPT_OUT = 'WGSE_MMSEG_NO_COMPAT'
+_applied = False
+
+
+def apply_compat() -> bool:
+    """Apply both patches, once per process, unless :data:`OPT_OUT` is set
+    to something other than ``''`` or ``'0'``. Returns whether they are
+    applied."""
+    global _applied
+    if os.environ.get(OPT_OUT, '') not in ('', '0'):
+        return False
+    if not _applied:
+        install_mmcv_ops_fallback()
+        allow_mmengine_checkpoints()
+        _applied = True
+    return True

@@ -51,8 +51,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from ..io import atomic_output, save_spikes, spike_shape, write_png
-from ..simulation import parse_effects, read_scene_file, simulate_spikes
+from ..core.constants import READOUT_HZ, REDS_THRESHOLD
+from ..core.io import atomic_output, save_spikes, spike_shape, write_png
+from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = [
     'CITYSCAPES_LABELS', 'LABEL_ID_TO_TRAIN_ID', 'CityscapesSample',
@@ -62,7 +63,6 @@ __all__ = [
 ]
 
 CITYSCAPES_FPS = 17.0  # leftImg8bit_sequence frame rate
-SPIKE_READOUT_HZ = 40000.0  # spike camera readout rate
 ANNOTATED_INDEX = 19  # the annotated frame is the 20th of a 30-frame snippet
 SNIPPET_LENGTH = 30
 IGNORE_INDEX = 255
@@ -144,7 +144,7 @@ class ConversionSettings:
     height: int = 512
     width: int = 1024
     num_steps: int = 129
-    threshold: float = 1 / 0.6
+    threshold: float = REDS_THRESHOLD
     frames_around: int = 1
     scene: Dict[str, Optional[dict]] = field(default_factory=dict)
     seed: int = 0
@@ -369,7 +369,7 @@ def _recipe(sample: CityscapesSample, settings: ConversionSettings,
         seed=sample_seed(sample.stem, settings.seed),
         effects=sample_effects(sample, settings.scene),
         time_span=dict(
-            readout_seconds=settings.num_steps / SPIKE_READOUT_HZ,
+            readout_seconds=settings.num_steps / READOUT_HZ,
             scene_seconds=scene_seconds if sample.sequence else 0.0,
             frames_around=settings.frames_around if sample.sequence else 0))
     return json.loads(json.dumps(recipe))

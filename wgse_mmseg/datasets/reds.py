@@ -4,13 +4,13 @@ Both datasets give samples of a ``num_steps``-frame spike window (41 in the
 literature) and the sharp grey image at its centre frame, on the intensity
 scale of the synthesized REDS spike set: a white pixel fires 0.6 spikes per
 step, so the window's spike rate / 0.6 is the image (see
-:mod:`wgse_mmseg.reconstruction_baselines`).
+:mod:`wgse_mmseg.core.reconstruction_baselines`).
 
 * :class:`REDSSpikeDataset`: files in the REDS layout
   (``spike/<name>.dat`` beside ``gt/<name>.png``).
 * :class:`SimulatedSpikeImageDataset`: any folder of still images, moved
   along random smooth trajectories (shift, rotation, zoom) and turned into
-  spikes by :func:`wgse_mmseg.simulation.simulate_spikes`, so that a user
+  spikes by :func:`wgse_mmseg.core.simulation.simulate_spikes`, so that a user
   without REDS can train.
 
 In a pipeline the spikes live in ``results['img']`` ``(H, W, T)`` uint8 (as
@@ -32,8 +32,8 @@ from mmengine.dataset import BaseDataset
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
-from ..reconstruction_baselines import REDS_WHITE_RATE
-from ..simulation import simulate_spikes
+from ..core.constants import REDS_WHITE_RATE
+from ..core.simulation import simulate_spikes
 from .transforms import LoadSpikeFromFile
 
 __all__ = [
@@ -270,7 +270,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
     proportional to its area), a view of ``crop_size`` moved along a random
     trajectory (:func:`render_trajectory`), a random brightness (gain in
     ``gain_range``, gamma log-uniform in ``gamma_range``), then
-    :func:`~wgse_mmseg.simulation.simulate_spikes` with
+    :func:`~wgse_mmseg.core.simulation.simulate_spikes` with
     ``threshold = 1 / white_rate`` (the REDS scale). The ground truth is the
     centre frame ``num_steps // 2``. Spikes and ground truth are made on the
     fly, in the data loader.

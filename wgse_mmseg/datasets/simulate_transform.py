@@ -2,7 +2,7 @@
 
 Trains a spike model from RGB frames: the transform turns a frame (or a
 sequence of frames) into a spike stream with
-:func:`wgse_mmseg.simulation.simulate_spikes`, in the layout
+:func:`wgse_mmseg.core.simulation.simulate_spikes`, in the layout
 :class:`~wgse_mmseg.datasets.LoadSpikeFromFile` produces, so the rest of a
 spike pipeline (``SpikeRandomCrop``, ``SpikeRandomFlip``, ``PackSegInputs``)
 follows unchanged. Simulating costs about ``H * W * T`` bytes of output and
@@ -19,7 +19,7 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
-from ..simulation import parse_effects, read_scene_file, simulate_spikes
+from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = ['SimulateSpikes']
 
@@ -40,7 +40,7 @@ class SimulateSpikes(BaseTransform):
 
     Args:
         num_steps: ``T``, readout steps to simulate.
-        threshold, gain: as in :func:`~wgse_mmseg.simulation.simulate_spikes`
+        threshold, gain: as in :func:`~wgse_mmseg.core.simulation.simulate_spikes`
             (intensity 1.0 fires ``gain / threshold`` spikes per step; the
             REDS convention is ``threshold=1 / 0.6``).
         effects: the scene: a mapping ``effect name -> parameters`` or a

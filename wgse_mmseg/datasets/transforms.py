@@ -13,7 +13,7 @@ from mmcv.transforms import BaseTransform
 
 from mmseg.datasets.transforms import RandomCrop
 from mmseg.registry import TRANSFORMS
-from ..io import load_spikes, spike_shape
+from ..core.io import load_spikes, spike_shape
 
 __all__ = ['LoadSpikeFromFile', 'SpikeRandomCrop', 'SpikeRandomFlip']
 
@@ -38,7 +38,7 @@ class LoadSpikeFromFile(BaseTransform):
     """Load a spike stream from ``results['img_path']``.
 
     Reads ``.dat``, ``.spk``, ``.npy`` and ``.npz`` files (see
-    :mod:`wgse_mmseg.io`).
+    :mod:`wgse_mmseg.core.io`).
 
     Args:
         num_steps: frames to load. ``None`` loads the whole stream. A longer

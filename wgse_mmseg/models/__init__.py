@@ -1,5 +1,10 @@
-from . import reconstruction, representations  # noqa: F401  (registers)
-from .data_preprocessor import SpikeSegDataPreProcessor
-from .wgse import WGSE, BandNetwork
+"""MMSeg models: the spike data preprocessor, the registered enhancers
+(:mod:`.enhancers`) and image reconstruction (:mod:`.reconstruction`)."""
+from .._openmmlab import require_openmmlab
 
-__all__ = ['WGSE', 'BandNetwork', 'SpikeSegDataPreProcessor']
+require_openmmlab('wgse_mmseg.models')
+
+from . import enhancers, reconstruction  # noqa: E402,F401  (registers)
+from .data_preprocessor import SpikeSegDataPreProcessor  # noqa: E402
+
+__all__ = ['SpikeSegDataPreProcessor']

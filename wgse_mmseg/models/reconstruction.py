@@ -24,8 +24,8 @@ from mmengine.model import BaseModel
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import MODELS
-from ..io import atomic_output
-from ..reconstruction_baselines import tfi, tfp
+from ..core.io import atomic_output
+from ..core.reconstruction_baselines import tfi, tfp
 
 __all__ = ['SpikeReconstructor', 'ResidualBlock', 'DEFAULT_WEIGHTS',
            'load_reconstructor', 'export_weights', 'reconstruction_method',
@@ -205,7 +205,7 @@ def reconstruction_method(method: str, checkpoint: Optional[str] = None,
 
     ``method``: ``'wgse'`` (the trained model of ``checkpoint``, by default
     the shipped weights), ``'tfp'`` or ``'tfi'`` (REDS scale, see
-    :mod:`wgse_mmseg.reconstruction_baselines`).
+    :mod:`wgse_mmseg.core.reconstruction_baselines`).
     """
     if method == 'wgse':
         return load_reconstructor(checkpoint, device).reconstruct

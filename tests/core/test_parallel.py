@@ -1,8 +1,8 @@
 import pytest
 import torch
 
-from wgse_mmseg.parallel import for_each_on_threads
-from wgse_mmseg.simulation import simulate_spikes
+from wgse_mmseg.core.parallel import for_each_on_threads
+from wgse_mmseg.core.simulation import simulate_spikes
 
 
 @pytest.fixture

@@ -29,10 +29,9 @@ from .effect import EFFECTS, register_effect
 from .fixed_point import initial_charge
 from .intensity import frames_to_intensity
 from .scene import parse_effects, read_scene_file
-from .simulator import READOUT_HZ, simulate_spikes
+from .simulator import simulate_spikes
 
 __all__ = [
     'simulate_spikes', 'frames_to_intensity', 'initial_charge',
-    'parse_effects', 'read_scene_file', 'EFFECTS', 'register_effect',
-    'READOUT_HZ'
+    'parse_effects', 'read_scene_file', 'EFFECTS', 'register_effect'
 ]

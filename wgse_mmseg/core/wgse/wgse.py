@@ -5,7 +5,7 @@ multi-level 1-D DWT into ``level + 1`` bands; each band passes through its own
 small residual CNN; the inverse DWT maps the result back to exactly ``T``
 channels, so any network with ``in_channels=T`` can follow.
 
-Variants (all behind the registry name ``WGSE``):
+Variants (all one class; MMSeg's registry name is ``WGSE``):
 
 * ``dim=1``: temporal convolutions per pixel (the paper's default);
 * ``dim=2``: spatial ``k x k`` convolutions on each coefficient plane;
@@ -20,9 +20,7 @@ from typing import List, Optional, Tuple
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
-from mmengine.model import BaseModule
 
-from mmseg.registry import MODELS
 from .band_network_backends import get_backend, resolve_backend
 from ..wavelets import (analysis_matrix, band_lengths, check_mode, get_wavelet,
                         synthesis_matrix)
@@ -105,7 +103,7 @@ class BandNetwork(nn.Module):
         """The convolutions in order, each with the index of the activation
         added before its ReLU (0: the input, ``i``: the output of the
         ``i``-th convolution) or ``None``: the description
-        :func:`~wgse_mmseg.models.fused_band_networks.fused_band_networks`
+        :func:`~wgse_mmseg.core.wgse.fused_band_networks.fused_band_networks`
         runs."""
         plan = []
         for block in self.residual_layers:
@@ -114,8 +112,7 @@ class BandNetwork(nn.Module):
         return plan + [(conv, None) for conv in self.output_convs]
 
 
-@MODELS.register_module()
-class WGSE(BaseModule):
+class WGSE(nn.Module):
     """Wavelet-guided spike enhancing: ``(B, T, H, W) -> (B, T, H, W)``.
 
     Args:
@@ -126,19 +123,18 @@ class WGSE(BaseModule):
             stream).
         level: number of DWT levels; ``level + 1`` band networks. Levels
             above ``pywt.dwt_max_level`` are allowed, as in the paper.
-        mode: DWT boundary mode (see :data:`wgse_mmseg.wavelets.SUPPORTED_MODES`).
+        mode: DWT boundary mode (see :data:`wgse_mmseg.core.wavelets.SUPPORTED_MODES`).
         kernel_size: odd kernel size of every convolution.
         hidden_channels: width of the band networks.
         num_blocks: residual layers (and output convolutions) per band;
             2 is the paper's "long" variant.
         backend: what runs the band networks: ``'auto'``, ``'torch'``,
             ``'compiled'`` or ``'triton'``
-            (:mod:`~wgse_mmseg.models.band_network_backends`). ``'auto'``
+            (:mod:`~wgse_mmseg.core.wgse.band_network_backends`). ``'auto'``
             picks the Triton kernel for CUDA inputs and the compiled kernel
             for CPU inputs where they can run, else ``'torch'``; a named
             backend that cannot run is an error. Every backend recomputes
             hidden activations in the backward pass.
-        init_cfg: mmengine initialisation config.
 
     Attributes:
         backend_in_use: the backend that ran the last forward pass
@@ -154,8 +150,8 @@ class WGSE(BaseModule):
     def __init__(self, dim: int = 1, wavelet: Optional[str] = 'db8',
                  level: int = 5, mode: str = 'zero', kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1,
-                 backend: str = 'auto', init_cfg=None):
-        super().__init__(init_cfg=init_cfg)
+                 backend: str = 'auto'):
+        super().__init__()
         if dim not in (1, 2, 3):
             raise ValueError(f'dim must be 1, 2 or 3, got {dim}')
         if wavelet is not None:

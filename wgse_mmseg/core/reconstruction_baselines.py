@@ -15,10 +15,9 @@ simulator produces the same scale with ``threshold = 1 / white_rate``.
 """
 import numpy as np
 
-__all__ = ['REDS_WHITE_RATE', 'tfp', 'tfi']
+from .constants import REDS_WHITE_RATE
 
-#: Spikes per readout step of a white pixel in the synthesized REDS spike set.
-REDS_WHITE_RATE = 0.6
+__all__ = ['tfp', 'tfi']
 
 
 def _check(spikes, white_rate: float) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""``wgse_mmseg.wavelets`` against PyWavelets, the independent reference."""
+"""``wgse_mmseg.core.wavelets`` against PyWavelets, the independent reference."""
 import warnings
 
 import numpy as np
@@ -8,7 +8,7 @@ import torch
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from wgse_mmseg.wavelets import (SUPPORTED_MODES, analysis_matrix,
+from wgse_mmseg.core.wavelets import (SUPPORTED_MODES, analysis_matrix,
                                  band_lengths, synthesis_matrix, wavedec,
                                  waverec)
 

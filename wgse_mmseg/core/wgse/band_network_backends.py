@@ -1,6 +1,6 @@
 """The backends that run WGSE's band networks, behind one interface.
 
-A backend takes the band networks (:class:`~wgse_mmseg.models.wgse.BandNetwork`,
+A backend takes the band networks (:class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`,
 one per wavelet band) and every pixel's wavelet coefficients ``(B, P, C)``
 (``P = H*W`` pixels, the bands side by side along ``C``) and returns the
 networks' outputs in the same layout. All compute the same function; they
@@ -8,12 +8,12 @@ differ in where they run and how fast:
 
 * ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
   every variant. ``dim=1`` runs the chunked kernel of
-  :mod:`~wgse_mmseg.models.fused_band_networks`; ``dim`` 2 and 3 run the
+  :mod:`~wgse_mmseg.core.wgse.fused_band_networks`; ``dim`` 2 and 3 run the
   ``nn.Conv3d`` modules one band and sample at a time.
 * ``'compiled'``: the C kernel of
-  :mod:`~wgse_mmseg.models.compiled_band_networks`: CPU with AVX2/FMA,
+  :mod:`~wgse_mmseg.core.wgse.compiled_band_networks`: CPU with AVX2/FMA,
   where the extension was built; float32, the paper's width and kernel.
-* ``'triton'``: the kernel of :mod:`~wgse_mmseg.models.triton_band_networks`:
+* ``'triton'``: the kernel of :mod:`~wgse_mmseg.core.wgse.triton_band_networks`:
   CUDA, where triton imports; the paper's network shape.
 
 ``'auto'`` picks ``triton`` for CUDA tensors and ``compiled`` for CPU

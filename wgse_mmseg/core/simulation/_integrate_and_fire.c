@@ -1,5 +1,5 @@
 /* Integrate-and-fire of a tile of pixels in one pass: the CPU kernel of
- * wgse_mmseg.simulation.fixed_point.
+ * wgse_mmseg.core.simulation.fixed_point.
  *
  * Charge is int32 in units of 2**-24 thresholds (fixed_point.ONE is one
  * threshold). For each step t and pixel p the kernel adds the step's charge

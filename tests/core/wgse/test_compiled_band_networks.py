@@ -9,8 +9,8 @@ import torch.nn.functional as F
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from wgse_mmseg.models import WGSE, compiled_band_networks
-from wgse_mmseg.models.wgse import BandNetwork
+from wgse_mmseg.core.wgse import WGSE, compiled_band_networks
+from wgse_mmseg.core.wgse.wgse import BandNetwork
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 needs_kernel = pytest.mark.skipif(

@@ -6,6 +6,7 @@ from typing import Any, Dict, Tuple
 import numpy as np
 import torch
 
+from ..constants import READOUT_HZ
 from .effect import SimulationContext, check_seed
 from .fixed_point import MAX_BLOCK_STEPS, Integrator, quantise
 from .intensity import frames_to_intensity
@@ -13,9 +14,8 @@ from .light import LinearLight
 from .scene import parse_effects
 from .sensor import SensorMaps
 
-__all__ = ['simulate_spikes', 'READOUT_HZ']
+__all__ = ['simulate_spikes']
 
-READOUT_HZ = 40_000.0  # the spike camera's readout rate (25 us per step)
 # A block's float32 charge stays under this, so the allocator reuses it
 # instead of mapping fresh pages for each block.
 _BLOCK_BYTES = 16 << 20

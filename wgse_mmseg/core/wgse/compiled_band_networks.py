@@ -9,15 +9,15 @@ parameter gradients in double. It computes no gradient for the
 coefficients: WGSE's input is spike data.
 
 :func:`unsupported` says why a call cannot use it; WGSE's ``'auto'``
-backend (:mod:`~wgse_mmseg.models.band_network_backends`) then runs
-:func:`~wgse_mmseg.models.fused_band_networks.fused_band_networks` (torch
+backend (:mod:`~wgse_mmseg.core.wgse.band_network_backends`) then runs
+:func:`~wgse_mmseg.core.wgse.fused_band_networks.fused_band_networks` (torch
 operations, any width, kernel, dtype, device, and the input gradient).
-Both compute the function of :class:`~wgse_mmseg.models.wgse.BandNetwork`;
+Both compute the function of :class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`;
 tests compare them.
 
 Calls are split into chunks of about :data:`ROWS_PER_CALL` rows of one
 band, which run side by side on torch's threads
-(:func:`~wgse_mmseg.parallel.for_each_on_threads`) with the GIL released;
+(:func:`~wgse_mmseg.core.parallel.for_each_on_threads`) with the GIL released;
 each thread sums its gradients in its own buffer, and the buffers are added
 in thread order, so results do not depend on timing.
 """
@@ -215,7 +215,7 @@ def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
     """Run one temporal CNN per band over every pixel's coefficients.
 
     Arguments and result as
-    :func:`~wgse_mmseg.models.fused_band_networks.fused_band_networks`
+    :func:`~wgse_mmseg.core.wgse.fused_band_networks.fused_band_networks`
     (``coeffs`` ``(N, C)``, bands side by side); only where
     :func:`unsupported` returns ``None``. Gradients flow to the parameters, not to ``coeffs``.
     """

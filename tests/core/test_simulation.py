@@ -12,17 +12,18 @@ import torch
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wgse_mmseg.simulation import (EFFECTS, READOUT_HZ, frames_to_intensity,
+from wgse_mmseg.core.constants import READOUT_HZ
+from wgse_mmseg.core.simulation import (EFFECTS, frames_to_intensity,
                                    initial_charge, parse_effects,
                                    simulate_spikes)
-from wgse_mmseg.simulation.camera_motion import CameraMotion
-from wgse_mmseg.simulation.effect import SensorEffect, SimulationContext
-from wgse_mmseg.simulation import fixed_point
-from wgse_mmseg.simulation.fixed_point import ONE, Integrator, quantise
-from wgse_mmseg.simulation.interpolation import FlowLight
-from wgse_mmseg.simulation.light import LinearLight
-from wgse_mmseg.simulation.sensor import SensorMaps
-from wgse_mmseg.simulation.warp import affine_grid
+from wgse_mmseg.core.simulation.camera_motion import CameraMotion
+from wgse_mmseg.core.simulation.effect import SensorEffect, SimulationContext
+from wgse_mmseg.core.simulation import fixed_point
+from wgse_mmseg.core.simulation.fixed_point import ONE, Integrator, quantise
+from wgse_mmseg.core.simulation.interpolation import FlowLight
+from wgse_mmseg.core.simulation.light import LinearLight
+from wgse_mmseg.core.simulation.sensor import SensorMaps
+from wgse_mmseg.core.simulation.warp import affine_grid
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 

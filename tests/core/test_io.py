@@ -1,4 +1,4 @@
-"""Spike file reading and writing (``wgse_mmseg.io``)."""
+"""Spike file reading and writing (``wgse_mmseg.core.io``)."""
 import json
 import os
 import os.path as osp
@@ -11,8 +11,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-import wgse_mmseg.io as spike_io
-from wgse_mmseg.io import SpikeFileError, load_spikes, save_spikes, spike_shape
+import wgse_mmseg.core.io as spike_io
+from wgse_mmseg.core.io import SpikeFileError, load_spikes, save_spikes, spike_shape
 
 
 def _random_spikes(shape, seed=0, p=0.3):

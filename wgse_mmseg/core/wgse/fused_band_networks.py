@@ -1,7 +1,7 @@
 """The 1-D band networks of WGSE as one fused, chunked torch kernel: the
 ``'torch'`` backend of WGSE, on any device.
 
-:class:`~wgse_mmseg.models.wgse.BandNetwork` with ``dim=1`` runs a few tiny
+:class:`~wgse_mmseg.core.wgse.wgse.BandNetwork` with ``dim=1`` runs a few tiny
 temporal convolutions (1 -> 32 -> 32 -> 1 channels, kernel 3) over every
 pixel's wavelet coefficients. As ``nn.Conv1d`` over ``B*H*W`` signals of
 15-72 samples this spends its time moving data, not multiplying. Here each
@@ -17,7 +17,7 @@ convolution is a few matrix products on a "padded rows" layout instead:
 * chunks are sized so that a layer's activations stay in cache, and every
   buffer is reused from chunk to chunk (:class:`_Workspace`);
 * on the CPU, with several torch threads, whole chunks run side by side,
-  one per thread (:func:`~wgse_mmseg.parallel.for_each_on_threads`),
+  one per thread (:func:`~wgse_mmseg.core.parallel.for_each_on_threads`),
   instead of splitting each small product; on other devices (CUDA, MPS)
   chunks are :data:`DEVICE_ROWS_PER_CHUNK` rows, large enough to keep the
   device busy, and run one after the other, so the memory of a chunk's

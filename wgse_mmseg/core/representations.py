@@ -7,7 +7,8 @@ WGSE::
 
     model = dict(data_preprocessor=dict(enhancer=dict(type='TFI')))
 
-They have no parameters. Each is computed with a handful of vectorised
+They have no parameters and need only torch; MMSeg's registry knows them by
+their class names (:mod:`wgse_mmseg.models.enhancers`). Each is computed with a handful of vectorised
 tensor operations (cumulative sums and maxima, average pooling), in float32
 (float64 for float64 input) even under autocast, like WGSE's transform.
 
@@ -34,9 +35,7 @@ the experiment grids use both.
 """
 import torch
 import torch.nn.functional as F
-from mmengine.model import BaseModule
-
-from mmseg.registry import MODELS
+from torch import nn
 
 __all__ = ['TemporalMeanFilter', 'TFP', 'TFI', 'SpatialMeanFilter']
 
@@ -47,7 +46,7 @@ def _check_odd(name: str, value: int) -> None:
                          f'centred on each step or pixel), got {value!r}')
 
 
-class _FixedRepresentation(BaseModule):
+class _FixedRepresentation(nn.Module):
     """A parameter-free map ``(B, T, H, W) -> (B, T, H, W)``.
 
     Subclasses implement :meth:`represent` on a float32 (float64 for float64
@@ -69,7 +68,6 @@ class _FixedRepresentation(BaseModule):
             return self.represent(spikes.to(dtype))
 
 
-@MODELS.register_module()
 class TemporalMeanFilter(_FixedRepresentation):
     """Mean over the ``kernel_size`` steps centred on each step, per pixel.
 
@@ -83,8 +81,8 @@ class TemporalMeanFilter(_FixedRepresentation):
             window is then cut to the whole stream near its centre).
     """
 
-    def __init__(self, kernel_size: int = 3, init_cfg=None):
-        super().__init__(init_cfg=init_cfg)
+    def __init__(self, kernel_size: int = 3):
+        super().__init__()
         _check_odd('kernel_size', kernel_size)
         self.kernel_size = kernel_size
 
@@ -101,7 +99,6 @@ class TemporalMeanFilter(_FixedRepresentation):
                 totals.index_select(1, lower)) / lengths
 
 
-@MODELS.register_module()
 class TFP(TemporalMeanFilter):
     """Texture from playback: the spike rate in a window around each step.
 
@@ -115,12 +112,11 @@ class TFP(TemporalMeanFilter):
             of steps).
     """
 
-    def __init__(self, window: int = 33, init_cfg=None):
+    def __init__(self, window: int = 33):
         _check_odd('window', window)
-        super().__init__(kernel_size=window, init_cfg=init_cfg)
+        super().__init__(kernel_size=window)
 
 
-@MODELS.register_module()
 class SpatialMeanFilter(_FixedRepresentation):
     """Mean over the ``kernel_size x kernel_size`` pixels centred on each
     pixel, per frame.
@@ -131,8 +127,8 @@ class SpatialMeanFilter(_FixedRepresentation):
         kernel_size: odd side of the square window.
     """
 
-    def __init__(self, kernel_size: int = 3, init_cfg=None):
-        super().__init__(init_cfg=init_cfg)
+    def __init__(self, kernel_size: int = 3):
+        super().__init__()
         _check_odd('kernel_size', kernel_size)
         self.kernel_size = kernel_size
 
@@ -142,7 +138,6 @@ class SpatialMeanFilter(_FixedRepresentation):
                             count_include_pad=False)
 
 
-@MODELS.register_module()
 class TFI(_FixedRepresentation):
     """Texture from inter-spike intervals: ``1 / ISI`` at each step.
 

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from mmseg.registry import MODELS
-from wgse_mmseg.models import WGSE, band_network_backends, \
+from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
     compiled_band_networks, triton_band_networks
 
 pytestmark = pytest.mark.usefixtures('single_thread')

@@ -7,12 +7,12 @@ import torch
 
 from mmseg.registry import MODELS
 from wgse_mmseg.config import load_config
-from wgse_mmseg.models.representations import (TFI, TFP, SpatialMeanFilter,
+from wgse_mmseg.core.representations import (TFI, TFP, SpatialMeanFilter,
                                                TemporalMeanFilter)
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 NAMES = ['TFP', 'TFI', 'SpatialMeanFilter', 'TemporalMeanFilter']
 
 

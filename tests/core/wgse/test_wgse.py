@@ -9,9 +9,9 @@ import torch
 from torch.func import functional_call
 
 from mmseg.registry import MODELS
-from wgse_mmseg.models import WGSE, band_network_backends, \
+from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
     fused_band_networks
-from wgse_mmseg.models.wgse import BandNetwork
+from wgse_mmseg.core.wgse.wgse import BandNetwork
 
 
 pytestmark = pytest.mark.usefixtures('single_thread')

@@ -1,0 +1,88 @@
+"""wgse_mmseg.core imports and runs where mmengine, mmsegmentation and mmcv
+cannot be imported (a GPU machine with torch alone), and the MMSeg layer
+then says what to install. The stack is hidden from a fresh interpreter by
+a ``sitecustomize`` that refuses to import it, so every process of a tool
+(the WGSE benchmark spawns workers) sees the same."""
+import json
+import os
+import os.path as osp
+import subprocess
+import sys
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+BLOCKER = '''
+import importlib.abc, sys
+class _HideOpenMMLab(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split('.')[0] in ('mmengine', 'mmseg', 'mmcv'):
+            raise ModuleNotFoundError(f'No module named {name!r} (hidden)',
+                                      name=name)
+sys.meta_path.insert(0, _HideOpenMMLab())
+'''
+SCRIPT = '''
+import json, sys
+import numpy as np, torch
+import wgse_mmseg
+from wgse_mmseg.core import (TFI, TFP, WGSE, load_spikes, save_spikes,
+                             simulate_spikes, wavedec)
+spikes, _ = simulate_spikes(np.full((2, 6, 8), 0.5), 41, seed=0)
+save_spikes(sys.argv[1], spikes)
+stream = torch.from_numpy(load_spikes(sys.argv[1]))[None].float()
+model = WGSE(backend='torch')
+out = model(stream)
+out.square().mean().backward()
+try:
+    wgse_mmseg.models
+    error = None
+except ImportError as exc:
+    error = str(exc)
+print(json.dumps(dict(
+    shape=list(out.shape), finite=bool(torch.isfinite(out).all()),
+    grads=all(p.grad is not None for p in model.parameters()),
+    tfp=list(TFP(window=5)(stream).shape), tfi=list(TFI()(stream).shape),
+    bands=len(wavedec(torch.zeros(41), 'db8', level=5, mode='zero')),
+    error=error, loaded=sorted({m.split('.')[0] for m in sys.modules
+                                if m.split('.')[0] in ('mmengine', 'mmseg',
+                                                       'mmcv')}))))
+'''
+
+
+def _env(tmp_path):
+    (tmp_path / 'sitecustomize.py').write_text(BLOCKER)
+    env = dict(os.environ, PYTHONPATH=f'{tmp_path}{os.pathsep}{ROOT}',
+               OMP_NUM_THREADS='1')
+    env.pop('TRITON_INTERPRET', None)
+    return env
+
+
+def test_core_runs_and_the_mmseg_layer_says_what_to_install(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, '-c', SCRIPT, str(tmp_path / 'clip.spk')],
+        capture_output=True, text=True, env=_env(tmp_path), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert report['shape'] == [1, 41, 6, 8] and report['finite']
+    assert report['grads']
+    assert report['tfp'] == report['tfi'] == [1, 41, 6, 8]
+    assert report['bands'] == 6
+    assert report['loaded'] == []  # nothing of the stack was imported
+    for name in ('wgse_mmseg.models', 'mmengine', 'mmsegmentation',
+                 'wgse_mmseg.core', 'tools/setup_env.sh'):
+        assert name in report['error']
+
+
+def test_importing_a_layer_module_directly_names_what_is_missing(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, '-c', 'import wgse_mmseg.datasets'],
+        capture_output=True, text=True, env=_env(tmp_path), cwd=tmp_path)
+    assert proc.returncode != 0
+    assert 'ImportError: wgse_mmseg.datasets needs' in proc.stderr
+
+
+def test_the_wgse_benchmark_runs_without_the_stack(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_wgse.py'),
+         '--impls', 'torch', '--shapes', '1x12x3x4', '--repeat', '1'],
+        capture_output=True, text=True, env=_env(tmp_path), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "WGSE, backend='torch'" in proc.stdout

@@ -1,0 +1,15 @@
+"""WGSE and what runs its band networks.
+
+* :mod:`.wgse`: the module, :class:`WGSE` ``(B, T, H, W) -> (B, T, H, W)``,
+  and its per-band network :class:`BandNetwork`;
+* :mod:`.band_network_backends`: the ``backend`` choice (``'auto'``,
+  ``'torch'``, ``'compiled'``, ``'triton'``), one interface;
+* the kernels behind it: :mod:`.fused_band_networks` (torch operations),
+  :mod:`.compiled_band_networks` (the C extension ``_band_networks.c``),
+  :mod:`.triton_band_networks` (CUDA; kernels in ``_triton_band_kernels``).
+"""
+from .band_network_backends import BACKENDS, CHOICES, BandNetworkBackend
+from .wgse import WGSE, BandNetwork
+
+__all__ = ['WGSE', 'BandNetwork', 'BACKENDS', 'CHOICES',
+           'BandNetworkBackend']
