@@ -25,7 +25,7 @@ from mmengine.structures import PixelData
 from mmseg.evaluation import IoUMetric
 from mmseg.registry import MODELS
 from mmseg.structures import SegDataSample
-from wgse_mmseg.config import load_config
+from wgse_mmseg.utils.config import load_config
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 

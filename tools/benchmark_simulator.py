@@ -6,7 +6,7 @@ Prints two tables:
    second) for the base model and for each effect alone, each against a
    plain NumPy step-loop integrate-and-fire on the same input in the same
    run (``vs NumPy loop``: its time over the row's time). Inputs are a
-   procedural street scene (:func:`wgse_mmseg.synthetic.
+   procedural street scene (:func:`wgse_mmseg.datasets.synthetic.
    render_street_scene`): ``still`` is its middle frame, ``video`` its
    ``--frames`` frames spread over the stream. Where the compiled CPU
    kernel is built, the base model also runs on the torch path (as without
@@ -41,7 +41,7 @@ from wgse_mmseg.core.constants import REDS_THRESHOLD
 from wgse_mmseg.core.io import load_spikes, save_spikes
 from wgse_mmseg.core.machine import cpu_model
 from wgse_mmseg.core.simulation import fixed_point, simulate_spikes
-from wgse_mmseg.synthetic import render_street_scene
+from wgse_mmseg.datasets.synthetic import render_street_scene
 
 LOAD_FORMATS = ('.dat', '.spk', '.npy', '.npz')
 

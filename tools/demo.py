@@ -32,7 +32,7 @@ from mmengine.dataset import Compose
 from mmengine.registry import init_default_scope
 from mmengine.runner import load_checkpoint
 from mmseg.apis import init_model
-from wgse_mmseg.config import load_config
+from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.datasets import SpikeCityscapesDataset
 from wgse_mmseg.core.io import write_png
 

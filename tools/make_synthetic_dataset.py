@@ -2,11 +2,11 @@
 
     python tools/make_synthetic_dataset.py data/synthetic_spike_cityscapes
 
-Resumable: existing files are kept. See wgse_mmseg/synthetic.py.
+Resumable: existing files are kept. See wgse_mmseg/datasets/synthetic.py.
 """
 import argparse
 
-from wgse_mmseg.synthetic import make_synthetic_dataset
+from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
 
 def parse_args():

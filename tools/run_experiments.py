@@ -34,7 +34,7 @@ from typing import Any, Dict, List, NamedTuple, Optional, Tuple
 
 from mmengine.config import Config
 
-from wgse_mmseg.benchmarking import markdown_table, validation_cost
+from wgse_mmseg.apis.benchmarking import markdown_table, validation_cost
 from wgse_mmseg.core.io import atomic_output
 
 REPO_ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))

@@ -9,7 +9,7 @@ import argparse
 
 from mmengine.runner import Runner
 
-from wgse_mmseg.config import add_runner_arguments, config_from_args
+from wgse_mmseg.utils.config import add_runner_arguments, config_from_args
 
 
 def parse_args():

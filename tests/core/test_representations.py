@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from mmseg.registry import MODELS
-from wgse_mmseg.config import load_config
+from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.core.representations import (TFI, TFP, SpatialMeanFilter,
                                                TemporalMeanFilter)
 

@@ -16,8 +16,8 @@ which returns only those methods and refuses everything else.
 
 The list was read off real checkpoints with
 ``torch.serialization.get_unsafe_globals_in_checkpoint``;
-``tests/test_compat.py`` loads such contents weights-only, and
-``tests/test_mim_end_to_end.py`` resumes a real run from its checkpoint.
+``tests/compat/test_compat.py`` loads such contents weights-only, and
+``tests/tools/test_mim_end_to_end.py`` resumes a real run from its checkpoint.
 """
 import importlib
 import pickle

@@ -1,12 +1,21 @@
+"""Datasets and pipeline transforms, registered with MMSeg.
+
+* :class:`SpikeCityscapesDataset` (:mod:`.spike_cityscapes`) and its
+  converter from Cityscapes (:mod:`.cityscapes_conversion`);
+* reconstruction data (:mod:`.reds`);
+* the embedded synthetic street-scene dataset (:mod:`.synthetic`);
+* transforms (:mod:`.transforms`).
+"""
 from .._openmmlab import require_openmmlab
 
 require_openmmlab('wgse_mmseg.datasets')
 
-from . import reds, simulate_transform  # noqa: E402,F401  (registers)
+from . import reds  # noqa: E402,F401  (registers)
 from .spike_cityscapes import SpikeCityscapesDataset  # noqa: E402
-from .transforms import LoadSpikeFromFile, SpikeRandomCrop, SpikeRandomFlip  # noqa: E402
+from .transforms import (LoadSpikeFromFile, SimulateSpikes,  # noqa: E402
+                         SpikeRandomCrop, SpikeRandomFlip)
 
 __all__ = [
     'SpikeCityscapesDataset', 'LoadSpikeFromFile', 'SpikeRandomCrop',
-    'SpikeRandomFlip'
+    'SpikeRandomFlip', 'SimulateSpikes'
 ]

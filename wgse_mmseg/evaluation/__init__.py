@@ -3,8 +3,8 @@ from .._openmmlab import require_openmmlab
 
 require_openmmlab('wgse_mmseg.evaluation')
 
-from .image_quality import entropy_2d, gaussian_window, psnr, ssim  # noqa: E402
-from .reconstruction_metric import ReconstructionMetric  # noqa: E402
+from .metrics import (ReconstructionMetric, entropy_2d,  # noqa: E402
+                      gaussian_window, psnr, ssim)
 
 __all__ = ['ReconstructionMetric', 'psnr', 'ssim', 'entropy_2d',
            'gaussian_window']

@@ -14,7 +14,7 @@ from mmengine.structures import BaseDataElement, PixelData
 
 import wgse_mmseg  # noqa: F401  (registers the modules)
 from mmseg.registry import MODELS
-from wgse_mmseg.config import load_config
+from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
                                       PackReconstructionInputs,
                                       REDSSpikeDataset,
@@ -22,7 +22,7 @@ from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
                                       render_trajectory)
 from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
                                    gaussian_window, psnr, ssim)
-from wgse_mmseg.evaluation.reconstruction_benchmark import (benchmark,
+from wgse_mmseg.apis.reconstruction_benchmark import (benchmark,
                                                             format_table)
 from wgse_mmseg.core.io import load_spikes, save_spikes
 from wgse_mmseg.models.reconstruction import (DEFAULT_WEIGHTS,
@@ -33,7 +33,7 @@ from wgse_mmseg.core.reconstruction_baselines import tfi, tfp
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIGS = osp.join(ROOT, 'configs', 'reconstruction')
 TOOLS = osp.join(ROOT, 'tools')
 WGSE_PARAMS = 19974  # 6 bands (db8, level 5) x 3329

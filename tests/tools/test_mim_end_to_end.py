@@ -14,9 +14,9 @@ import sys
 
 import pytest
 
-from wgse_mmseg.synthetic import make_synthetic_dataset
+from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 BIN = osp.dirname(sys.executable)
 
 

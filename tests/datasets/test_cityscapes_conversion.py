@@ -18,7 +18,7 @@ from wgse_mmseg.datasets.cityscapes_conversion import (
 from wgse_mmseg.core.io import load_spikes
 from wgse_mmseg.core.simulation import simulate_spikes
 
-REPO_ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+REPO_ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 SIZE = (64, 128)  # source frames, H x W
 SETTINGS = ConversionSettings(height=32, width=64, num_steps=9)
 # stem -> (split, city, label files written, has a sequence)

@@ -5,7 +5,7 @@ import pytest
 from mmcv.transforms import Compose
 
 from mmseg.registry import TRANSFORMS
-from wgse_mmseg.datasets.simulate_transform import SimulateSpikes
+from wgse_mmseg.datasets.transforms.simulate import SimulateSpikes
 from wgse_mmseg.core.simulation import simulate_spikes
 
 pytestmark = pytest.mark.usefixtures('single_thread')

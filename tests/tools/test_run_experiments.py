@@ -12,10 +12,10 @@ import sys
 import pytest
 
 from mmseg.registry import MODELS
-from wgse_mmseg.config import add_runner_arguments, load_config
-from wgse_mmseg.synthetic import make_synthetic_dataset
+from wgse_mmseg.utils.config import add_runner_arguments, load_config
+from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 RUNNER = osp.join(ROOT, 'tools', 'run_experiments.py')
 GRID_CPU = osp.join(ROOT, 'configs', 'experiments', 'grid_cpu.py')
 GRID_FULL = osp.join(ROOT, 'configs', 'experiments', 'grid_full.py')

@@ -67,8 +67,8 @@ from mmengine.structures import PixelData
 
 from mmseg.registry import DATASETS, MODELS
 from mmseg.structures import SegDataSample
-from .config import load_config
-from .core.machine import cpu_model
+from ..utils.config import load_config
+from ..core.machine import cpu_model
 
 __all__ = [
     'summarize', 'time_calls', 'make_spike_batch', 'build_model',
@@ -142,7 +142,7 @@ def build_model(config: str, cfg_options: Optional[dict] = None,
                 checkpoint: Optional[str] = None,
                 device: str = 'cpu') -> Tuple[Any, nn.Module]:
     """``(cfg, model)`` for ``config`` with ``cfg_options`` (``num_steps``,
-    ``crop_size``, ... as in :func:`wgse_mmseg.config.load_config`), weights
+    ``crop_size``, ... as in :func:`wgse_mmseg.utils.config.load_config`), weights
     from ``checkpoint`` if given, on ``device``."""
     cfg = load_config(config, cfg_options)
     model = MODELS.build(cfg.model)
@@ -545,7 +545,7 @@ def format_results(results: Sequence[Dict[str, Any]]) -> str:
         f"wgse_mmseg {env['wgse_mmseg']}; {env['platform']}",
         'times: median ± median absolute deviation over the repeats, after '
         'warm-up; FLOPs: one multiply-add = 1 FLOP, batch 1, auxiliary head '
-        'excluded (see wgse_mmseg/benchmarking.py for what is counted); '
+        'excluded (see wgse_mmseg/apis/benchmarking.py for what is counted); '
         f"peak memory: {', '.join(memory_kinds)} during the training steps",
     ]
     notes += list(dict.fromkeys(r['flops_note'] for r in results

@@ -8,9 +8,9 @@ from mmengine.structures import PixelData
 import wgse_mmseg  # noqa: F401  (registers the modules)
 from mmseg.registry import MODELS
 from mmseg.structures import SegDataSample
-from wgse_mmseg.config import load_config
+from wgse_mmseg.utils.config import load_config
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 MAIN_CONFIGS = ['pspnet_wgse', 'pspnet_raw', 'segformer_b0_wgse',
                 'segformer_b0_raw']
 WGSE_PARAMETERS = 19974  # db8, 5 levels, kernel 3, 32 hidden channels

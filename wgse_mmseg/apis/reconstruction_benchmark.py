@@ -1,6 +1,6 @@
 """Score reconstruction methods on a REDS-layout folder.
 
-    python -m wgse_mmseg.evaluation.reconstruction_benchmark DATA_ROOT
+    python -m wgse_mmseg.apis.reconstruction_benchmark DATA_ROOT
         [--methods wgse,tfp,tfi] [--checkpoint CKPT] [--num-steps 41]
 
 ``DATA_ROOT`` holds ``spike/<name>.dat`` beside ``gt/<name>.png``
@@ -16,7 +16,7 @@ from ..datasets.reds import (LoadSpikeImagePair, PackReconstructionInputs,
                              REDSSpikeDataset)
 from ..models.reconstruction import (METHODS, load_reconstructor,
                                      reconstruction_method)
-from .reconstruction_metric import ReconstructionMetric
+from ..evaluation.metrics import ReconstructionMetric
 
 __all__ = ['benchmark', 'format_table']
 

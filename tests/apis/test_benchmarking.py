@@ -1,4 +1,4 @@
-"""tools/benchmark.py and the measurements of wgse_mmseg.benchmarking."""
+"""tools/benchmark.py and the measurements of wgse_mmseg.apis.benchmarking."""
 import json
 import os.path as osp
 import subprocess
@@ -9,7 +9,7 @@ import torch
 import torch.nn as nn
 
 from mmseg.registry import MODELS
-from wgse_mmseg.benchmarking import (build_model, count_flops,
+from wgse_mmseg.apis.benchmarking import (build_model, count_flops,
                                      inference_parameters, markdown_table,
                                      measure_enhancer_step,
                                      measure_train_step, summarize,
@@ -17,7 +17,7 @@ from wgse_mmseg.benchmarking import (build_model, count_flops,
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 TINY = dict(num_steps=9, crop_size='32,64')
 
 

@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .core.constants import REDS_THRESHOLD
-from .core.io import save_spikes, write_png
-from .core.simulation import simulate_spikes
+from ..core.constants import REDS_THRESHOLD
+from ..core.io import save_spikes, write_png
+from ..core.simulation import simulate_spikes
 
 __all__ = ['render_street_scene', 'make_synthetic_dataset']
 

@@ -14,11 +14,11 @@ from mmengine.registry import init_default_scope
 from mmengine.structures import PixelData
 from mmseg.registry import MODELS
 from mmseg.structures import SegDataSample
-from wgse_mmseg.config import load_config
+from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.datasets import SpikeCityscapesDataset
 from wgse_mmseg.core.io import save_spikes
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 EXAMPLE = osp.join(ROOT, 'configs', 'examples', 'deeplabv3plus_r18_wgse.py')
 DEMO = osp.join(ROOT, 'tools', 'demo.py')
 NUM_STEPS = 9  # small T keeps WGSE fast on CPU

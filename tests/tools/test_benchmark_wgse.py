@@ -11,7 +11,7 @@ import torch
 from wgse_mmseg.core.wgse import compiled_band_networks
 
 pytest.importorskip('pytorch_wavelets')
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 #: a plain environment: no TRITON_INTERPRET, so no Triton row on the CPU
 ENV = {'OMP_NUM_THREADS': '1', 'PATH': '/usr/bin:/bin'}
 CPU_BACKENDS = {'torch'} | (

@@ -1,0 +1,72 @@
+"""Loading spike streams into a data pipeline.
+
+In a pipeline a spike stream lives in ``results['img']`` as an ``(H, W, T)``
+``uint8`` array of 0/1: MMSeg's channel-last image convention, so
+``PackSegInputs`` turns it into the ``(T, H, W)`` tensor that
+:class:`~wgse_mmseg.models.SpikeSegDataPreProcessor` batches. Spikes stay
+binary and one byte per spike until the preprocessor.
+"""
+from typing import Optional, Sequence, Union
+
+import numpy as np
+from mmcv.transforms import BaseTransform
+
+from mmseg.registry import TRANSFORMS
+from ...core.io import load_spikes, spike_shape
+
+__all__ = ['LoadSpikeFromFile']
+
+
+@TRANSFORMS.register_module()
+class LoadSpikeFromFile(BaseTransform):
+    """Load a spike stream from ``results['img_path']``.
+
+    Reads ``.dat``, ``.spk``, ``.npy`` and ``.npz`` files (see
+    :mod:`wgse_mmseg.core.io`).
+
+    Args:
+        num_steps: frames to load. ``None`` loads the whole stream. A longer
+            stream gives a window of ``num_steps`` frames centred on
+            ``center`` (the middle frame by default, where the annotated
+            frame of Spike-Cityscapes and REDS lies); a shorter one is an
+            error naming the file and both numbers.
+        height, width: frame size of ``.dat`` files (other formats, and
+            ``.dat`` files with a ``.json`` side file, record it).
+        center: frame the window is centred on; ``None`` for the middle.
+
+    Added keys: ``img`` ``(H, W, T)`` uint8, ``img_shape``, ``ori_shape``,
+    ``num_steps``.
+    """
+
+    def __init__(self, num_steps: Optional[int] = None,
+                 height: Optional[int] = None, width: Optional[int] = None,
+                 center: Optional[int] = None):
+        super().__init__()
+        if num_steps is not None and num_steps < 1:
+            raise ValueError(f'num_steps must be >= 1, got {num_steps}')
+        self.num_steps = num_steps
+        self.height = height
+        self.width = width
+        self.center = center
+
+    def transform(self, results: dict) -> dict:
+        path = results['img_path']
+        total, _, _ = spike_shape(path, self.height, self.width)
+        length = total if self.num_steps is None else self.num_steps
+        if length > total:
+            raise ValueError(
+                f'{path}: the stream has T={total} frames but the config '
+                f'asks for num_steps={length}')
+        center = total // 2 if self.center is None else self.center
+        start = min(max(center - length // 2, 0), total - length)
+        spikes = load_spikes(path, self.height, self.width, start, length)
+        results['img'] = np.ascontiguousarray(spikes.transpose(1, 2, 0))
+        results['img_shape'] = spikes.shape[1:]
+        results['ori_shape'] = spikes.shape[1:]
+        results['num_steps'] = length
+        return results
+
+    def __repr__(self):
+        return (f'{self.__class__.__name__}(num_steps={self.num_steps}, '
+                f'height={self.height}, width={self.width}, '
+                f'center={self.center})')
