@@ -16,7 +16,7 @@ WORK=${WORK:-work_dirs/quickstart_$(basename "$CONFIG" .py)}
 PY=.venv/bin/python
 
 bash tools/setup_env.sh
-"$PY" tools/make_synthetic_dataset.py "$DATA" --num-steps 41
+"$PY" tools/dataset_converters/make_synthetic_dataset.py "$DATA" --num-steps 41
 
 # The embedded data: T=41, 128x256 frames, 64x128 crops; a one-epoch warm-up
 # and a short schedule instead of the paper's 10 of 100 epochs.

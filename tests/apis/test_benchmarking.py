@@ -1,4 +1,4 @@
-"""tools/benchmark.py and the measurements of wgse_mmseg.apis.benchmarking."""
+"""tools/analysis_tools/benchmark.py and the measurements of wgse_mmseg.apis.benchmarking."""
 import json
 import os.path as osp
 import subprocess
@@ -32,7 +32,7 @@ def count(module):
 def test_cli_prints_the_table_and_writes_json(tmp_path):
     out = tmp_path / 'bench.json'
     proc = subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', 'benchmark.py'),
+        [sys.executable, osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark.py'),
          config_path('segformer_b0_wgse'), '--crop', '32', '64', '--repeat',
          '1', '--warmup', '0', '--threads', '1', '--cfg-options',
          'num_steps=9', 'model.data_preprocessor.enhancer.dim=2', '--out',

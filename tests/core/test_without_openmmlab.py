@@ -81,7 +81,7 @@ def test_importing_a_layer_module_directly_names_what_is_missing(tmp_path):
 
 def test_the_wgse_benchmark_runs_without_the_stack(tmp_path):
     proc = subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_wgse.py'),
+        [sys.executable, osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark_wgse.py'),
          '--impls', 'torch', '--shapes', '1x12x3x4', '--repeat', '1'],
         capture_output=True, text=True, env=_env(tmp_path), cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -35,7 +35,7 @@ pytestmark = pytest.mark.usefixtures('single_thread')
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIGS = osp.join(ROOT, 'configs', 'reconstruction')
-TOOLS = osp.join(ROOT, 'tools')
+TOOLS = osp.join(ROOT, 'tools', 'misc')
 WGSE_PARAMS = 19974  # 6 bands (db8, level 5) x 3329
 REDS_NAME = '203_part2_key_id151'
 
@@ -59,9 +59,7 @@ def _tiny_model(**kwargs):
 
 
 def _tool(name):
-    """Import tools/<name>.py (tools import each other by file name)."""
-    if TOOLS not in sys.path:
-        sys.path.insert(0, TOOLS)
+    """Import tools/<name>.py as a module, to call its ``main``."""
     spec = importlib.util.spec_from_file_location(
         name, osp.join(TOOLS, name + '.py'))
     module = importlib.util.module_from_spec(spec)

@@ -1,4 +1,4 @@
-"""tools/run_experiments.py: the grids, the options it passes to the train
+"""tools/analysis_tools/run_experiments.py: the grids, the options it passes to the train
 and test tools, aggregation and reports, and one tiny run end to end."""
 import argparse
 import csv
@@ -12,17 +12,18 @@ import sys
 import pytest
 
 from mmseg.registry import MODELS
+from wgse_mmseg.apis import experiments as runner
 from wgse_mmseg.utils.config import add_runner_arguments, load_config
 from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-RUNNER = osp.join(ROOT, 'tools', 'run_experiments.py')
+RUNNER = osp.join(ROOT, 'tools', 'analysis_tools', 'run_experiments.py')
 GRID_CPU = osp.join(ROOT, 'configs', 'experiments', 'grid_cpu.py')
 GRID_FULL = osp.join(ROOT, 'configs', 'experiments', 'grid_full.py')
 
 _spec = importlib.util.spec_from_file_location('run_experiments', RUNNER)
-runner = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(runner)
+cli = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(cli)
 
 
 def wgse_sweep(entries):
@@ -127,7 +128,7 @@ def test_select_by_pattern_and_unknown_names():
 
 def test_runs_made_with_other_settings_are_not_mixed_in(tmp_path):
     grid, entries = runner.load_grid(GRID_CPU)
-    args = runner.parse_args([GRID_CPU, '--data-root', 'data/x',
+    args = cli.parse_args([GRID_CPU, '--data-root', 'data/x',
                               '--work-dir', str(tmp_path), '--seeds', '0',
                               '1', '--epochs', '3'])
     runs = runner.plan(runner.select(entries, ['segformer_b0_tf?']), args,
@@ -186,7 +187,7 @@ def test_aggregate_and_report(tmp_path):
     assert table[0]['aAcc_mean'] == '32.0' and table[1]['mIoU_std'] == ''
     assert list(table[0]) == runner.CSV_COLUMNS
 
-    args = runner.parse_args([GRID_CPU, '--data-root', 'data/x',
+    args = cli.parse_args([GRID_CPU, '--data-root', 'data/x',
                               '--work-dir', str(tmp_path), '--seeds', '0',
                               '1', '--epochs', '3'])
     runner.write_markdown(rows, str(tmp_path / 'results.md'), 'python cmd',

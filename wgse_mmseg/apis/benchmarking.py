@@ -1,6 +1,6 @@
 """What a spike segmentor costs: parameters, FLOPs, time and memory.
 
-The measurements behind ``tools/benchmark.py`` and the experiment runner,
+The measurements behind ``tools/analysis_tools/benchmark.py`` and the experiment runner,
 following MMSeg's ``tools/analysis_tools/benchmark.py`` and ``get_flops.py``
 but for ``T``-channel spike input. Inputs are random binary streams
 ``(T, H, W)`` (spike probability 0.3) packed as the data loader packs them,

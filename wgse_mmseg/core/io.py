@@ -34,7 +34,8 @@ import cv2
 import numpy as np
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'atomic_output', 'write_png', 'SPIKE_EXTENSIONS']
+           'centered_window', 'atomic_output', 'write_png', 'to_uint8',
+           'SPIKE_EXTENSIONS']
 
 SPIKE_EXTENSIONS = ('.dat', '.spk', '.npy', '.npz')
 _MAGIC = b'WGSESPK1'
@@ -79,6 +80,11 @@ def write_png(path: str, image: np.ndarray) -> None:
         raise OSError(f'{path}: PNG encoding failed')
     with atomic_output(path) as f:
         f.write(encoded.tobytes())
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """``(H, W)`` float in [0, 1] -> 8-bit grey, rounded, clipped."""
+    return np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
 
 
 def _check_binary(path: str, spikes: np.ndarray) -> None:
@@ -152,6 +158,26 @@ def _spk_geometry(path: str) -> Tuple[int, int, int]:
             f'needs {expected} bytes, but the file has {size}; it is '
             f'truncated or corrupted')
     return steps, height, width
+
+
+def centered_window(path: str, total: int, center: int, length: int) -> int:
+    """First frame of the ``length``-frame window centred on frame
+    ``center`` of a ``total``-frame stream (frame ``center - length // 2``).
+
+    The package's one window policy: a window that does not fit in the
+    stream is an error naming the file and the centre frames that fit,
+    never moved silently (a moved window no longer has the annotated frame
+    at its centre).
+    """
+    start = center - length // 2
+    if length < 1 or start < 0 or start + length > total:
+        first = length // 2
+        last = total - length + length // 2
+        raise SpikeFileError(
+            f'{path}: a {length}-frame window centred on frame {center} does '
+            f'not fit in the stream\'s {total} frames; centre frames '
+            + (f'{first}..{last} fit' if last >= first else 'none fit'))
+    return start
 
 
 def _window(path: str, total: int, start: int,

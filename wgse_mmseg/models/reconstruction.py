@@ -187,7 +187,7 @@ def export_weights(checkpoint: str, out: str) -> None:
 
     The result (``{'state_dict', 'meta': {'model', 'source'}}``, no
     optimiser state or logs) is what :func:`load_reconstructor` and
-    ``tools/reconstruct.py`` read; about 4 bytes per parameter.
+    ``tools/misc/reconstruct.py`` read; about 4 bytes per parameter.
     """
     state = _read_checkpoint(checkpoint)
     model_cfg = _model_config(state, checkpoint)

@@ -9,7 +9,7 @@ from mmcv.transforms import Compose
 from mmseg.registry import TRANSFORMS
 from wgse_mmseg.datasets import (LoadSpikeFromFile, SpikeRandomCrop,
                                  SpikeRandomFlip)
-from wgse_mmseg.core.io import load_spikes, save_spikes
+from wgse_mmseg.core.io import SpikeFileError, load_spikes, save_spikes
 
 T = 129
 
@@ -81,14 +81,23 @@ def test_load_centred_window(stream_file, num_steps):
         np.testing.assert_array_equal(img[..., 20], spikes[64])
 
 
-@pytest.mark.parametrize('center, start', [(10, 0), (64, 44), (125, 88),
-                                           (0, 0), (128, 88)])
+@pytest.mark.parametrize('center, start', [(20, 0), (64, 44), (108, 88)])
 def test_load_window_at_center(stream_file, center, start):
     path, spikes = stream_file
     results = LoadSpikeFromFile(num_steps=41, center=center)(dict(
         img_path=path))
     np.testing.assert_array_equal(results['img'],
                                   spikes[start:start + 41].transpose(1, 2, 0))
+
+
+@pytest.mark.parametrize('center', [0, 19, 109, 128])
+def test_a_window_past_the_stream_is_an_error_not_moved(stream_file, center):
+    """One window policy (core.io.centered_window): a window that does not
+    fit is refused with the centre frames that fit, never shifted away from
+    the annotated frame."""
+    path, _ = stream_file
+    with pytest.raises(SpikeFileError, match=r'centre frames 20\.\.108 fit'):
+        LoadSpikeFromFile(num_steps=41, center=center)(dict(img_path=path))
 
 
 def test_load_dat_with_geometry(tmp_path):

@@ -6,13 +6,13 @@ In a pipeline a spike stream lives in ``results['img']`` as an ``(H, W, T)``
 :class:`~wgse_mmseg.models.SpikeSegDataPreProcessor` batches. Spikes stay
 binary and one byte per spike until the preprocessor.
 """
-from typing import Optional, Sequence, Union
+from typing import Optional
 
 import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
-from ...core.io import load_spikes, spike_shape
+from ...core.io import centered_window, load_spikes, spike_shape
 
 __all__ = ['LoadSpikeFromFile']
 
@@ -33,6 +33,8 @@ class LoadSpikeFromFile(BaseTransform):
         height, width: frame size of ``.dat`` files (other formats, and
             ``.dat`` files with a ``.json`` side file, record it).
         center: frame the window is centred on; ``None`` for the middle.
+            A window that does not fit in the stream is an error
+            (:func:`~wgse_mmseg.core.io.centered_window`).
 
     Added keys: ``img`` ``(H, W, T)`` uint8, ``img_shape``, ``ori_shape``,
     ``num_steps``.
@@ -58,7 +60,7 @@ class LoadSpikeFromFile(BaseTransform):
                 f'{path}: the stream has T={total} frames but the config '
                 f'asks for num_steps={length}')
         center = total // 2 if self.center is None else self.center
-        start = min(max(center - length // 2, 0), total - length)
+        start = centered_window(path, total, center, length)
         spikes = load_spikes(path, self.height, self.width, start, length)
         results['img'] = np.ascontiguousarray(spikes.transpose(1, 2, 0))
         results['img_shape'] = spikes.shape[1:]

@@ -3,7 +3,7 @@
 The stream is ``results['img']``, ``(H, W, T)`` ``uint8`` (see
 :mod:`.loading`); crops and flips move its label maps with it.
 """
-from typing import Optional, Sequence, Union
+from typing import Sequence, Union
 
 import numpy as np
 from mmcv.transforms import BaseTransform

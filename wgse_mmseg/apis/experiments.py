@@ -1,21 +1,17 @@
-"""Train and evaluate a grid of configs over seeds; tabulate and plot.
+"""Experiment grids: train and evaluate configs over seeds, tabulate, plot.
 
-    python tools/run_experiments.py GRID --data-root DIR --work-dir DIR
-        [--seeds 0 1 2] [--epochs N | --max-iters N] [--only NAME ...]
-        [--report-dir DIR] [--keep-checkpoints] [--list]
-
-GRID (e.g. configs/experiments/grid_cpu.py) lists models and enhancers; each
-entry ``<model>_<enhancer>`` is the model's config with
-``model.data_preprocessor.enhancer`` overridden. Each (entry, seed) run
-trains with tools/train.py and evaluates its final checkpoint with
-tools/test.py, each in its own process with the grid's ``--cfg-options``,
-then times batch-1 inference on a validation-sized stream. A run is done
-when ``WORK_DIR/<entry>/seed_<seed>/result.json`` exists (written
-atomically): re-running the command skips finished runs and resumes an
-interrupted one from its last checkpoint. At the end, every finished run of
-the selected entries and seeds is aggregated into ``results.csv``,
-``results.md`` and ``accuracy_vs_time.png`` in ``--report-dir`` (default:
-the work dir). See docs/benchmark.md.
+What ``tools/analysis_tools/run_experiments.py`` runs (its docstring has the
+command line). A grid (e.g. ``configs/experiments/grid_cpu.py``) lists
+models and enhancers; each entry ``<model>_<enhancer>`` is the model's
+config with ``model.data_preprocessor.enhancer`` overridden. Each (entry,
+seed) run trains with ``tools/train.py`` and evaluates its final checkpoint
+with ``tools/test.py``, each in its own process with the grid's
+``--cfg-options``, then times batch-1 inference on a validation-sized
+stream. A run is done when ``WORK_DIR/<entry>/seed_<seed>/result.json``
+exists (written atomically): re-running skips finished runs and resumes an
+interrupted one from its last checkpoint. :func:`report` aggregates every
+finished run into ``results.csv``, ``results.md`` and
+``accuracy_vs_time.png``. See docs/benchmark.md.
 """
 import argparse
 import csv
@@ -34,10 +30,13 @@ from typing import Any, Dict, List, NamedTuple, Optional, Tuple
 
 from mmengine.config import Config
 
-from wgse_mmseg.apis.benchmarking import markdown_table, validation_cost
-from wgse_mmseg.core.io import atomic_output
+from .benchmarking import markdown_table, validation_cost
+from ..core.io import atomic_output
 
-REPO_ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+#: where the package keeps its ``configs/`` and ``tools/`` (``setup.py``
+#: links them into ``wgse_mmseg/.mim``, MMSeg's convention for mim)
+PROJECT_ROOT = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),
+                        '.mim')
 METRICS = ('mIoU', 'mAcc', 'aAcc')
 ENHANCER_KEY = 'model.data_preprocessor.enhancer'
 
@@ -58,7 +57,8 @@ class RunFailed(RuntimeError):
 def load_grid(path: str) -> Tuple[Config, List[Entry]]:
     """The grid config and its entries, models outer, enhancers inner.
 
-    Model config paths are relative to the repository root (or absolute).
+    Model config paths are relative to the project root, where
+    ``configs/`` is (or absolute).
     """
     grid = Config.fromfile(path)
     for key in ('models', 'enhancers', 'cfg_options', 'epochs', 'seeds',
@@ -67,7 +67,7 @@ def load_grid(path: str) -> Tuple[Config, List[Entry]]:
             raise ValueError(f'{path}: the grid must define {key!r}')
     entries = []
     for model, config in grid.models.items():
-        config = osp.join(REPO_ROOT, config)
+        config = osp.join(PROJECT_ROOT, config)
         if not osp.isfile(config):
             raise FileNotFoundError(f'{path}: model {model!r}: {config} '
                                     f'does not exist')
@@ -173,8 +173,7 @@ def _run_logged(command: List[str], log_path: str, what: str) -> None:
     with open(log_path, 'a') as log:
         log.write(f'$ {shlex.join(command)}\n')
         log.flush()
-        code = subprocess.call(command, stdout=log, stderr=subprocess.STDOUT,
-                               cwd=REPO_ROOT)
+        code = subprocess.call(command, stdout=log, stderr=subprocess.STDOUT)
     if code != 0:
         with open(log_path) as log:
             tail = ''.join(log.readlines()[-20:])
@@ -238,7 +237,8 @@ def plan(entries: List[Entry], args: argparse.Namespace,
     runs = []
     for seed in args.seeds:
         for entry in entries:
-            run_dir = osp.join(args.work_dir, entry.name, f'seed_{seed}')
+            run_dir = osp.join(osp.abspath(args.work_dir), entry.name,
+                               f'seed_{seed}')
             model_options = dict(grid.cfg_options,
                                  data_root=osp.abspath(args.data_root),
                                  **enhancer_options(entry.enhancer))
@@ -271,13 +271,13 @@ def run_one(run: Run, keep_checkpoints: bool,
     """Train, test and time one run; returns (and writes) its result."""
     entry, python = run.entry, [sys.executable]
     train_command = python + [
-        osp.join(REPO_ROOT, 'tools', 'train.py'), entry.config, '--work-dir',
+        osp.join(PROJECT_ROOT, 'tools', 'train.py'), entry.config, '--work-dir',
         run.run_dir, '--resume', '--cfg-options', *as_cli(run.train_options)
     ]
     timing = _train(train_command, run.run_dir)
     test_dir = osp.join(run.run_dir, 'test')
     test_command = python + [
-        osp.join(REPO_ROOT, 'tools', 'test.py'), entry.config, run.checkpoint,
+        osp.join(PROJECT_ROOT, 'tools', 'test.py'), entry.config, run.checkpoint,
         '--work-dir', test_dir, '--cfg-options', *as_cli(run.model_options)
     ]
     _run_logged(test_command, osp.join(run.run_dir, 'test.log'), 'testing')
@@ -383,7 +383,7 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
     schedule = (f'{args.epochs} epochs' if args.max_iters is None else
                 f'{args.max_iters} iterations')
     settings = ', '.join(f'{k}={v}' for k, v in grid.cfg_options.items())
-    grid_name = osp.relpath(osp.abspath(args.grid), REPO_ROOT)
+    grid_name = osp.relpath(osp.abspath(args.grid))
     lines = [
         '# Accuracy against time per image', '',
         f'Grid `{grid_name}` ({settings}, '
@@ -467,88 +467,3 @@ def report(entries: List[Entry], args: argparse.Namespace, grid: Config,
     print(f'{len(rows)} entries reported in {report_dir}: results.md, '
           f'results.csv, accuracy_vs_time.png')
     return rows
-
-
-def parse_args(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('grid', help='grid file, e.g. '
-                        'configs/experiments/grid_cpu.py')
-    parser.add_argument('--data-root', required=True,
-                        help='dataset root (Spike-Cityscapes layout)')
-    parser.add_argument('--work-dir', required=True,
-                        help='one sub-directory per entry and seed')
-    parser.add_argument('--seeds', type=int, nargs='+',
-                        help="seeds (default: the grid's)")
-    schedule = parser.add_mutually_exclusive_group()
-    schedule.add_argument('--epochs', type=int,
-                          help="training epochs (default: the grid's)")
-    schedule.add_argument('--max-iters', type=int,
-                          help='train for this many iterations instead')
-    parser.add_argument('--only', nargs='+', metavar='NAME',
-                        help='entries to run: names or shell patterns, '
-                        "e.g. 'segformer_b0_*'")
-    parser.add_argument('--report-dir',
-                        help='where results.{md,csv} and the plot go '
-                        '(default: the work dir)')
-    parser.add_argument('--keep-checkpoints', action='store_true',
-                        help='keep each run\'s checkpoints (default: '
-                        'removed once the run is done)')
-    parser.add_argument('--list', action='store_true',
-                        help='list the selected entries and exit')
-    parser.add_argument('--report-only', action='store_true',
-                        help='train nothing: report the finished runs of '
-                        'the selected entries and seeds (a grid run in '
-                        'stages with different seeds per entry)')
-    return parser.parse_args(argv)
-
-
-def main(argv=None):
-    args = parse_args(argv)
-    command = shlex.join(['python', osp.relpath(__file__, os.getcwd())] +
-                         list(sys.argv[1:] if argv is None else argv))
-    grid, entries = load_grid(args.grid)
-    entries = select(entries, args.only)
-    if args.list:
-        for entry in entries:
-            print(f'{entry.name:32s} {describe(entry.enhancer)}')
-        return 0
-    if not args.report_only and not osp.isdir(
-            osp.join(args.data_root, 'spike', 'train')):
-        raise SystemExit(
-            f'{args.data_root}/spike/train does not exist. Make the embedded '
-            f'dataset with: python tools/make_synthetic_dataset.py '
-            f'{args.data_root} --num-steps {grid.cfg_options["num_steps"]}')
-    args.seeds = args.seeds or list(grid.seeds)
-    if args.max_iters is None and args.epochs is None:
-        args.epochs = grid.epochs
-    runs = plan(entries, args, grid)
-    done = [finished(run) for run in runs]  # checks every result first
-    failures = []
-    for index, (run, skip) in enumerate(zip(runs, done), 1):
-        prefix = f'[{index}/{len(runs)}] {run.entry.name} seed {run.seed}:'
-        if skip:
-            print(f'{prefix} done before, skipped', flush=True)
-            continue
-        if args.report_only:
-            print(f'{prefix} not run (--report-only)', flush=True)
-            continue
-        print(f'{prefix} running ...', flush=True)
-        start = time.perf_counter()
-        try:
-            result = run_one(run, args.keep_checkpoints, grid.latency)
-        except RunFailed as error:
-            print(f'{prefix} FAILED: {error}', flush=True)
-            failures.append(f'{run.entry.name} seed {run.seed}')
-            continue
-        print(f"{prefix} mIoU {result['mIoU']:.2f}, "
-              f"{result['ms_per_image']['median']:.1f} ms/image, "
-              f'{time.perf_counter() - start:.0f} s', flush=True)
-    report(entries, args, grid, command)
-    if failures:
-        print(f'{len(failures)} runs failed: {", ".join(failures)}')
-        return 1
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -1,7 +1,7 @@
 """Benchmark spike segmentors: parameters, FLOPs, latency, throughput,
 training-step time, the enhancer's share of the step and peak memory.
 
-    python tools/benchmark.py CONFIG [CONFIG ...] [--device cpu|cuda]
+    python tools/analysis_tools/benchmark.py CONFIG [CONFIG ...] [--device cpu|cuda]
         [--crop H W] [--repeat N] [--warmup N] [--batch-size N]
         [--threads N] [--out FILE] [--cfg-options num_steps=41 ...]
 

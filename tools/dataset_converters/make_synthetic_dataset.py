@@ -1,6 +1,6 @@
 """Make the embedded Spike-Cityscapes-format dataset (procedural street scenes).
 
-    python tools/make_synthetic_dataset.py data/synthetic_spike_cityscapes
+    python tools/dataset_converters/make_synthetic_dataset.py data/synthetic_spike_cityscapes
 
 Resumable: existing files are kept. See wgse_mmseg/datasets/synthetic.py.
 """

@@ -1,30 +1,10 @@
 """WGSE forward+backward time and peak memory against the reference design.
 
-The reference is the public WGSE implementation's design, rebuilt here only:
-``pytorch_wavelets.DWT1DForward(J=level, wave=wavelet, mode='zero')`` over
-every pixel's time series ``(B*H*W, 1, T)``, one ``nn.Conv1d`` band network
-per band on the whole batch, ``DWT1DInverse`` back (``T + 1`` samples for odd
-``T``; the extra one is dropped for the comparison). It uses the same band
-network weights as the package's ``WGSE``, so outputs must agree. Each
-further row is ``WGSE`` with one band-network backend
-(``wgse_mmseg.core.wgse.band_network_backends``): by default every backend
-that can run on ``--device`` here (CPU: ``torch`` and, where the extension
-is built, ``compiled``; CUDA: ``torch`` and, where triton imports,
-``triton``). Every backend recomputes hidden activations in the backward
-pass.
-
-Each measurement runs in a fresh process: peak memory is the growth of the
-process's peak resident set (on ``--device cuda``: of CUDA memory allocated)
-during the first forward+backward after set-up (inputs and model already
-built), also per pixel (``B*H*W``); time the median (and min-max) wall time
-of ``--repeat`` further forward+backward passes after one warm-up.
-
-    python tools/benchmark_wgse.py                          # the issue's shapes
-    python tools/benchmark_wgse.py --shapes 4x41x64x64 --repeat 3
-    python tools/benchmark_wgse.py --out results.json
-    python tools/benchmark_wgse.py --device cuda --shapes 4x129x256x512
-
-Needs ``pytorch_wavelets`` (``requirements/tests.txt``).
+What ``tools/analysis_tools/benchmark_wgse.py`` runs; its docstring says
+what is compared and how (docs/wgse_speed.md has the tables). Needs torch
+and, for the reference row, ``pytorch_wavelets``; nothing of OpenMMLab, so
+it runs on a GPU machine that has torch alone. Every measurement runs in a
+fresh process (``python -m wgse_mmseg.core.wgse.benchmark --worker ...``).
 """
 import argparse
 import json
@@ -35,9 +15,13 @@ import statistics
 import subprocess
 import sys
 import time
-from typing import Dict, List
+from typing import Dict, List, Optional
 
 import torch
+
+from ..machine import cpu_model
+from . import band_network_backends
+from .wgse import WGSE
 
 IMPLEMENTATIONS = {
     'reference': 'pytorch_wavelets + per-pixel nn.Conv1d',
@@ -48,13 +32,13 @@ IMPLEMENTATIONS = {
 DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
 
 
-def _parse_shape(text: str) -> List[int]:
+def parse_shape(text: str) -> List[int]:
     try:
         shape = [int(v) for v in text.lower().split('x')]
     except ValueError:
         shape = []
     if len(shape) != 4 or min(shape) < 1:
-        raise argparse.ArgumentTypeError(
+        raise ValueError(
             f'shape must be BxTxHxW with positive sizes, got {text!r}')
     return shape
 
@@ -87,8 +71,6 @@ class ReferenceWGSE(torch.nn.Module):
 
 def available_backends(device: str) -> List[str]:
     """The backends that can run WGSE's default network on ``device``."""
-    import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
-    from wgse_mmseg.core.wgse import WGSE, band_network_backends
     networks = WGSE().band_networks
     probe = torch.zeros(1, 1, sum(1 for _ in networks), device=device)
     return [name for name, backend in band_network_backends.BACKENDS.items()
@@ -96,8 +78,6 @@ def available_backends(device: str) -> List[str]:
 
 
 def _build(impl: str, shape: List[int], device: str):
-    import wgse_mmseg  # noqa: F401  (registers; quiet mmcv fallback below)
-    from wgse_mmseg.core.wgse import WGSE
     torch.manual_seed(0)
     model = WGSE(backend='auto' if impl == 'reference' else impl)
     spikes = (torch.rand(shape, generator=torch.Generator().manual_seed(1))
@@ -171,7 +151,7 @@ def agreement(shape: List[int], device: str) -> Dict:
 
 
 def _run_worker(args: List[str]) -> Dict:
-    cmd = [sys.executable, os.path.abspath(__file__), '--worker'] + args
+    cmd = [sys.executable, '-m', __name__, '--worker'] + args
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f'benchmark worker {args} failed:\n{proc.stderr}')
@@ -179,7 +159,6 @@ def _run_worker(args: List[str]) -> Dict:
 
 
 def machine(device: str) -> Dict:
-    from wgse_mmseg.core.machine import cpu_model
     import pytorch_wavelets
     gpu = {} if device == 'cpu' else dict(
         gpu=torch.cuda.get_device_name(), cuda=torch.version.cuda)
@@ -191,43 +170,12 @@ def machine(device: str) -> Dict:
                 load_average=os.getloadavg()[0])
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--shapes', nargs='+', type=_parse_shape,
-                        default=[_parse_shape(s) for s in DEFAULT_SHAPES],
-                        help='BxTxHxW batches (default: %s)' %
-                        ' '.join(DEFAULT_SHAPES))
-    parser.add_argument('--repeat', type=int, default=3)
-    parser.add_argument('--impls', nargs='+', choices=list(IMPLEMENTATIONS),
-                        help='rows to run (default: the reference and every '
-                        'backend that can run on --device here)')
-    parser.add_argument('--device', choices=['cpu', 'cuda'], default='cpu')
-    parser.add_argument('--out', help='also write the results as JSON')
-    parser.add_argument('--worker', nargs='+', help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.worker:
-        kind, *rest = args.worker
-        if kind == 'agree':
-            result = agreement(_parse_shape(rest[0]), args.device)
-        else:
-            result = worker(kind, _parse_shape(rest[0]), int(rest[1]),
-                            args.device)
-        print(json.dumps(result))
-        return 0
-    if args.repeat < 1:
-        parser.error('--repeat must be >= 1')
-    if args.device == 'cuda' and not torch.cuda.is_available():
-        parser.error('--device cuda: torch sees no CUDA device here')
-    backends = available_backends(args.device)
-    if args.impls is None:
-        args.impls = ['reference'] + backends
-    missing = [impl for impl in args.impls
-               if impl != 'reference' and impl not in backends]
-    if missing:
-        parser.error(f'--impls {" ".join(missing)}: cannot run on '
-                     f'{args.device} here (available: {", ".join(backends)})')
-
-    info = machine(args.device)
+def run_benchmark(shapes: List[List[int]], impls: List[str], repeat: int,
+                  device: str, out: Optional[str] = None) -> Dict:
+    """Measure ``impls`` (``'reference'`` and backend names) at every shape,
+    printing the table as rows come in; returns (and writes to ``out`` as
+    JSON) ``{'machine', 'results', 'agreement'}``."""
+    info = machine(device)
     print('WGSE forward+backward (db8, 5 levels, zero mode, kernel 3, '
           '32 channels)')
     print(' | '.join(f'{k}: {v}' for k, v in info.items()))
@@ -237,11 +185,11 @@ def main(argv=None) -> int:
     print(header)
     print('-' * len(header))
     rows, checks = [], []
-    for shape in args.shapes:
+    for shape in shapes:
         text = 'x'.join(map(str, shape))
-        results = {impl: _run_worker([impl, text, str(args.repeat),
-                                      '--device', args.device])
-                   for impl in args.impls}
+        results = {impl: _run_worker([impl, text, str(repeat),
+                                      '--device', device])
+                   for impl in impls}
         base = results.get('reference')
         for impl, res in results.items():
             speed = mem = ''
@@ -257,24 +205,40 @@ def main(argv=None) -> int:
                   f'{res["peak_mib"]:>9.0f} {res["kib_per_pixel"]:>7.1f} '
                   f'{speed:>9} {mem:>7}')
             rows.append(res)
-        if 'reference' in args.impls:
-            check = _run_worker(['agree', text, '--device', args.device])
+        if 'reference' in impls:
+            check = _run_worker(['agree', text, '--device', device])
             checks.append(check)
             print(f'{"":>14} output agreement ({check["backend"]}): max '
                   f'|WGSE - reference| = '
                   f'{check["max_abs_output_diff"]:.2e} (outputs up to '
                   f'{check["max_output"]:.2f}); band-network gradients: max '
                   f'relative difference {check["max_rel_grad_diff"]:.2e}')
-    peak = ('CUDA memory allocated' if args.device == 'cuda' else
+    peak = ('CUDA memory allocated' if device == 'cuda' else
             'peak RSS')
     print('speed-up: reference median / median; memory: peak / reference '
           f'peak (peak = growth of {peak} during one forward+backward)')
-    if args.out:
-        with open(args.out, 'w') as f:
-            json.dump(dict(machine=info, results=rows, agreement=checks), f,
-                      indent=2)
+    report = dict(machine=info, results=rows, agreement=checks)
+    if out:
+        with open(out, 'w') as f:
+            json.dump(report, f, indent=2)
+    return report
+
+
+def _worker_main(argv: List[str]) -> int:
+    """``--worker KIND SHAPE [REPEAT] --device DEVICE``: one measurement in
+    this fresh process, printed as JSON."""
+    parser = argparse.ArgumentParser()
+    parser.add_argument('--worker', nargs='+', required=True)
+    parser.add_argument('--device', default='cpu')
+    args = parser.parse_args(argv)
+    kind, *rest = args.worker
+    if kind == 'agree':
+        result = agreement(parse_shape(rest[0]), args.device)
+    else:
+        result = worker(kind, parse_shape(rest[0]), int(rest[1]), args.device)
+    print(json.dumps(result))
     return 0
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(_worker_main(sys.argv[1:]))

@@ -1,6 +1,6 @@
 """Reconstruct grey images from a spike stream and write them as PNGs.
 
-    python tools/reconstruct.py SPIKE_FILE --out DIR [--method wgse|tfp|tfi]
+    python tools/misc/reconstruct.py SPIKE_FILE --out DIR [--method wgse|tfp|tfi]
         [--checkpoint CKPT] [--height H --width W] [--frames 150,...]
         [--num-steps 41] [--device cpu]
 
@@ -21,10 +21,10 @@ import argparse
 import os.path as osp
 import sys
 
-import numpy as np
 
 from wgse_mmseg.evaluation import entropy_2d
-from wgse_mmseg.core.io import SpikeFileError, load_spikes, spike_shape, write_png
+from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
+                                spike_shape, to_uint8, write_png)
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
                                               reconstruction_method)
 
@@ -65,24 +65,6 @@ def parse_args(argv=None):
     return args
 
 
-def window_start(path: str, total: int, center: int, length: int) -> int:
-    """First frame of the ``length``-frame window centred on ``center``."""
-    start = center - length // 2
-    if start < 0 or start + length > total:
-        first = length // 2
-        last = total - length + length // 2
-        raise SpikeFileError(
-            f'{path}: a {length}-frame window centred on frame {center} does '
-            f'not fit in the stream\'s {total} frames; centre frames '
-            + (f'{first}..{last} fit' if last >= first else 'none fit'))
-    return start
-
-
-def to_uint8(image: np.ndarray) -> np.ndarray:
-    """``(H, W)`` float in [0, 1] -> 8-bit grey."""
-    return np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
-
-
 def main(argv=None):
     args = parse_args(argv)
     try:
@@ -94,7 +76,8 @@ def main(argv=None):
         else:
             method = reconstruction_method(args.method)
         frames = args.frames if args.frames else [total // 2]
-        starts = [window_start(args.spikes, total, f, length) for f in frames]
+        starts = [centered_window(args.spikes, total, f, length)
+                  for f in frames]
     except (SpikeFileError, ValueError, FileNotFoundError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     stem = osp.splitext(osp.basename(args.spikes))[0]

@@ -1,6 +1,6 @@
 """A figure like the paper's Fig. 9: reconstructions of a stream over time.
 
-    python tools/make_reconstruction_figure.py SPIKE_FILE --out FIG.png
+    python tools/misc/make_reconstruction_figure.py SPIKE_FILE --out FIG.png
         [--methods wgse] [--frames 60,100,... | --count 5]
         [--checkpoint CKPT] [--height H --width W] [--scale 1.0]
 
@@ -16,8 +16,8 @@ import sys
 import cv2
 import numpy as np
 
-from reconstruct import to_uint8, window_start
-from wgse_mmseg.core.io import SpikeFileError, load_spikes, spike_shape, write_png
+from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
+                                spike_shape, to_uint8, write_png)
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
                                               reconstruction_method)
 
@@ -86,7 +86,7 @@ def main(argv=None):
             first, last = length // 2, total - length + length // 2
             frames = np.linspace(first, last, args.count).round().astype(
                 int).tolist()
-        starts = [window_start(args.spikes, total, f, length) for f in frames]
+        starts = [centered_window(args.spikes, total, f, length) for f in frames]
     except (SpikeFileError, ValueError, FileNotFoundError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     columns = []

@@ -1,0 +1,73 @@
+"""Throughput of the spike simulator, and load time of spike files.
+
+Prints two tables:
+
+1. Simulator throughput in pixel-steps per second (``H * W * T`` per
+   second) for the base model and for each effect alone, each against a
+   plain NumPy step-loop integrate-and-fire on the same input in the same
+   run (``vs NumPy loop``: its time over the row's time). Inputs are a
+   procedural street scene (:func:`wgse_mmseg.datasets.synthetic.
+   render_street_scene`): ``still`` is its middle frame, ``video`` its
+   ``--frames`` frames spread over the stream. Where the compiled CPU
+   kernel is built, the base model also runs on the torch path (as without
+   it, and as on a GPU); both must give the same spikes.
+2. Time to load one ``--load-shape`` sample (default 129x512x1024) from
+   each format with :func:`wgse_mmseg.core.io.load_spikes` (files just written,
+   so from the page cache: decoding, not the disk), against simulating it.
+
+Each time is the median of ``--repeat`` runs after one warm-up run. The
+default size runs in about a minute on two cores; the full-size run is::
+
+    python tools/analysis_tools/benchmark_simulator.py --height 512 --width 1024 --repeat 5
+
+``--threads`` sets torch's intra-op threads (default 1, the NumPy loop's
+count, so the ratio compares algorithms, not core counts).
+"""
+import argparse
+
+import numpy as np
+import torch
+
+from wgse_mmseg.apis.simulator_benchmark import (header, load_rows,
+                                                 simulator_rows)
+from wgse_mmseg.datasets.synthetic import render_street_scene
+
+
+def parse_args():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--height', type=int, default=256)
+    parser.add_argument('--width', type=int, default=512)
+    parser.add_argument('--steps', type=int, default=129)
+    parser.add_argument('--frames', type=int, default=3,
+                        help='video frames over the stream')
+    parser.add_argument('--repeat', type=int, default=5)
+    parser.add_argument('--device', default='cpu')
+    parser.add_argument('--threads', type=int, default=1,
+                        help='torch intra-op threads (0: torch default)')
+    parser.add_argument('--load-shape', default='129,512,1024',
+                        type=lambda s: tuple(int(v) for v in s.split(',')),
+                        help='T,H,W of the load-time sample')
+    parser.add_argument('--skip-load', action='store_true')
+    args = parser.parse_args()
+    if min(args.height, args.width, args.steps, args.repeat) < 1 or \
+            args.frames < 2 or len(args.load_shape) != 3:
+        parser.error('sizes and --repeat must be >= 1, --frames >= 2, '
+                     '--load-shape T,H,W')
+    return args
+
+
+def main():
+    args = parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    frames, _ = render_street_scene(np.random.default_rng(0), args.height,
+                                    args.width, args.frames)
+    still = frames[args.frames // 2:args.frames // 2 + 1]
+    lines = header(args) + [''] + simulator_rows(args, still, frames)
+    if not args.skip_load:
+        lines += [''] + load_rows(args, still)
+    print('\n'.join(lines))
+
+
+if __name__ == '__main__':
+    main()

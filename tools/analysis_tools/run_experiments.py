@@ -1,0 +1,114 @@
+"""Train and evaluate a grid of configs over seeds; tabulate and plot.
+
+    python tools/analysis_tools/run_experiments.py GRID --data-root DIR --work-dir DIR
+        [--seeds 0 1 2] [--epochs N | --max-iters N] [--only NAME ...]
+        [--report-dir DIR] [--keep-checkpoints] [--list]
+
+GRID (e.g. configs/experiments/grid_cpu.py) lists models and enhancers; each
+entry ``<model>_<enhancer>`` is the model's config with
+``model.data_preprocessor.enhancer`` overridden. Each (entry, seed) run
+trains with tools/train.py and evaluates its final checkpoint with
+tools/test.py, each in its own process with the grid's ``--cfg-options``,
+then times batch-1 inference on a validation-sized stream. A run is done
+when ``WORK_DIR/<entry>/seed_<seed>/result.json`` exists (written
+atomically): re-running the command skips finished runs and resumes an
+interrupted one from its last checkpoint. At the end, every finished run of
+the selected entries and seeds is aggregated into ``results.csv``,
+``results.md`` and ``accuracy_vs_time.png`` in ``--report-dir`` (default:
+the work dir). See docs/benchmark.md.
+"""
+import argparse
+import os
+import os.path as osp
+import shlex
+import sys
+import time
+
+from wgse_mmseg.apis.experiments import (RunFailed, describe, finished,
+                                         load_grid, plan, report, run_one,
+                                         select)
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('grid', help='grid file, e.g. '
+                        'configs/experiments/grid_cpu.py')
+    parser.add_argument('--data-root', required=True,
+                        help='dataset root (Spike-Cityscapes layout)')
+    parser.add_argument('--work-dir', required=True,
+                        help='one sub-directory per entry and seed')
+    parser.add_argument('--seeds', type=int, nargs='+',
+                        help="seeds (default: the grid's)")
+    schedule = parser.add_mutually_exclusive_group()
+    schedule.add_argument('--epochs', type=int,
+                          help="training epochs (default: the grid's)")
+    schedule.add_argument('--max-iters', type=int,
+                          help='train for this many iterations instead')
+    parser.add_argument('--only', nargs='+', metavar='NAME',
+                        help='entries to run: names or shell patterns, '
+                        "e.g. 'segformer_b0_*'")
+    parser.add_argument('--report-dir',
+                        help='where results.{md,csv} and the plot go '
+                        '(default: the work dir)')
+    parser.add_argument('--keep-checkpoints', action='store_true',
+                        help='keep each run\'s checkpoints (default: '
+                        'removed once the run is done)')
+    parser.add_argument('--list', action='store_true',
+                        help='list the selected entries and exit')
+    parser.add_argument('--report-only', action='store_true',
+                        help='train nothing: report the finished runs of '
+                        'the selected entries and seeds (a grid run in '
+                        'stages with different seeds per entry)')
+    return parser.parse_args(argv)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    command = shlex.join(['python', osp.relpath(__file__, os.getcwd())] +
+                         list(sys.argv[1:] if argv is None else argv))
+    grid, entries = load_grid(args.grid)
+    entries = select(entries, args.only)
+    if args.list:
+        for entry in entries:
+            print(f'{entry.name:32s} {describe(entry.enhancer)}')
+        return 0
+    if not args.report_only and not osp.isdir(
+            osp.join(args.data_root, 'spike', 'train')):
+        raise SystemExit(
+            f'{args.data_root}/spike/train does not exist. Make the embedded '
+            f'dataset with: python tools/dataset_converters/make_synthetic_dataset.py '
+            f'{args.data_root} --num-steps {grid.cfg_options["num_steps"]}')
+    args.seeds = args.seeds or list(grid.seeds)
+    if args.max_iters is None and args.epochs is None:
+        args.epochs = grid.epochs
+    runs = plan(entries, args, grid)
+    done = [finished(run) for run in runs]  # checks every result first
+    failures = []
+    for index, (run, skip) in enumerate(zip(runs, done), 1):
+        prefix = f'[{index}/{len(runs)}] {run.entry.name} seed {run.seed}:'
+        if skip:
+            print(f'{prefix} done before, skipped', flush=True)
+            continue
+        if args.report_only:
+            print(f'{prefix} not run (--report-only)', flush=True)
+            continue
+        print(f'{prefix} running ...', flush=True)
+        start = time.perf_counter()
+        try:
+            result = run_one(run, args.keep_checkpoints, grid.latency)
+        except RunFailed as error:
+            print(f'{prefix} FAILED: {error}', flush=True)
+            failures.append(f'{run.entry.name} seed {run.seed}')
+            continue
+        print(f"{prefix} mIoU {result['mIoU']:.2f}, "
+              f"{result['ms_per_image']['median']:.1f} ms/image, "
+              f'{time.perf_counter() - start:.0f} s', flush=True)
+    report(entries, args, grid, command)
+    if failures:
+        print(f'{len(failures)} runs failed: {", ".join(failures)}')
+        return 1
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
