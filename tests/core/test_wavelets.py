@@ -1,4 +1,5 @@
 """``wgse_mmseg.core.wavelets`` against PyWavelets, the independent reference."""
+import inspect
 import warnings
 
 import numpy as np
@@ -139,9 +140,8 @@ def test_band_lengths_db8_level5_zero(n, expected):
 
 def test_default_level_is_pywt_max_level():
     x = _signal(0, 100)
-    # level=None -> dwt_max_level; the package's default mode is 'zero'
-    # (PyWavelets' is 'symmetric').
-    ref = pywt.wavedec(x, 'db2', mode='zero')
+    # level=None -> dwt_max_level; default mode 'symmetric', as PyWavelets
+    ref = pywt.wavedec(x, 'db2')
     got = wavedec(torch.from_numpy(x), 'db2', level=None)
     assert len(got) == len(ref) == pywt.dwt_max_level(100, 'db2') + 1
     for g, r in zip(got, ref):
@@ -151,7 +151,7 @@ def test_default_level_is_pywt_max_level():
 def test_wavelet_object_accepted():
     x = _signal(1, 20)
     got = wavedec(torch.from_numpy(x), pywt.Wavelet('sym4'), level=2)
-    ref = _pywt_wavedec(x, 'sym4', 'zero', 2)
+    ref = _pywt_wavedec(x, 'sym4', 'symmetric', 2)
     for g, r in zip(got, ref):
         np.testing.assert_allclose(g.numpy(), r, rtol=0, atol=1e-10)
 
@@ -160,7 +160,7 @@ def test_non_float64_inputs_use_float32():
     x = torch.randint(0, 2, (41, ), dtype=torch.uint8)
     coeffs = wavedec(x, 'db8', level=5)
     assert all(c.dtype == torch.float32 for c in coeffs)
-    ref = _pywt_wavedec(x.numpy().astype(np.float64), 'db8', 'zero', 5)
+    ref = _pywt_wavedec(x.numpy().astype(np.float64), 'db8', 'symmetric', 5)
     for g, r in zip(coeffs, ref):
         np.testing.assert_allclose(g.numpy(), r, rtol=1e-5, atol=1e-5)
 
@@ -219,3 +219,19 @@ def test_waverec_length_out_of_range():
             waverec(coeffs, 'db8', length=bad)
     # pywt.waverec returns 42 samples here; length=42 is still allowed.
     assert waverec(coeffs, 'db8', length=42).shape == (42, )
+
+
+@pytest.mark.parametrize('ours, theirs', [(wavedec, pywt.wavedec),
+                                          (waverec, pywt.waverec)])
+def test_public_functions_follow_pywavelets_signature(ours, theirs):
+    """Same parameter names, order and defaults as PyWavelets (ours adds
+    ``length`` to waverec), so code moves between the two unchanged."""
+    mine = inspect.signature(ours).parameters
+    pywt_params = inspect.signature(theirs).parameters
+    assert list(mine)[:len(pywt_params)] == list(pywt_params)
+    for name, param in pywt_params.items():
+        assert mine[name].default == param.default, name
+    x = torch.linspace(0, 1, 20, dtype=torch.float64)
+    np.testing.assert_allclose(
+        [c.numpy() for c in wavedec(x, 'db2')][0],
+        pywt.wavedec(x.numpy(), 'db2')[0])

@@ -199,8 +199,8 @@ def _synthesis(wavelet_name: str, mode: str,
     return approx
 
 
-def band_lengths(length: int, wavelet='db8', level: Optional[int] = None,
-                 mode: str = 'zero') -> Tuple[int, ...]:
+def band_lengths(length: int, wavelet, level: Optional[int] = None,
+                 mode: str = 'symmetric') -> Tuple[int, ...]:
     """Coefficient counts ``(len(cA_n), len(cD_n), ..., len(cD_1))``."""
     wavelet = get_wavelet(wavelet)
     check_mode(mode)
@@ -208,8 +208,8 @@ def band_lengths(length: int, wavelet='db8', level: Optional[int] = None,
                      _resolve_level(level, length, wavelet))[1]
 
 
-def analysis_matrix(length: int, wavelet='db8', level: Optional[int] = None,
-                    mode: str = 'zero') -> np.ndarray:
+def analysis_matrix(length: int, wavelet, level: Optional[int] = None,
+                    mode: str = 'symmetric') -> np.ndarray:
     """The ``(sum(band_lengths), length)`` float64 matrix of :func:`wavedec`.
 
     Rows are ordered ``cA_n, cD_n, ..., cD_1``. Read-only and cached.
@@ -222,8 +222,8 @@ def analysis_matrix(length: int, wavelet='db8', level: Optional[int] = None,
                      _resolve_level(level, length, wavelet))[0]
 
 
-def synthesis_matrix(lengths: Sequence[int], wavelet='db8',
-                     mode: str = 'zero',
+def synthesis_matrix(lengths: Sequence[int], wavelet,
+                     mode: str = 'symmetric',
                      length: Optional[int] = None) -> np.ndarray:
     """The ``(n_out, sum(lengths))`` float64 matrix of :func:`waverec`.
 
@@ -252,15 +252,17 @@ def _apply(matrix: np.ndarray, data: torch.Tensor, axis: int) -> torch.Tensor:
     return torch.matmul(moved, weight.T).movedim(-1, axis)
 
 
-def wavedec(data: torch.Tensor, wavelet='db8', mode: str = 'zero',
+def wavedec(data: torch.Tensor, wavelet, mode: str = 'symmetric',
             level: Optional[int] = None, axis: int = -1) -> List[torch.Tensor]:
-    """Multi-level DWT of ``data`` along ``axis`` (like ``pywt.wavedec``).
+    """Multi-level DWT of ``data`` along ``axis``: ``pywt.wavedec``'s
+    signature and defaults, on torch tensors.
 
     Args:
         data: a tensor of any shape; integer and half-precision inputs are
             transformed in float32, float64 stays float64.
         wavelet: a discrete PyWavelets wavelet name or ``pywt.Wavelet``.
-        mode: one of :data:`SUPPORTED_MODES`.
+        mode: one of :data:`SUPPORTED_MODES` (PyWavelets' default,
+            ``'symmetric'``; WGSE uses the paper's ``'zero'``).
         level: number of levels; ``None`` uses ``pywt.dwt_max_level``.
         axis: the axis to transform.
 
@@ -274,10 +276,11 @@ def wavedec(data: torch.Tensor, wavelet='db8', mode: str = 'zero',
     return list(torch.split(coeffs, list(lengths), dim=axis))
 
 
-def waverec(coeffs: Sequence[torch.Tensor], wavelet='db8',
-            mode: str = 'zero', axis: int = -1,
+def waverec(coeffs: Sequence[torch.Tensor], wavelet,
+            mode: str = 'symmetric', axis: int = -1,
             length: Optional[int] = None) -> torch.Tensor:
-    """Inverse of :func:`wavedec` (like ``pywt.waverec``).
+    """Inverse of :func:`wavedec`: ``pywt.waverec``'s signature and
+    defaults, on torch tensors.
 
     Args:
         coeffs: ``[cA_n, cD_n, ..., cD_1]`` as returned by :func:`wavedec`.

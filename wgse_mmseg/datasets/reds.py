@@ -102,7 +102,7 @@ class LoadSpikeImagePair(BaseTransform):
 
 @TRANSFORMS.register_module()
 class PackReconstructionInputs(BaseTransform):
-    """Pack a sample for :class:`~wgse_mmseg.models.SpikeReconstructor`.
+    """Pack a sample for :class:`~wgse_mmseg.models.reconstruction.SpikeReconstructor`.
 
     Returns ``inputs``: ``(T, H, W)`` uint8 tensor, and ``data_samples``: a
     ``BaseDataElement`` with ``gt_image`` (``PixelData`` ``(1, H, W)``
