@@ -30,6 +30,7 @@ from wgse_mmseg.models.reconstruction import (DEFAULT_WEIGHTS,
                                               export_weights,
                                               load_reconstructor)
 from wgse_mmseg.core.reconstruction_baselines import tfi, tfp
+from wgse_mmseg.core.representations import TFI
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
@@ -180,9 +181,14 @@ def test_tfi_uses_the_interval_around_the_centre():
     spikes = np.zeros((9, 1, 4), np.uint8)   # centre frame 4
     spikes[[1, 6], 0, 0] = 1                 # interval 5
     spikes[[4, 5], 0, 1] = 1                 # spike at the centre: 1
-    spikes[7, 0, 2] = 1                      # none before: prev = -1 -> 8
-    expected = [1 / (5 * 0.6), 1.0, 1 / (8 * 0.6), 1 / (10 * 0.6)]
+    spikes[7, 0, 2] = 1                      # one spike: count / T = 1 / 9
+    # no spike: 0. TFI's definition (core.representations), on the REDS
+    # scale: the baseline is the representation at the centre frame.
+    expected = [1 / (5 * 0.6), 1.0, 1 / (9 * 0.6), 0.0]
     np.testing.assert_allclose(tfi(spikes)[0], expected)
+    stream = torch.from_numpy(spikes).double()[None]
+    np.testing.assert_allclose(
+        tfi(spikes), np.clip(TFI()(stream)[0, 4].numpy() / 0.6, 0, 1))
 
 
 def test_baselines_reject_bad_input():
