@@ -10,12 +10,16 @@ from .._openmmlab import require_openmmlab
 
 require_openmmlab('wgse_mmseg.datasets')
 
-from . import reds  # noqa: E402,F401  (registers)
+from .reds import (LoadSpikeImagePair,  # noqa: E402
+                   PackReconstructionInputs, REDSSpikeDataset,
+                   SimulatedSpikeImageDataset)
 from .spike_cityscapes import SpikeCityscapesDataset  # noqa: E402
 from .transforms import (LoadSpikeFromFile, SimulateSpikes,  # noqa: E402
                          SpikeRandomCrop, SpikeRandomFlip)
 
 __all__ = [
-    'SpikeCityscapesDataset', 'LoadSpikeFromFile', 'SpikeRandomCrop',
-    'SpikeRandomFlip', 'SimulateSpikes'
+    'SpikeCityscapesDataset', 'REDSSpikeDataset',
+    'SimulatedSpikeImageDataset', 'LoadSpikeFromFile', 'SpikeRandomCrop',
+    'SpikeRandomFlip', 'SimulateSpikes', 'LoadSpikeImagePair',
+    'PackReconstructionInputs'
 ]

@@ -4,7 +4,10 @@ from .._openmmlab import require_openmmlab
 
 require_openmmlab('wgse_mmseg.models')
 
-from . import enhancers, reconstruction  # noqa: E402,F401  (registers)
 from .data_preprocessor import SpikeSegDataPreProcessor  # noqa: E402
+from .enhancers import ENHANCERS  # noqa: E402
+from .reconstruction import (ResidualBlock,  # noqa: E402
+                             SpikeReconstructor, load_reconstructor)
 
-__all__ = ['SpikeSegDataPreProcessor']
+__all__ = ['SpikeSegDataPreProcessor', 'ENHANCERS', 'SpikeReconstructor',
+           'ResidualBlock', 'load_reconstructor']
