@@ -31,6 +31,7 @@ from wgse_mmseg.models.reconstruction import (DEFAULT_WEIGHTS,
                                               load_reconstructor)
 from wgse_mmseg.core.reconstruction_baselines import tfi, tfp
 from wgse_mmseg.core.representations import TFI
+from wgse_mmseg.utils.config_data import ConfigDataError
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
@@ -139,6 +140,47 @@ def test_configs_build_with_paper_sizes(name, enhancer_params, channels):
     assert enhancer == enhancer_params
     if name == 'wgse_resnet':
         assert head == 3783297  # the paper's network, 3.8 M parameters
+
+
+def _crafted_checkpoint(tmp_path, cfg_text):
+    model = _tiny_model()
+    path = tmp_path / 'downloaded.pth'
+    torch.save(dict(state_dict=model.state_dict(),
+                    meta=dict(cfg=cfg_text)), path)
+    return str(path)
+
+
+@pytest.mark.parametrize('payload', [
+    "open(r'{marker}', 'w').write('ran')\nmodel = dict(type='{model}')",
+    "model = dict(type='{model}', note=open(r'{marker}', 'w').write('ran'))",
+])
+@pytest.mark.parametrize('loader', ['load_reconstructor', 'export_weights'])
+def test_a_checkpoint_config_that_would_write_a_file_runs_nothing(
+        tmp_path, payload, loader):
+    """Config text in a checkpoint is data: a crafted one that would write a
+    file when executed is refused, naming the file, and nothing is written
+    (``Config.fromstring``, used before, executed it)."""
+    marker = tmp_path / 'pwned'
+    path = _crafted_checkpoint(tmp_path, payload.format(
+        marker=marker, model='SpikeReconstructor'))
+    with pytest.raises(ConfigDataError, match='downloaded.pth'):
+        if loader == 'load_reconstructor':
+            load_reconstructor(path)
+        else:
+            export_weights(path, str(tmp_path / 'out.pth'))
+    assert not marker.exists()
+    assert not (tmp_path / 'out.pth').exists()
+
+
+@pytest.mark.parametrize('model', [
+    "dict(type='EncoderDecoder')",
+    "dict(type='SpikeReconstructor', enhancer=dict(type='EncoderDecoder'))",
+    "[1, 2]",
+])
+def test_a_checkpoint_builds_only_reconstruction_models(tmp_path, model):
+    path = _crafted_checkpoint(tmp_path, f'model = {model}')
+    with pytest.raises(ConfigDataError, match='downloaded.pth'):
+        load_reconstructor(path)
 
 
 def test_cpu_config_trains_a_few_iterations(tmp_path):

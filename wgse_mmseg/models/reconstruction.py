@@ -19,13 +19,13 @@ import numpy as np
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
-from mmengine.config import Config
 from mmengine.model import BaseModel
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import MODELS
 from ..core.io import atomic_output
 from ..core.reconstruction_baselines import tfi, tfp
+from ..utils.config_data import ConfigDataError, read_config_data
 
 __all__ = ['SpikeReconstructor', 'ResidualBlock', 'DEFAULT_WEIGHTS',
            'load_reconstructor', 'export_weights', 'reconstruction_method',
@@ -143,15 +143,42 @@ class SpikeReconstructor(BaseModel):
         return self._forward(inputs)[0, 0].clamp(0, 1).cpu().numpy()
 
 
+#: what a checkpoint's model config may build: the reconstruction model,
+#: with one of the registered enhancers (or none) in front
+RECONSTRUCTION_MODEL = 'SpikeReconstructor'
+ENHANCER_TYPES = ('WGSE', 'TFP', 'TFI', 'SpatialMeanFilter',
+                  'TemporalMeanFilter')
+
+
 def _model_config(checkpoint: dict, path: str) -> dict:
+    """The checkpoint's model config, read as data and checked to build a
+    reconstruction model only."""
     meta = checkpoint.get('meta') or {}
+    if not isinstance(meta, dict):
+        raise ConfigDataError(f'{path}: meta is a {type(meta).__name__}, '
+                              f'not a dict')
     if 'model' in meta:  # exported by export_weights
-        return dict(meta['model'])
-    if 'cfg' in meta:  # an mmengine Runner checkpoint
-        return Config.fromstring(meta['cfg'], '.py').model.to_dict()
-    raise ValueError(
-        f'{path}: holds no model config (neither meta["model"] of '
-        f'export_weights nor meta["cfg"] of an mmengine checkpoint)')
+        model = meta['model']
+    elif 'cfg' in meta:  # an mmengine Runner checkpoint
+        model = read_config_data(meta['cfg'],
+                                 f'{path} (meta["cfg"])').get('model')
+    else:
+        raise ValueError(
+            f'{path}: holds no model config (neither meta["model"] of '
+            f'export_weights nor meta["cfg"] of an mmengine checkpoint)')
+    if not isinstance(model, dict) or \
+            model.get('type') != RECONSTRUCTION_MODEL:
+        found = model.get('type') if isinstance(model, dict) else model
+        raise ConfigDataError(
+            f'{path}: the model config must build {RECONSTRUCTION_MODEL}, '
+            f'found {found!r}')
+    enhancer = model.get('enhancer')
+    if enhancer is not None and (not isinstance(enhancer, dict) or
+                                 enhancer.get('type') not in ENHANCER_TYPES):
+        raise ConfigDataError(
+            f'{path}: the enhancer must be None or one of {ENHANCER_TYPES}, '
+            f'found {enhancer!r}')
+    return dict(model)
 
 
 def _read_checkpoint(path: str) -> dict:
