@@ -55,13 +55,51 @@ def _taps(ptr, HIDDEN: tl.constexpr):
 
 
 @triton.jit
+def _wide_offsets(HIDDEN: tl.constexpr):
+    """``(H_in, H_out)`` offsets of tap 0 in an ``(H_out, H_in, 3)``
+    weight: element ``[i, o]`` is ``o * 3H + i * 3``."""
+    channels = tl.arange(0, HIDDEN)
+    return channels[:, None] * 3 + channels[None, :] * (HIDDEN * 3)
+
+
+@triton.jit
 def _wide_taps(ptr, HIDDEN: tl.constexpr):
     """The three taps of the ``(H_out, H_in, 3)`` weight, each as the
     ``(H_in, H_out)`` matrix that multiplies a ``(BLOCK, H_in)`` tile."""
-    channels = tl.arange(0, HIDDEN)
-    offsets = channels[:, None] * 3 + channels[None, :] * (HIDDEN * 3)
+    offsets = _wide_offsets(HIDDEN)
     return (tl.load(ptr + offsets), tl.load(ptr + offsets + 1),
             tl.load(ptr + offsets + 2))
+
+
+@triton.jit
+def _load_weights(w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
+                  HIDDEN: tl.constexpr):
+    """One band's weights as the step uses them: conv1's taps ``(1, H)``
+    and bias, conv2's taps ``(H_in, H_out)`` and bias, conv3's taps
+    ``(1, H)`` and its scalar bias."""
+    channels = tl.arange(0, HIDDEN)
+    w1_0, w1_1, w1_2 = _taps(w1_ptr, HIDDEN)
+    w2_0, w2_1, w2_2 = _wide_taps(w2_ptr, HIDDEN)
+    w3_0, w3_1, w3_2 = _taps(w3_ptr, HIDDEN)
+    return (w1_0, w1_1, w1_2, tl.load(b1_ptr + channels)[None, :],
+            w2_0, w2_1, w2_2, tl.load(b2_ptr + channels)[None, :],
+            w3_0, w3_1, w3_2, tl.load(b3_ptr))
+
+
+@triton.jit
+def _hidden_step(s, x_1, x_0, x_n, h1_2, h1_1, w1_0, w1_1, w1_2, b1, w2_0,
+                 w2_1, w2_2, b2, LENGTH: tl.constexpr,
+                 PRECISION: tl.constexpr):
+    """``h1[s]`` and ``h2[s - 1]``, each ``(BLOCK, H)`` and zero outside
+    the band, from ``x[s - 1]``, ``x[s]``, ``x[s + 1]`` and ``h1[s - 2]``,
+    ``h1[s - 1]``."""
+    h1_0 = tl.maximum(b1 + w1_0 * x_1[:, None] + w1_1 * x_0[:, None] +
+                      w1_2 * x_n[:, None], 0.0)
+    h1_0 = tl.where(s < LENGTH, h1_0, 0.0)
+    h2_1 = (b2 + _dot(h1_2, w2_0, PRECISION) + _dot(h1_1, w2_1, PRECISION) +
+            _dot(h1_0, w2_2, PRECISION) + x_1[:, None])
+    h2_1 = tl.where((s >= 1) & (s <= LENGTH), tl.maximum(h2_1, 0.0), 0.0)
+    return h1_0, h2_1
 
 
 @triton.jit
@@ -75,13 +113,9 @@ def band_forward(x_ptr, y_ptr, stride, offset, pixels,
     valid = rows < pixels
     x_row = x_ptr + rows.to(tl.int64) * stride + offset
     y_row = y_ptr + rows.to(tl.int64) * stride + offset
-    channels = tl.arange(0, HIDDEN)
-    w1_0, w1_1, w1_2 = _taps(w1_ptr, HIDDEN)
-    b1 = tl.load(b1_ptr + channels)[None, :]
-    w2_0, w2_1, w2_2 = _wide_taps(w2_ptr, HIDDEN)
-    b2 = tl.load(b2_ptr + channels)[None, :]
-    w3_0, w3_1, w3_2 = _taps(w3_ptr, HIDDEN)
-    b3 = tl.load(b3_ptr)
+    (w1_0, w1_1, w1_2, b1, w2_0, w2_1, w2_2, b2, w3_0, w3_1, w3_2,
+     b3) = _load_weights(w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
+                         HIDDEN)
 
     zeros = tl.zeros((BLOCK, HIDDEN), tl.float32)
     x_1 = tl.zeros((BLOCK, ), tl.float32)  # x[s - 1]
@@ -93,14 +127,9 @@ def band_forward(x_ptr, y_ptr, stride, offset, pixels,
     for s in range(0, LENGTH + 2):
         x_n = tl.load(x_row + s + 1, mask=valid & (s + 1 < LENGTH),
                       other=0.0)
-        h1_0 = tl.maximum(b1 + w1_0 * x_1[:, None] + w1_1 * x_0[:, None] +
-                          w1_2 * x_n[:, None], 0.0)
-        h1_0 = tl.where(s < LENGTH, h1_0, 0.0)
-        h2_1 = (b2 + _dot(h1_2, w2_0, PRECISION) +
-                _dot(h1_1, w2_1, PRECISION) + _dot(h1_0, w2_2, PRECISION) +
-                x_1[:, None])
-        h2_1 = tl.where((s >= 1) & (s <= LENGTH), tl.maximum(h2_1, 0.0),
-                        0.0)
+        h1_0, h2_1 = _hidden_step(s, x_1, x_0, x_n, h1_2, h1_1, w1_0, w1_1,
+                                  w1_2, b1, w2_0, w2_1, w2_2, b2, LENGTH,
+                                  PRECISION)
         y = tl.maximum(
             b3 + tl.sum(h2_3 * w3_0 + h2_2 * w3_1 + h2_1 * w3_2, axis=1),
             0.0)
@@ -126,13 +155,9 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
     x_row = x_ptr + rows.to(tl.int64) * stride + offset
     gy_row = gy_ptr + rows.to(tl.int64) * stride + offset
     gx_row = gx_ptr + rows.to(tl.int64) * stride + offset
-    channels = tl.arange(0, HIDDEN)
-    w1_0, w1_1, w1_2 = _taps(w1_ptr, HIDDEN)
-    b1 = tl.load(b1_ptr + channels)[None, :]
-    w2_0, w2_1, w2_2 = _wide_taps(w2_ptr, HIDDEN)
-    b2 = tl.load(b2_ptr + channels)[None, :]
-    w3_0, w3_1, w3_2 = _taps(w3_ptr, HIDDEN)
-    b3 = tl.load(b3_ptr)
+    (w1_0, w1_1, w1_2, b1, w2_0, w2_1, w2_2, b2, w3_0, w3_1, w3_2,
+     b3) = _load_weights(w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
+                         HIDDEN)
 
     zeros = tl.zeros((BLOCK, HIDDEN), tl.float32)
     zero = tl.zeros((BLOCK, ), tl.float32)
@@ -173,14 +198,9 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
         # forward: h1[s], h2[s - 1], y[s - 2]
         x_n = tl.load(x_row + s + 1, mask=valid & (s + 1 < LENGTH),
                       other=0.0)
-        h1_0 = tl.maximum(b1 + w1_0 * x_1[:, None] + w1_1 * x_0[:, None] +
-                          w1_2 * x_n[:, None], 0.0)
-        h1_0 = tl.where(s < LENGTH, h1_0, 0.0)
-        h2_1 = (b2 + _dot(h1_2, w2_0, PRECISION) +
-                _dot(h1_1, w2_1, PRECISION) + _dot(h1_0, w2_2, PRECISION) +
-                x_1[:, None])
-        h2_1 = tl.where((s >= 1) & (s <= LENGTH), tl.maximum(h2_1, 0.0),
-                        0.0)
+        h1_0, h2_1 = _hidden_step(s, x_1, x_0, x_n, h1_2, h1_1, w1_0, w1_1,
+                                  w1_2, b1, w2_0, w2_1, w2_2, b2, LENGTH,
+                                  PRECISION)
         y = b3 + tl.sum(h2_3 * w3_0 + h2_2 * w3_1 + h2_1 * w3_2, axis=1)
         # d3[s - 2]: gy is zero outside the band and the rows
         gy = tl.load(gy_row + s - 2,
@@ -219,6 +239,7 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
         d2_5, d2_4 = d2_4, d2_3
         d1_6, d1_5 = d1_5, d1_4
 
+    channels = tl.arange(0, HIDDEN)
     part = partial_ptr + pid.to(tl.int64) * (8 * HIDDEN +
                                              3 * HIDDEN * HIDDEN + 1)
     tl.store(part + channels * 3, g_w1_0)
@@ -227,7 +248,7 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
     part += 3 * HIDDEN
     tl.store(part + channels, g_b1)
     part += HIDDEN
-    wide = channels[:, None] * 3 + channels[None, :] * (HIDDEN * 3)
+    wide = _wide_offsets(HIDDEN)
     tl.store(part + wide, g_w2_0)
     tl.store(part + wide + 1, g_w2_1)
     tl.store(part + wide + 2, g_w2_2)
