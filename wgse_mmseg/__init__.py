@@ -23,20 +23,26 @@ from ._openmmlab import missing_openmmlab, require_openmmlab
 from .version import __version__
 
 _MMSEG_LAYER = ('datasets', 'evaluation', 'models')
-#: why the MMSeg layer did not import although the stack is installed
-_LAYER_ERROR = None
 
-if not missing_openmmlab():
+
+def _import_mmseg_layer():
+    """Apply the compatibility patches, then import (and so register) the
+    MMSeg layer. Returns why it did not import, or ``None``."""
     from .compat import OPT_OUT, apply_compat
     applied = apply_compat()
     try:
         from . import datasets, evaluation, models  # noqa: F401 (registers)
     except ImportError as error:  # e.g. mmcv-lite with the patches off
-        _LAYER_ERROR = (f'the MMSeg layer of wgse_mmseg did not import: '
-                        f'{error}' + ('' if applied else
-                                      f' ({OPT_OUT} is set: MMSeg then '
-                                      f'needs full mmcv)'))
-        warnings.warn(_LAYER_ERROR + '; wgse_mmseg.core still works')
+        message = (f'the MMSeg layer of wgse_mmseg did not import: {error}' +
+                   ('' if applied else f' ({OPT_OUT} is set: MMSeg then '
+                                       f'needs full mmcv)'))
+        warnings.warn(message + '; wgse_mmseg.core still works')
+        return message
+    return None
+
+
+#: why the MMSeg layer did not import although the stack is installed
+_LAYER_ERROR = None if missing_openmmlab() else _import_mmseg_layer()
 
 
 def __getattr__(name):

@@ -194,6 +194,9 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
             f'{list(lengths)} do not fit coefficients shaped '
             f'{tuple(coeffs.shape)}')
     hidden = weights[0][0][0].shape[0]
+    reason = unsupported_network(1, 3, hidden, 1)
+    if reason:
+        raise ValueError(f'the Triton band network kernel: {reason}')
     expected = [(hidden, 1, 3), (hidden, ), (hidden, hidden, 3), (hidden, ),
                 (1, hidden, 3), (1, )]
     params = [t for band in weights for layer in band for t in layer]
@@ -203,9 +206,6 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
             raise ValueError(f'the Triton kernel runs conv 1->H, H->H, H->1 '
                              f'(kernel 3) band networks: expected parameter '
                              f'shapes {expected}, got {shapes}')
-        reason = unsupported_network(1, 3, hidden, 1)
-        if reason:
-            raise ValueError(f'the Triton band network kernel: {reason}')
     if any(p.dtype != torch.float32 or p.device != coeffs.device
            for p in params):
         raise ValueError('the Triton kernel needs float32 parameters on '
