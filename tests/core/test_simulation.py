@@ -16,7 +16,8 @@ from wgse_mmseg.core.constants import READOUT_HZ
 from wgse_mmseg.core.simulation import (EFFECTS, frames_to_intensity,
                                    initial_charge, parse_effects,
                                    simulate_spikes)
-from wgse_mmseg.core.simulation.camera_motion import CameraMotion
+from wgse_mmseg.core.simulation.camera_motion import (CameraMotion,
+                                                      trajectory_source_maps)
 from wgse_mmseg.core.simulation.effect import SensorEffect, SimulationContext
 from wgse_mmseg.core.simulation import fixed_point
 from wgse_mmseg.core.simulation.fixed_point import ONE, Integrator, quantise
@@ -471,6 +472,38 @@ def test_camera_motion_rotates_counter_clockwise_and_zooms():
     np.testing.assert_allclose(_source(zoom, 2, 26, 10),
                                centre + [11 / 1.1, 0], atol=1e-9)
     np.testing.assert_allclose(_source(zoom, 1, 26, 10), [26, 10])
+
+
+@given(st.floats(-5, 5), st.floats(-3, 3), st.floats(-0.3, 0.3),
+       st.floats(-0.05, 0.05), st.floats(-math.pi, math.pi),
+       st.floats(0.5, 3), st.floats(-20, 20))
+def test_trajectory_maps_invert_the_motion_model(dx, ax, rotation, zoom,
+                                                 base_angle, base_scale,
+                                                 tau):
+    """Content at source point x appears where the module's forward model
+    puts it: view_centre + s R(phi) (x - c) / base_scale + shift."""
+    height, width, centre = 30, 50, np.array([70.0, 40.0])
+    maps = trajectory_source_maps(
+        torch.tensor([tau], dtype=torch.float64), (height, width),
+        tuple(centre),
+        translation=(dx, -dx / 2), acceleration=(ax, 0.5), rotation=rotation,
+        zoom=zoom, base_angle=base_angle, base_scale=base_scale)[0].numpy()
+    view = np.array([3.0, 27.0])
+    source = maps[:, :2] @ view + maps[:, 2]
+    phi, scale = base_angle + tau * rotation, 1 + tau * zoom
+    # counter-clockwise on screen with y down
+    turn = np.array([[math.cos(phi), math.sin(phi)],
+                     [-math.sin(phi), math.cos(phi)]])
+    shift = tau * np.array([dx, -dx / 2]) + tau**2 / 2 * np.array([ax, 0.5])
+    back = (np.array([(width - 1) / 2, (height - 1) / 2]) +
+            scale * turn @ (source - centre) / base_scale + shift)
+    np.testing.assert_allclose(back, view, atol=1e-7)
+
+
+def test_trajectory_maps_refuse_a_vanishing_zoom():
+    with pytest.raises(ValueError, match='zoom=-0.1 shrinks the view'):
+        trajectory_source_maps(torch.arange(-20.0, 21.0), (4, 4), (2, 2),
+                               zoom=-0.1)
 
 
 def test_camera_motion_per_second_uses_the_readout_rate():

@@ -33,7 +33,7 @@ from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
 from ..core.constants import REDS_WHITE_RATE
-from ..core.simulation import simulate_spikes
+from ..core.simulation import simulate_spikes, trajectory_source_maps
 from .transforms import LoadSpikeFromFile
 
 __all__ = [
@@ -217,43 +217,38 @@ def render_trajectory(image: np.ndarray, size: Tuple[int, int],
     """A ``num_steps``-frame clip of a camera moving over a still image.
 
     A view of ``size`` ``(h, w)`` pixels, centred at a random point of
-    ``image`` ``(H, W)`` at a random base scale (source pixels per view
-    pixel, log-uniform in ``scale_range``), moves along a smooth random
-    trajectory: at step ``t`` (``tau = t - num_steps // 2``) it is shifted
-    by ``v * tau + a * tau**2 / 2`` (speed up to ``max_speed`` px/step,
-    acceleration up to ``max_speed / num_steps``), rotated by
-    ``omega * tau`` (``|omega| <= max_rotation`` rad/step) and zoomed by
-    ``exp(zeta * tau)`` (``|zeta| <= max_zoom`` per step). Borders reflect.
+    ``image`` ``(H, W)`` at a random base angle and base scale (source pixels
+    per view pixel, log-uniform in ``scale_range``), moves along a random
+    trajectory of :func:`~wgse_mmseg.core.simulation.trajectory_source_maps`
+    with ``tau = t - num_steps // 2`` steps: speed up to ``max_speed`` view
+    px/step, acceleration up to ``max_speed / num_steps``, rotation up to
+    ``max_rotation`` rad/step and zoom up to ``max_zoom`` per step, each in a
+    random direction. Borders reflect.
 
     Returns:
         ``(num_steps, h, w)`` float32 frames; frame ``num_steps // 2`` is the
         view at the trajectory's reference point.
     """
     height, width = size
-    centre_view = np.array([(width - 1) / 2, (height - 1) / 2])
-    centre_src = rng.uniform([0, 0], [image.shape[1] - 1,
-                                      image.shape[0] - 1])
-    base_scale = np.exp(rng.uniform(*np.log(scale_range)))
-    base_angle = rng.uniform(-np.pi, np.pi)
 
     def random_vector(magnitude):
         angle = rng.uniform(-np.pi, np.pi)
-        return rng.uniform(0, magnitude) * np.array([np.cos(angle),
-                                                     np.sin(angle)])
+        return tuple(rng.uniform(0, magnitude) *
+                     np.array([np.cos(angle), np.sin(angle)]))
 
-    velocity = random_vector(max_speed)
-    acceleration = random_vector(max_speed / num_steps)
-    omega = rng.uniform(-max_rotation, max_rotation)
-    zeta = rng.uniform(-max_zoom, max_zoom)
+    maps = trajectory_source_maps(
+        torch.arange(num_steps, dtype=torch.float64) - num_steps // 2,
+        (height, width),
+        source_centre=tuple(rng.uniform([0, 0], [image.shape[1] - 1,
+                                                 image.shape[0] - 1])),
+        base_scale=float(np.exp(rng.uniform(*np.log(scale_range)))),
+        base_angle=rng.uniform(-np.pi, np.pi),
+        translation=random_vector(max_speed),
+        acceleration=random_vector(max_speed / num_steps),
+        rotation=rng.uniform(-max_rotation, max_rotation),
+        zoom=rng.uniform(-max_zoom, max_zoom)).numpy()
     frames = np.empty((num_steps, height, width), np.float32)
-    for step in range(num_steps):
-        tau = step - num_steps // 2
-        angle = base_angle + omega * tau
-        scale = base_scale * np.exp(zeta * tau)
-        linear = scale * np.array([[np.cos(angle), -np.sin(angle)],
-                                   [np.sin(angle), np.cos(angle)]])
-        shift = centre_src + velocity * tau + acceleration * tau ** 2 / 2
-        matrix = np.hstack([linear, (shift - linear @ centre_view)[:, None]])
+    for step, matrix in enumerate(maps):
         frames[step] = cv2.warpAffine(
             image, matrix, (width, height),
             flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,

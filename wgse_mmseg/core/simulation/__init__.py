@@ -24,7 +24,8 @@ Modules, one concept each:
 docs/simulator.md describes the model, every effect and its calibrated
 defaults, with sources.
 """
-from . import camera_motion, interpolation, noise, sensor  # noqa: F401
+from . import interpolation, noise, sensor  # noqa: F401
+from .camera_motion import trajectory_source_maps
 from .effect import EFFECTS, register_effect
 from .fixed_point import initial_charge
 from .intensity import frames_to_intensity
@@ -33,5 +34,6 @@ from .simulator import simulate_spikes
 
 __all__ = [
     'simulate_spikes', 'frames_to_intensity', 'initial_charge',
-    'parse_effects', 'read_scene_file', 'EFFECTS', 'register_effect'
+    'parse_effects', 'read_scene_file', 'EFFECTS', 'register_effect',
+    'trajectory_source_maps'
 ]
