@@ -27,14 +27,15 @@ import numpy as np
 import torch
 from mmengine.config import DictAction
 
-import wgse_mmseg  # noqa: F401  (registers the spike modules; before mmseg)
-from mmengine.dataset import Compose
-from mmengine.registry import init_default_scope
-from mmengine.runner import load_checkpoint
-from mmseg.apis import init_model
-from wgse_mmseg.utils.config import load_config
-from wgse_mmseg.datasets import SpikeCityscapesDataset
-from wgse_mmseg.core.io import write_png
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
+from mmengine.dataset import Compose  # noqa: E402
+from mmengine.registry import init_default_scope  # noqa: E402
+from mmengine.runner import load_checkpoint  # noqa: E402
+from mmseg.apis import init_model  # noqa: E402
+from wgse_mmseg.core.io import write_png  # noqa: E402
+from wgse_mmseg.datasets import SpikeCityscapesDataset  # noqa: E402
+from wgse_mmseg.utils.config import load_config  # noqa: E402
 
 
 def parse_args():

@@ -4,53 +4,44 @@ Two layers:
 
 * :mod:`wgse_mmseg.core` needs only torch and numpy: spike I/O, wavelets,
   representations, WGSE and its kernels, the simulator;
-* the MMSeg layer (:mod:`.datasets`, :mod:`.models`, :mod:`.evaluation`)
-  registers them, and the datasets, transforms, data preprocessor and
-  metrics, with MMSeg's registries.
+* the MMSeg layer (:mod:`.datasets`, :mod:`.evaluation`, :mod:`.models`;
+  :mod:`.apis` and :mod:`.utils` for the tools) registers them, and the
+  datasets, transforms, data preprocessor and metrics, with MMSeg's
+  registries.
 
-Importing the package imports core and, where mmengine, mmsegmentation and
-mmcv are installed, the MMSeg layer, so that
-``custom_imports=dict(imports=['wgse_mmseg'])`` in a config registers
-everything; before that it applies the compatibility patches of
-:mod:`wgse_mmseg.compat` (once per process; ``WGSE_MMSEG_NO_COMPAT=1``
-turns them off). Without that stack the MMSeg layer's names raise an
-ImportError that says what to install.
+``import wgse_mmseg`` imports core only and changes nothing in the process,
+as ``import mmseg`` registers nothing. The MMSeg layer registers when it is
+imported: a config names it in ``custom_imports`` (the shipped ``_base_``
+configs do), Python code calls :func:`register_all_modules`, and
+``wgse_mmseg.models`` (any layer name) imports it on first use. A layer
+package applies the compatibility patches of :mod:`wgse_mmseg.compat` before
+it imports MMSeg (once per process; ``WGSE_MMSEG_NO_COMPAT=1`` turns them
+off); without the OpenMMLab stack it raises an ImportError that says what to
+install.
 """
-import warnings
+import importlib
 
 from . import core
-from ._openmmlab import missing_openmmlab, require_openmmlab
 from .version import __version__
 
-_MMSEG_LAYER = ('datasets', 'evaluation', 'models')
+#: the packages that register with MMSeg, as a config's ``custom_imports``
+MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.evaluation',
+               'wgse_mmseg.models')
+_LAZY = ('apis', 'compat', 'datasets', 'evaluation', 'models', 'utils')
 
 
-def _import_mmseg_layer():
-    """Apply the compatibility patches, then import (and so register) the
-    MMSeg layer. Returns why it did not import, or ``None``."""
-    from .compat import OPT_OUT, apply_compat
-    applied = apply_compat()
-    try:
-        from . import datasets, evaluation, models  # noqa: F401 (registers)
-    except ImportError as error:  # e.g. mmcv-lite with the patches off
-        message = (f'the MMSeg layer of wgse_mmseg did not import: {error}' +
-                   ('' if applied else f' ({OPT_OUT} is set: MMSeg then '
-                                       f'needs full mmcv)'))
-        warnings.warn(message + '; wgse_mmseg.core still works')
-        return message
-    return None
-
-
-#: why the MMSeg layer did not import although the stack is installed
-_LAYER_ERROR = None if missing_openmmlab() else _import_mmseg_layer()
+def register_all_modules() -> None:
+    """Register every module of the package with MMSeg's registries (import
+    :data:`MMSEG_LAYER`); for Python code that builds from configs that do
+    not list ``custom_imports``."""
+    for name in MMSEG_LAYER:
+        importlib.import_module(name)
 
 
 def __getattr__(name):
-    if name in _MMSEG_LAYER:  # only reached where the layer is missing
-        if _LAYER_ERROR:
-            raise ImportError(_LAYER_ERROR)
-        require_openmmlab(f'wgse_mmseg.{name}')
+    if name in _LAZY:
+        return importlib.import_module(f'{__name__}.{name}')
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
-__all__ = ['__version__', 'core', 'datasets', 'evaluation', 'models']
+__all__ = ['__version__', 'core', 'register_all_modules', 'MMSEG_LAYER']

@@ -1,13 +1,17 @@
-"""Whether the OpenMMLab stack that the MMSeg layer needs is installed.
+"""What the MMSeg layer needs before it imports MMSeg.
 
-:mod:`wgse_mmseg.core` needs only torch and numpy; ``wgse_mmseg.datasets``,
-``.models``, ``.evaluation`` and the tools need mmengine, mmsegmentation
-and mmcv (or mmcv-lite) as well.
+:mod:`wgse_mmseg.core` needs only torch and numpy; the MMSeg layer
+(``wgse_mmseg.datasets``, ``.evaluation``, ``.models``, ``.apis``,
+``.utils``) and the tools need mmengine, mmsegmentation and mmcv (or
+mmcv-lite) as well, and the compatibility patches of
+:mod:`wgse_mmseg.compat`. Each layer package calls
+:func:`prepare_mmseg_layer` first.
 """
 import importlib.util
 from typing import List
 
-__all__ = ['OPENMMLAB', 'missing_openmmlab', 'require_openmmlab']
+__all__ = ['OPENMMLAB', 'missing_openmmlab', 'require_openmmlab',
+           'prepare_mmseg_layer']
 
 #: import name -> distribution to install
 OPENMMLAB = {'mmengine': 'mmengine', 'mmcv': 'mmcv-lite',
@@ -38,3 +42,16 @@ def require_openmmlab(what: str) -> None:
             f'WGSE, the simulator) works without them; for the rest run '
             f'`bash tools/setup_env.sh` or, on a GPU machine without network, '
             f'`bash tools/gpu_bundle.sh install` (docs/wgse_speed.md).')
+
+
+def prepare_mmseg_layer(what: str) -> None:
+    """Before ``what`` (a layer package) imports MMSeg: a clear ImportError
+    where the stack is missing, else the compatibility patches (once per
+    process, unless turned off; :func:`wgse_mmseg.compat.apply_compat`)."""
+    require_openmmlab(what)
+    from .compat import OPT_OUT, apply_compat
+    if not apply_compat() and importlib.util.find_spec('mmcv._ext') is None:
+        raise ImportError(
+            f'{what} needs mmcv.ops, which mmcv-lite lacks: {OPT_OUT} is set, '
+            f'so the stand-in of wgse_mmseg.compat is off. Unset it, or '
+            f'install full mmcv; wgse_mmseg.core works either way.')

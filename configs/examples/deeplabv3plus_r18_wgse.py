@@ -5,9 +5,10 @@
 # lr 1e-3 / wd 0.01, 10-epoch warm-up, OHEM cross-entropy).
 #
 # Any MMSeg segmentor takes spike streams once three things are in place:
-#   1. custom_imports = dict(imports=['wgse_mmseg'])  -- comes with the
-#      dataset base config below; it registers the spike loader/transforms,
-#      SpikeCityscapesDataset, SpikeSegDataPreProcessor and WGSE.
+#   1. custom_imports naming wgse_mmseg.datasets, .evaluation and .models --
+#      comes with the dataset base config below; it registers the spike
+#      loader/transforms, SpikeCityscapesDataset, SpikeSegDataPreProcessor
+#      and WGSE.
 #   2. model.data_preprocessor = SpikeSegDataPreProcessor (replacing the RGB
 #      SegDataPreProcessor, hence `_delete_=True`): it batches the (T, H, W)
 #      binary streams without mean/std, pads them, and runs the WGSE enhancer,

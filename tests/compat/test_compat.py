@@ -12,11 +12,12 @@ import torch
 import torch.nn.functional as F
 from mmengine.logging import HistoryBuffer, MessageHub
 
-import wgse_mmseg  # noqa: F401
+from wgse_mmseg.compat import apply_compat
 from wgse_mmseg.compat.checkpoint_safety import history_buffer_statistic
 from wgse_mmseg.compat.mmcv_ops_fallback import MissingCompiledOpError
 
 HAS_COMPILED_OPS = importlib.util.find_spec('mmcv._ext') is not None
+apply_compat()
 
 
 @pytest.mark.skipif(HAS_COMPILED_OPS, reason='full mmcv: nothing replaced')
@@ -84,32 +85,52 @@ def test_getattr_stays_restricted_to_history_buffer_statistics():
         torch.load(buffer, weights_only=True)
 
 
+def _run(code, **env):
+    proc = subprocess.run([sys.executable, '-c', code], capture_output=True,
+                          text=True, env=dict(os.environ, **env))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout
+
+
+def test_importing_the_package_and_core_changes_nothing():
+    """``import wgse_mmseg`` and core patch nothing and import nothing of
+    OpenMMLab; registering the MMSeg layer applies the patches."""
+    _run('import sys, torch\n'
+         'before = len(torch.serialization.get_safe_globals())\n'
+         'import wgse_mmseg, wgse_mmseg.core\n'
+         'wgse_mmseg.core.WGSE()(torch.zeros(1, 9, 2, 2))\n'
+         'assert len(torch.serialization.get_safe_globals()) == before\n'
+         'assert not [m for m in sys.modules if m.split(".")[0] in '
+         '("mmcv", "mmseg", "mmengine")], "OpenMMLab imported"\n'
+         'wgse_mmseg.register_all_modules()\n'
+         'from mmseg.registry import MODELS\n'
+         'assert MODELS.get("WGSE") is wgse_mmseg.core.WGSE\n'
+         'assert len(torch.serialization.get_safe_globals()) > before\n')
+
+
 def test_patches_are_applied_once_and_can_be_turned_off():
     """``WGSE_MMSEG_NO_COMPAT=1``: torch's allowlist is left alone and no
-    ``mmcv.ops`` stand-in is installed; core still imports (and under
-    mmcv-lite the MMSeg layer's absence is explained, not a crash)."""
-    code = (
-        'import sys, warnings, torch\n'
+    ``mmcv.ops`` stand-in is installed; core still works, and under
+    mmcv-lite the MMSeg layer says why it cannot import."""
+    out = _run(
+        'import sys, torch\n'
         'before = len(torch.serialization.get_safe_globals())\n'
-        'with warnings.catch_warnings(record=True) as caught:\n'
-        '    warnings.simplefilter("always")\n'
-        '    import wgse_mmseg\n'
+        'import wgse_mmseg\n'
+        'try:\n'
+        '    wgse_mmseg.register_all_modules()\n'
+        'except ImportError as error:\n'
+        '    print(error)\n'
         'from wgse_mmseg.compat import apply_compat\n'
         'assert apply_compat() is False\n'
         'assert len(torch.serialization.get_safe_globals()) == before\n'
         'ops = sys.modules.get("mmcv.ops")\n'
         'assert not getattr(ops, "__wgse_fallback__", False)\n'
-        'print([str(w.message) for w in caught if "MMSeg layer" in '
-        'str(w.message)])\n'
-        'wgse_mmseg.core.WGSE()(torch.zeros(1, 9, 2, 2))\n')
-    env = dict(os.environ, WGSE_MMSEG_NO_COMPAT='1')
-    proc = subprocess.run([sys.executable, '-c', code], capture_output=True,
-                          text=True, env=env)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    if importlib.util.find_spec('mmcv._ext') is None:  # mmcv-lite
-        assert 'WGSE_MMSEG_NO_COMPAT is set' in proc.stdout
+        'wgse_mmseg.core.WGSE()(torch.zeros(1, 9, 2, 2))\n',
+        WGSE_MMSEG_NO_COMPAT='1')
+    if not HAS_COMPILED_OPS:  # mmcv-lite
+        assert 'WGSE_MMSEG_NO_COMPAT is set' in out
+        assert 'wgse_mmseg.datasets needs mmcv.ops' in out
     # and by default, applying again changes nothing
-    from wgse_mmseg.compat import apply_compat
     count = len(torch.serialization.get_safe_globals())
     assert apply_compat() is True
     assert len(torch.serialization.get_safe_globals()) == count

@@ -5,10 +5,12 @@ import pytest
 import torch
 from mmengine.structures import PixelData
 
-import wgse_mmseg  # noqa: F401  (registers the modules)
+import wgse_mmseg
 from mmseg.registry import MODELS
 from mmseg.structures import SegDataSample
 from wgse_mmseg.utils.config import load_config
+
+wgse_mmseg.register_all_modules()  # before mmseg builds anything
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 MAIN_CONFIGS = ['pspnet_wgse', 'pspnet_raw', 'segformer_b0_wgse',
@@ -61,6 +63,7 @@ def test_config_defaults_are_the_papers(name):
     has_wgse = cfg.model.data_preprocessor.enhancer is not None
     assert has_wgse == name.endswith('_wgse')
     assert cfg.model.get('pretrained') is None
+    assert tuple(cfg.custom_imports.imports) == wgse_mmseg.MMSEG_LAYER
 
 
 def test_spike_settings_override_every_dependent_field():

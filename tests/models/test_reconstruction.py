@@ -12,7 +12,7 @@ import pytest
 import torch
 from mmengine.structures import BaseDataElement, PixelData
 
-import wgse_mmseg  # noqa: F401  (registers the modules)
+import wgse_mmseg
 from mmseg.registry import MODELS
 from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
@@ -32,6 +32,8 @@ from wgse_mmseg.models.reconstruction import (DEFAULT_WEIGHTS,
 from wgse_mmseg.core.reconstruction_baselines import tfi, tfp
 from wgse_mmseg.core.representations import TFI
 from wgse_mmseg.utils.config_data import ConfigDataError
+
+wgse_mmseg.register_all_modules()  # before mmseg builds anything
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 

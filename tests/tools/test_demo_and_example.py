@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-import wgse_mmseg  # noqa: F401  (registers the spike modules)
+import wgse_mmseg
 from mmengine.registry import init_default_scope
 from mmengine.structures import PixelData
 from mmseg.registry import MODELS
@@ -17,6 +17,8 @@ from mmseg.structures import SegDataSample
 from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.datasets import SpikeCityscapesDataset
 from wgse_mmseg.core.io import save_spikes
+
+wgse_mmseg.register_all_modules()  # before mmseg builds anything
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 EXAMPLE = osp.join(ROOT, 'configs', 'examples', 'deeplabv3plus_r18_wgse.py')

@@ -1,6 +1,6 @@
 """What the tools run: model benchmarks (:mod:`.benchmarking`) and the
 reconstruction benchmark (:mod:`.reconstruction_benchmark`). Import the
 module you need; importing this package registers nothing."""
-from .._openmmlab import require_openmmlab
+from .._openmmlab import prepare_mmseg_layer
 
-require_openmmlab('wgse_mmseg.apis')
+prepare_mmseg_layer('wgse_mmseg.apis')

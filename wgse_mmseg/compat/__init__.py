@@ -1,7 +1,9 @@
 """The compatibility patches the MMSeg layer needs, in one place.
 
-Two changes to the process, both made by :func:`apply_compat`, which
-``import wgse_mmseg`` calls once before it imports MMSeg:
+Two changes to the process, both made by :func:`apply_compat`, which each
+package of the MMSeg layer calls before it imports MMSeg
+(:func:`wgse_mmseg._openmmlab.prepare_mmseg_layer`); ``import wgse_mmseg``
+and :mod:`wgse_mmseg.core` apply neither:
 
 * :func:`install_mmcv_ops_fallback`: where mmcv's compiled ops are missing
   (mmcv-lite), a stand-in ``mmcv.ops`` with the few names MMSeg imports at
@@ -13,7 +15,6 @@ Two changes to the process, both made by :func:`apply_compat`, which
 ``WGSE_MMSEG_NO_COMPAT=1`` in the environment turns both off (then MMSeg
 needs full mmcv, and resuming a checkpoint needs
 ``torch.serialization.add_safe_globals`` done by the user).
-:mod:`wgse_mmseg.core` applies neither.
 """
 import os
 

@@ -1,8 +1,8 @@
 """MMSeg models: the spike data preprocessor, the registered enhancers
 (:mod:`.enhancers`) and image reconstruction (:mod:`.reconstruction`)."""
-from .._openmmlab import require_openmmlab
+from .._openmmlab import prepare_mmseg_layer
 
-require_openmmlab('wgse_mmseg.models')
+prepare_mmseg_layer('wgse_mmseg.models')
 
 from .data_preprocessor import SpikeSegDataPreProcessor  # noqa: E402
 from .enhancers import ENHANCERS  # noqa: E402

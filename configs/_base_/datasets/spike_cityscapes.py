@@ -9,7 +9,9 @@
 # environment variables WGSE_NUM_STEPS, WGSE_DATA_ROOT and WGSE_CROP_SIZE, which
 # mmengine substitutes below), so the loader, the preprocessor and the
 # backbone's in_channels always agree.
-custom_imports = dict(imports=['wgse_mmseg'], allow_failed_imports=False)
+custom_imports = dict(
+    imports=['wgse_mmseg.datasets', 'wgse_mmseg.evaluation', 'wgse_mmseg.models'],
+    allow_failed_imports=False)
 
 dataset_type = 'SpikeCityscapesDataset'
 num_classes = 19  # Cityscapes train ids 0-18; 255 is ignored

@@ -4,7 +4,9 @@
 # frame (the middle frame of the stream). Settings overridable with
 # `--cfg-options num_steps=41 data_root=DIR crop_size=H,W` (tools/train.py,
 # tools/test.py); crop_size is the training crop of the configs that train.
-custom_imports = dict(imports=['wgse_mmseg'], allow_failed_imports=False)
+custom_imports = dict(
+    imports=['wgse_mmseg.datasets', 'wgse_mmseg.evaluation', 'wgse_mmseg.models'],
+    allow_failed_imports=False)
 
 num_steps = int('{{$WGSE_NUM_STEPS:41}}')
 data_root = '{{$WGSE_DATA_ROOT:data/reds}}'
