@@ -22,8 +22,9 @@ fi
 PIP=("$VENV/bin/python" -m pip --disable-pip-version-check)
 
 # torch first and pinned exactly: an unpinned torch pulls several GB of CUDA wheels.
-# setuptools < 81 keeps pkg_resources (mmengine, mim); wheel and ninja build mmcv.
-"${PIP[@]}" install -q "$TORCH_PIN" "setuptools>=61,<81" wheel ninja
+# setuptools < 80 keeps pkg_resources (mmengine, mim) and `setup.py develop`'s
+# egg-link (below); pip < 25.3 still runs it; wheel and ninja build mmcv.
+"${PIP[@]}" install -q "$TORCH_PIN" "setuptools>=61,<80" "pip>=21,<25.3" wheel ninja
 
 installed_mmcv() { "$VENV/bin/python" - <<'PY'
 import importlib.metadata as md
@@ -53,6 +54,9 @@ esac
 # The rest of the stack; the torch constraint stops any dependency from upgrading torch.
 echo "$TORCH_PIN" > "$VENV/torch-constraint.txt"
 "${PIP[@]}" install -q -c "$VENV/torch-constraint.txt" -r requirements/runtime.txt -r requirements/tests.txt
-"${PIP[@]}" install -q --no-build-isolation --no-deps -e .
+# Editable, as `setup.py develop` (an egg-link to this checkout), not PEP 660:
+# mim finds configs/ and tools/ through pkg_resources' location of the package,
+# which is this checkout for an egg-link but site-packages for a PEP 660 install.
+"${PIP[@]}" install -q --no-build-isolation --no-deps --no-use-pep517 -e .
 
 "$VENV/bin/python" -c "import wgse_mmseg, mmseg, mmcv, torch; print('[setup_env] ready: torch', torch.__version__, '| mmcv', mmcv.__version__, '| mmseg', mmseg.__version__, '| wgse_mmseg', wgse_mmseg.__version__)"

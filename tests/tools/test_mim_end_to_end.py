@@ -1,9 +1,12 @@
-"""From a built and installed package: mim train, resume, tools/test.py.
+"""mim with the package, in both install modes a user has.
 
-The package is built as a wheel from a copy of the repository and installed
-into a fresh directory placed first on PYTHONPATH, so `mim` finds the
-installed copy's `.mim/tools/train.py` and `.mim/configs/` (not the
-repository's), as a user's regular install would.
+* The README's: ``tools/setup_env.sh``'s editable install, the one these
+  tests run in. ``mim train``, ``mim test`` and ``mim run`` from the
+  repository root and from another directory.
+* A regular install: a wheel built from a copy of the repository, installed
+  into a fresh directory placed first on PYTHONPATH, so that mim finds the
+  installed copy's ``.mim/tools/train.py`` and ``.mim/configs/`` (not the
+  repository's).
 """
 import os
 import os.path as osp
@@ -28,6 +31,54 @@ def run(cmd, cwd, env, timeout=900):
     return log
 
 
+def options_for(data):
+    """--cfg-options of a tiny run on the synthetic set at ``data``, with
+    the data loaders in the main process."""
+    loaders = [f'{split}_dataloader.{key}={value}'
+               for split in ('train', 'val', 'test')
+               for key, value in (('num_workers', 0),
+                                  ('persistent_workers', False))]
+    return ['--cfg-options', f'data_root={data}', 'num_steps=9',
+            'crop_size=32,64', 'train_dataloader.batch_size=2',
+            'train_cfg.val_interval=1', 'default_hooks.checkpoint.interval=1',
+            'default_hooks.logger.interval=1'] + loaders
+
+
+def test_mim_in_the_readme_install_mode(tmp_path):
+    """mim train / test / run against this checkout's editable install."""
+    from mim.utils import get_installed_path
+    assert get_installed_path('wgse_mmseg') == osp.join(ROOT, 'wgse_mmseg'), (
+        'not the README install mode: run `bash tools/setup_env.sh`')
+    data = tmp_path / 'data'
+    make_synthetic_dataset(str(data), num_train=2, num_val=1, height=32,
+                           width=64, num_steps=9, progress=False)
+    env = dict(os.environ, PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
+    for name in ('PYTHONPATH', 'TRITON_INTERPRET'):  # the user's own shell
+        env.pop(name, None)
+    mim = osp.join(BIN, 'mim')
+    work_dir = tmp_path / 'work'
+    train = [mim, 'train', 'wgse_mmseg', 'configs/pspnet_wgse.py', '--gpus',
+             '0', '--launcher', 'none', '--work-dir', str(work_dir)]
+    # elsewhere: mim finds the config in the package's .mim/configs
+    log = run(train + options_for(data) + ['train_cfg.max_epochs=1'],
+              cwd=tmp_path, env=env)
+    assert osp.join(ROOT, 'configs', 'pspnet_wgse.py') in log
+    assert (work_dir / 'epoch_1.pth').is_file()
+    # the repository root: the path is the checkout's own config
+    log = run(train + ['--resume'] + options_for(data) +
+              ['train_cfg.max_epochs=2'], cwd=ROOT, env=env)
+    assert re.search(r'resumed epoch: 1, iter: 1', log), log[-3000:]
+    log = run([mim, 'test', 'wgse_mmseg', 'configs/pspnet_wgse.py',
+               '--checkpoint', str(work_dir / 'epoch_2.pth'), '--gpus', '0',
+               '--launcher', 'none', '--work-dir', str(tmp_path / 'test')] +
+              options_for(data), cwd=tmp_path, env=env)
+    assert re.search(r'mIoU: [\d.]+', log), log[-3000:]
+    log = run([mim, 'run', 'wgse_mmseg', 'benchmark_wgse', '--impls',
+               'torch', '--shapes', '1x12x3x4', '--repeat', '1'],
+              cwd=tmp_path, env=env)
+    assert "WGSE, backend='torch'" in log
+
+
 @pytest.fixture(scope='module')
 def installed(tmp_path_factory):
     """PYTHONPATH entry holding wgse_mmseg installed from a wheel."""
@@ -50,43 +101,23 @@ def installed(tmp_path_factory):
     return target
 
 
-def test_mim_train_resume_and_test_from_installed_package(installed,
-                                                          tmp_path):
+def test_mim_train_and_test_from_a_regular_install(installed, tmp_path):
     data = tmp_path / 'data'
     make_synthetic_dataset(str(data), num_train=2, num_val=1, height=32,
                            width=64, num_steps=9, progress=False)
     env = dict(os.environ, PYTHONPATH=str(installed),
                PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
-    options = ['--cfg-options', f'data_root={data}', 'num_steps=9',
-               'crop_size=32,64', 'train_dataloader.batch_size=2',
-               'train_dataloader.num_workers=0',
-               'train_dataloader.persistent_workers=False',
-               'val_dataloader.num_workers=0',
-               'val_dataloader.persistent_workers=False',
-               'train_cfg.val_interval=1', 'default_hooks.checkpoint.interval=1',
-               'default_hooks.logger.interval=1']
     work_dir = tmp_path / 'work'
-    mim = [osp.join(BIN, 'mim'), 'train', 'wgse_mmseg',
-           'configs/pspnet_wgse.py', '--gpus', '0', '--launcher', 'none',
-           '--work-dir', str(work_dir)]
-    log = run(mim + options + ['train_cfg.max_epochs=1'], cwd=tmp_path,
-              env=env)
+    mim = osp.join(BIN, 'mim')
+    log = run([mim, 'train', 'wgse_mmseg', 'configs/pspnet_wgse.py',
+               '--gpus', '0', '--launcher', 'none', '--work-dir',
+               str(work_dir)] + options_for(data) +
+              ['train_cfg.max_epochs=1'], cwd=tmp_path, env=env)
     assert str(installed) in log  # the installed copy's config was used
-    assert (work_dir / 'epoch_1.pth').is_file()
-
-    log = run(mim + ['--resume'] + options + ['train_cfg.max_epochs=2'],
-              cwd=tmp_path, env=env)
-    assert re.search(r'resumed epoch: 1, iter: 1', log), log[-3000:]
-    assert (work_dir / 'epoch_2.pth').is_file()
-
-    test_script = installed / 'wgse_mmseg' / '.mim' / 'tools' / 'test.py'
-    config = installed / 'wgse_mmseg' / '.mim' / 'configs' / 'pspnet_wgse.py'
-    log = run([sys.executable, str(test_script), str(config),
-               str(work_dir / 'epoch_2.pth'), '--work-dir',
-               str(tmp_path / 'test')] + options[:4] +
-              ['test_dataloader.num_workers=0',
-               'test_dataloader.persistent_workers=False'],
-              cwd=tmp_path, env=env)
+    log = run([mim, 'test', 'wgse_mmseg', 'configs/pspnet_wgse.py',
+               '--checkpoint', str(work_dir / 'epoch_1.pth'), '--gpus', '0',
+               '--launcher', 'none', '--work-dir', str(tmp_path / 'test')] +
+              options_for(data), cwd=tmp_path, env=env)
     metrics = re.search(r'aAcc: ([\d.]+)\s+mIoU: ([\d.]+)\s+mAcc: ([\d.]+)',
                         log)
     assert metrics, log[-3000:]
