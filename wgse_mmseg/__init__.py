@@ -4,8 +4,8 @@ Two layers:
 
 * :mod:`wgse_mmseg.core` needs only torch and numpy: spike I/O, wavelets,
   representations, WGSE and its kernels, the simulator;
-* the MMSeg layer (:mod:`.datasets`, :mod:`.evaluation`, :mod:`.models`;
-  :mod:`.apis` and :mod:`.utils` for the tools) registers them, and the
+* the MMSeg layer (:mod:`.datasets`, :mod:`.engine`, :mod:`.evaluation`,
+  :mod:`.models`; :mod:`.apis` and :mod:`.utils` for the tools) registers them, and the
   datasets, transforms, data preprocessor and metrics, with MMSeg's
   registries.
 
@@ -25,9 +25,10 @@ from . import core
 from .version import __version__
 
 #: the packages that register with MMSeg, as a config's ``custom_imports``
-MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.evaluation',
-               'wgse_mmseg.models')
-_LAZY = ('apis', 'compat', 'datasets', 'evaluation', 'models', 'utils')
+MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
+               'wgse_mmseg.evaluation', 'wgse_mmseg.models')
+_LAZY = ('apis', 'compat', 'datasets', 'engine', 'evaluation', 'models',
+         'utils')
 
 
 def register_all_modules() -> None:

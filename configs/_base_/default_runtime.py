@@ -1,3 +1,7 @@
 # MMSeg's runtime, logging by epoch to match the epoch-based schedule.
 _base_ = ['mmseg::_base_/default_runtime.py']
 log_processor = dict(by_epoch=True)
+# Multi-GPU runs (tools/dist_train.sh) turn every BN into SyncBN, as MMSeg's
+# SyncBN configs do; single-process runs keep BN (mmengine converts only when
+# distributed), and so do CPU runs with gloo. sync_bn=None keeps per-GPU BN.
+sync_bn = 'torch'

@@ -5,7 +5,8 @@
 # lr 1e-3 / wd 0.01, 10-epoch warm-up, OHEM cross-entropy).
 #
 # Any MMSeg segmentor takes spike streams once three things are in place:
-#   1. custom_imports naming wgse_mmseg.datasets, .evaluation and .models --
+#   1. custom_imports naming wgse_mmseg.datasets, .engine, .evaluation and
+#      .models --
 #      comes with the dataset base config below; it registers the spike
 #      loader/transforms, SpikeCityscapesDataset, SpikeSegDataPreProcessor
 #      and WGSE.
@@ -27,7 +28,7 @@ _base_ = [
     '../_base_/default_runtime.py',
     '../_base_/schedules/adamw_warmup_100e.py',
 ]
-norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN needs distributed runs
+norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN on multi-GPU runs: sync_bn
 ohem = dict(type='OHEMPixelSampler', thresh=0.7, min_kept=100000)
 model = dict(
     pretrained=None,  # no RGB ImageNet weights: the stem takes T channels

@@ -15,6 +15,8 @@ from typing import Dict, Optional
 
 from mmengine.config import Config, DictAction
 
+from .distributed import prepare_launcher
+
 __all__ = [
     'SPIKE_SETTINGS', 'load_config', 'add_runner_arguments',
     'config_from_args'
@@ -84,7 +86,9 @@ def config_from_args(args: argparse.Namespace) -> Config:
     """The config of ``args.config`` set up for an mmengine ``Runner``.
 
     Applies ``--cfg-options``, the launcher and the work dir (default
-    ``./work_dirs/<config name>``), and sets ``LOCAL_RANK`` if unset.
+    ``./work_dirs/<config name>``), and sets ``LOCAL_RANK`` if unset;
+    distributed runs on a machine without CUDA use gloo
+    (:func:`~wgse_mmseg.utils.distributed.prepare_launcher`).
     """
     os.environ.setdefault('LOCAL_RANK', str(args.local_rank))
     cfg = load_config(args.config, args.cfg_options)
@@ -94,4 +98,5 @@ def config_from_args(args: argparse.Namespace) -> Config:
     elif cfg.get('work_dir', None) is None:
         cfg.work_dir = osp.join('./work_dirs',
                                 osp.splitext(osp.basename(args.config))[0])
+    prepare_launcher(cfg)
     return cfg

@@ -10,7 +10,8 @@
 # mmengine substitutes below), so the loader, the preprocessor and the
 # backbone's in_channels always agree.
 custom_imports = dict(
-    imports=['wgse_mmseg.datasets', 'wgse_mmseg.evaluation', 'wgse_mmseg.models'],
+    imports=['wgse_mmseg.datasets', 'wgse_mmseg.engine', 'wgse_mmseg.evaluation',
+             'wgse_mmseg.models'],
     allow_failed_imports=False)
 
 dataset_type = 'SpikeCityscapesDataset'

@@ -5,7 +5,8 @@
 # `--cfg-options num_steps=41 data_root=DIR crop_size=H,W` (tools/train.py,
 # tools/test.py); crop_size is the training crop of the configs that train.
 custom_imports = dict(
-    imports=['wgse_mmseg.datasets', 'wgse_mmseg.evaluation', 'wgse_mmseg.models'],
+    imports=['wgse_mmseg.datasets', 'wgse_mmseg.engine', 'wgse_mmseg.evaluation',
+             'wgse_mmseg.models'],
     allow_failed_imports=False)
 
 num_steps = int('{{$WGSE_NUM_STEPS:41}}')

@@ -1,0 +1,121 @@
+"""Distributed training on CPUs (gloo): two processes keep the WGSE
+enhancer, which runs in the data preprocessor outside DDP's forward,
+identical, and match one process with the same total batch."""
+import os
+import os.path as osp
+import re
+import socket
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+DRIVER = osp.join(osp.dirname(osp.abspath(__file__)), 'ddp_training_run.py')
+CONFIG = osp.join(ROOT, 'configs', 'segformer_b0_wgse.py')
+
+
+def _free_port():
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        return sock.getsockname()[1]
+
+
+def _run(cmd, cwd, **extra):
+    env = dict(os.environ, OMP_NUM_THREADS='1', CUDA_VISIBLE_DEVICES='',
+               **extra)
+    env.pop('TRITON_INTERPRET', None)
+    proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=900)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-6000:]
+    return proc.stdout + proc.stderr
+
+
+@pytest.fixture(scope='module')
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp('ddp_data')
+    make_synthetic_dataset(str(root), num_train=4, num_val=1, height=32,
+                           width=64, num_steps=9, progress=False)
+    return root
+
+
+def _options(data, batch_size):
+    return ['--cfg-options', f'data_root={data}', 'num_steps=9',
+            'crop_size=32,64', f'train_dataloader.batch_size={batch_size}',
+            'train_dataloader.num_workers=0',
+            'train_dataloader.persistent_workers=False',
+            'train_cfg.max_epochs=2', 'train_cfg.val_interval=100',
+            'default_hooks.logger.interval=1',
+            'default_hooks.checkpoint.interval=100']
+
+
+def test_two_processes_keep_the_enhancer_in_sync(data, tmp_path):
+    two, one = tmp_path / 'two', tmp_path / 'one'
+    two.mkdir()
+    one.mkdir()
+    log = _run([sys.executable, '-m', 'torch.distributed.run',
+                '--nproc_per_node=2', f'--master_port={_free_port()}',
+                DRIVER, CONFIG, str(two), '--launcher', 'pytorch',
+                '--work-dir', str(tmp_path / 'work_two')] +
+               _options(data, 1), cwd=tmp_path)
+    assert 'gloo' in log
+    _run([sys.executable, DRIVER, CONFIG, str(one), '--work-dir',
+          str(tmp_path / 'work_one')] + _options(data, 2), cwd=tmp_path)
+    rank0 = torch.load(two / 'rank0.pt', weights_only=False)
+    rank1 = torch.load(two / 'rank1.pt', weights_only=False)
+    single = torch.load(one / 'rank0.pt', weights_only=False)
+    assert rank0['wrapper'] == 'CPUDistributedDataParallel'
+    assert rank0['world_size'] == 2 and single['world_size'] == 1
+    moved = [name for name, value in rank0['after'].items()
+             if not torch.equal(value, rank0['before'][name])]
+    assert len(moved) > len(rank0['after']) // 2  # 4 steps of SGD
+    for name, value in rank0['after'].items():
+        assert torch.equal(value, rank1['after'][name]), name
+        torch.testing.assert_close(rank0['before'][name],
+                                   single['before'][name])
+        torch.testing.assert_close(value, single['after'][name],
+                                   rtol=1e-4, atol=1e-6)
+
+
+def test_dist_train_and_dist_test_scripts_on_cpu(data, tmp_path):
+    """MMSeg's interface, two processes with gloo; the configs' SyncBN
+    switch is set aside on CPUs, with a warning."""
+    work = tmp_path / 'work'
+    options = _options(data, 1)[:-3] + ['train_cfg.max_epochs=1',
+                                        'val_dataloader.num_workers=0',
+                                        'val_dataloader.persistent_workers=False',
+                                        'test_dataloader.num_workers=0',
+                                        'test_dataloader.persistent_workers=False']
+    log = _run(['bash', osp.join(ROOT, 'tools', 'dist_train.sh'), CONFIG,
+                '2', '--work-dir', str(work)] + options, cwd=tmp_path,
+               PYTHON=sys.executable, PORT=str(_free_port()))
+    assert "sync_bn='torch' ignored" in log
+    assert (work / 'epoch_1.pth').is_file()
+    log = _run(['bash', osp.join(ROOT, 'tools', 'dist_test.sh'), CONFIG,
+                str(work / 'epoch_1.pth'), '2', '--work-dir',
+                str(tmp_path / 'test')] + options, cwd=tmp_path,
+               PYTHON=sys.executable, PORT=str(_free_port()))
+    assert re.search(r'mIoU: [\d.]+', log), log[-3000:]
+
+
+def test_a_distributed_launcher_without_torchrun_says_how_to_start(tmp_path):
+    from argparse import Namespace
+    from wgse_mmseg.utils.config import config_from_args
+    if torch.cuda.is_available():
+        pytest.skip('the gloo path is for machines without CUDA')
+    env_names = ('RANK', 'WORLD_SIZE', 'MASTER_ADDR', 'MASTER_PORT')
+    saved = {name: os.environ.pop(name, None) for name in env_names}
+    try:
+        with pytest.raises(ValueError, match='tools/dist_train.sh'):
+            config_from_args(Namespace(
+                config=CONFIG, cfg_options=None, launcher='pytorch',
+                work_dir=str(tmp_path), local_rank=0))
+        with pytest.raises(ValueError, match='slurm needs GPUs'):
+            config_from_args(Namespace(
+                config=CONFIG, cfg_options=None, launcher='slurm',
+                work_dir=str(tmp_path), local_rank=0))
+    finally:
+        os.environ.update({k: v for k, v in saved.items() if v is not None})

@@ -1,0 +1,9 @@
+"""Training-loop pieces registered with MMSeg: the model wrapper for
+distributed runs on CPUs (:mod:`.model_wrappers`)."""
+from .._openmmlab import prepare_mmseg_layer
+
+prepare_mmseg_layer('wgse_mmseg.engine')
+
+from .model_wrappers import CPUDistributedDataParallel  # noqa: E402
+
+__all__ = ['CPUDistributedDataParallel']

@@ -1,0 +1,58 @@
+"""Launching distributed runs, on GPUs as in MMSeg and on CPUs with gloo.
+
+With ``--launcher pytorch`` (``tools/dist_train.sh``, or ``torchrun ...
+tools/train.py CONFIG --launcher pytorch``) mmengine's runner starts the
+process group itself, for GPUs: ``init_dist`` calls
+``torch.cuda.set_device`` whatever the backend. On a machine without CUDA
+:func:`prepare_launcher` starts it with gloo instead, before the runner,
+and wraps the model in :class:`~wgse_mmseg.engine.CPUDistributedDataParallel`
+(gradients averaged across processes, as on GPUs). That is the documented
+way to try a multi-process run without GPUs; it trains as slowly as CPUs do.
+"""
+import os
+import warnings
+
+import torch
+import torch.distributed as dist
+from mmengine.config import Config
+
+__all__ = ['prepare_launcher']
+
+
+def prepare_launcher(cfg: Config) -> None:
+    """Make ``cfg`` (with ``cfg.launcher`` set) runnable on this machine.
+
+    Where CUDA is available, or the launcher is ``'none'``, nothing changes.
+    Otherwise, for ``'pytorch'``: the gloo process group is initialised from
+    torchrun's environment (``RANK``, ``WORLD_SIZE``, ``MASTER_ADDR``,
+    ``MASTER_PORT``), ``cfg.env_cfg.dist_cfg.backend`` becomes ``'gloo'``,
+    the model wrapper becomes ``CPUDistributedDataParallel`` and
+    ``cfg.sync_bn`` is dropped (SyncBN needs GPUs). Other launchers raise a
+    ``ValueError`` (slurm and mpi runs need GPUs here).
+    """
+    launcher = cfg.get('launcher', 'none')
+    if launcher == 'none' or torch.cuda.is_available():
+        return
+    if launcher != 'pytorch':
+        raise ValueError(
+            f'--launcher {launcher} needs GPUs; without CUDA only '
+            f"'pytorch' (torchrun, gloo) runs distributed")
+    missing = [name for name in ('RANK', 'WORLD_SIZE', 'MASTER_ADDR',
+                                 'MASTER_PORT') if name not in os.environ]
+    if missing:
+        raise ValueError(
+            f'--launcher pytorch expects torchrun\'s environment; '
+            f'{", ".join(missing)} not set (start with tools/dist_train.sh '
+            f'or torchrun --nproc_per_node=N tools/train.py CONFIG '
+            f'--launcher pytorch)')
+    cfg.setdefault('env_cfg', {}).setdefault('dist_cfg', {})
+    cfg.env_cfg.dist_cfg.backend = 'gloo'
+    if not dist.is_initialized():
+        dist.init_process_group('gloo')
+    from .. import engine  # noqa: F401 (registers the wrapper)
+    wrapper = cfg.get('model_wrapper_cfg') or {}
+    cfg.model_wrapper_cfg = dict(wrapper, type='CPUDistributedDataParallel')
+    if cfg.get('sync_bn'):
+        warnings.warn(f'sync_bn={cfg.sync_bn!r} ignored: SyncBN needs GPUs, '
+                      f'this CPU run keeps per-process BN statistics')
+        cfg.sync_bn = None
