@@ -7,6 +7,7 @@ Prints mIoU, mAcc and aAcc (MMSeg's IoUMetric).
 """
 import argparse
 
+from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from wgse_mmseg.utils.config import add_runner_arguments, config_from_args
@@ -27,7 +28,9 @@ def main():
     if args.out is not None:
         cfg.test_evaluator['output_dir'] = args.out
         cfg.test_evaluator['keep_results'] = True
-    runner = Runner.from_cfg(cfg)
+    # as MMSeg's tools: the config's runner_type (SpikeRunner) where it has one
+    runner = RUNNERS.build(cfg) if 'runner_type' in cfg else \
+        Runner.from_cfg(cfg)
     # Strict: a checkpoint made for another T (or model) must not be scored
     # with some layers left at random initialisation.
     runner.load_checkpoint(args.checkpoint, strict=True)

@@ -7,6 +7,7 @@
 """
 import argparse
 
+from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from wgse_mmseg.utils.config import add_runner_arguments, config_from_args
@@ -31,7 +32,9 @@ def main():
         cfg.optim_wrapper.type = 'AmpOptimWrapper'
         cfg.optim_wrapper.loss_scale = 'dynamic'
     cfg.resume = args.resume
-    runner = Runner.from_cfg(cfg)
+    # as MMSeg's tools: the config's runner_type (SpikeRunner) where it has one
+    runner = RUNNERS.build(cfg) if 'runner_type' in cfg else \
+        Runner.from_cfg(cfg)
     runner.train()
 
 

@@ -16,6 +16,7 @@ from typing import Dict, Optional
 from mmengine.config import Config, DictAction
 
 from .distributed import prepare_launcher
+from .num_steps import apply_num_steps
 
 __all__ = [
     'SPIKE_SETTINGS', 'load_config', 'add_runner_arguments',
@@ -48,7 +49,9 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
 
     ``num_steps``, ``data_root`` and ``crop_size`` in ``cfg_options`` are
     applied before parsing (see module docstring); other keys are merged
-    with ``Config.merge_from_dict``.
+    with ``Config.merge_from_dict``. Then the config's ``num_steps`` reaches
+    every field built from it (:func:`~wgse_mmseg.utils.num_steps.
+    apply_num_steps`), also where a child config set it.
     """
     options = dict(cfg_options or {})
     saved = {}
@@ -66,6 +69,7 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
                 os.environ[env] = value
     if options:
         cfg.merge_from_dict(options)
+    apply_num_steps(cfg)
     return cfg
 
 

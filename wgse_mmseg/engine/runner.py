@@ -1,0 +1,33 @@
+"""The shipped configs' runner: mmengine's ``Runner`` that first gives the
+config's ``num_steps`` to every field built from it
+(:func:`wgse_mmseg.utils.num_steps.apply_num_steps`).
+
+The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
+``tools/train.py``, which builds ``RUNNERS.build(cfg)`` when a config has a
+``runner_type``, uses it as this package's tools do.
+"""
+from mmengine.logging import print_log
+# mmengine's root registry: RUNNERS.build(cfg) looks the runner up there
+# (a config's default_scope is not in force yet)
+from mmengine.registry import RUNNERS
+from mmengine.runner import Runner
+
+from ..utils.num_steps import apply_num_steps
+
+__all__ = ['SpikeRunner']
+
+
+@RUNNERS.register_module()
+class SpikeRunner(Runner):
+    """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` applies
+    ``cfg.num_steps`` first; otherwise the same."""
+
+    @classmethod
+    def from_cfg(cls, cfg) -> 'SpikeRunner':
+        changed = apply_num_steps(cfg)
+        if changed:
+            print_log(f'num_steps = {cfg.num_steps} applied to '
+                      f'{", ".join(sorted(changed))} (they held '
+                      f'{sorted(set(changed.values()))[0]}, from a base '
+                      f'config)', logger='current')
+        return super().from_cfg(cfg)
