@@ -21,6 +21,7 @@ import argparse
 import copy
 import os.path as osp
 import sys
+from typing import Tuple
 
 import cv2
 import numpy as np
@@ -33,7 +34,10 @@ from mmengine.dataset import Compose  # noqa: E402
 from mmengine.registry import init_default_scope  # noqa: E402
 from mmengine.runner import load_checkpoint  # noqa: E402
 from mmseg.apis import init_model  # noqa: E402
-from wgse_mmseg.core.io import write_png  # noqa: E402
+from wgse_mmseg.core.exposure import (apply_exposure,  # noqa: E402
+                                      parse_exposure)
+from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
+from wgse_mmseg.core.reconstruction_baselines import tfp  # noqa: E402
 from wgse_mmseg.datasets import SpikeCityscapesDataset  # noqa: E402
 from wgse_mmseg.utils.config import load_config  # noqa: E402
 
@@ -59,7 +63,15 @@ def parse_args():
         '--cfg-options', nargs='+', action=DictAction,
         help='override config settings, key=value; num_steps, data_root and '
         'crop_size re-derive every field that depends on them')
+    parser.add_argument(
+        '--exposure', default='auto',
+        help='exposure of the grey clip under the overlay: auto (99.5th '
+        'percentile to white; default), none, or a gain')
     args = parser.parse_args()
+    try:
+        args.exposure = parse_exposure(args.exposure)
+    except ValueError as err:
+        parser.error(str(err))
     if not 0 <= args.opacity <= 1:
         parser.error(f'--opacity must be in [0, 1], got {args.opacity}')
     if (args.height is None) != (args.width is None):
@@ -115,12 +127,11 @@ def load_model(cfg, checkpoint: str, device: str):
     return model.to(device).eval()
 
 
-def rate_image(spikes: torch.Tensor) -> np.ndarray:
-    """``(T, H, W)`` spikes -> ``(H, W)`` uint8 spike rate, max rate white."""
-    rate = spikes.float().mean(0).cpu().numpy()
-    peak = rate.max()
-    grey = np.clip(rate / peak, 0, 1) if peak > 0 else rate
-    return np.round(grey * 255).astype(np.uint8)
+def clip_image(spikes: torch.Tensor, exposure) -> Tuple[np.ndarray, float]:
+    """``(T, H, W)`` spikes -> ``(H, W)`` uint8 TFP image of the whole clip
+    (spike rate / 0.6), exposure-normalised, and the gain applied."""
+    image, gain = apply_exposure(tfp(spikes.cpu().numpy()), exposure)
+    return to_uint8(image), gain
 
 
 def overlay(grey: np.ndarray, labels: np.ndarray, palette,
@@ -156,10 +167,10 @@ def main():
     with torch.no_grad():
         result = model.test_step(batch)[0]
     labels = result.pred_sem_seg.data[0].cpu().numpy()
-    image = overlay(rate_image(data['inputs']), labels,
-                    model.dataset_meta['palette'], args.opacity)
+    grey, gain = clip_image(data['inputs'], args.exposure)
+    image = overlay(grey, labels, model.dataset_meta['palette'], args.opacity)
     write_png(args.out_file, image[..., ::-1])  # RGB -> OpenCV's BGR
-    print(args.out_file)
+    print(f'{args.out_file}\texposure_gain={gain:.3g}')
 
 
 if __name__ == '__main__':

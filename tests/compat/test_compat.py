@@ -42,6 +42,42 @@ def test_compiled_only_ops_import_but_fail_clearly_on_use():
         CrissCrossAttention(16)
     with pytest.raises(MissingCompiledOpError, match='MMCV=full'):
         sigmoid_focal_loss(torch.zeros(1, 2), torch.zeros(1))
+    from mmcv.ops.multi_scale_deform_attn import MultiScaleDeformableAttention
+    with pytest.raises(MissingCompiledOpError, match='MultiScaleDeform'):
+        MultiScaleDeformableAttention()
+
+
+QUIET_RUN = (
+    'import subprocess, sys\n'
+    'import wgse_mmseg\n'
+    'wgse_mmseg.register_all_modules()\n'
+    'from mmseg.registry import MODELS\n'
+    'from wgse_mmseg.utils.config import load_config\n'
+    'MODELS.build(load_config(sys.argv[1]).model)\n'
+    'if len(sys.argv) > 2:  # a process started from this one\n'
+    '    subprocess.run([sys.executable, "-c", "import wgse_mmseg; '
+    'wgse_mmseg.register_all_modules()"], check=True)\n')
+
+
+@pytest.mark.parametrize('rank', [None, '1'])
+def test_a_run_is_quiet(rank):
+    """One line about mmcv-lite per run (none in other ranks or child
+    processes), and no warnings from importing and building the models."""
+    config = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
+        os.path.abspath(__file__)))), 'configs', 'segformer_b0_wgse.py')
+    env = {k: v for k, v in os.environ.items()
+           if k not in ('RANK', 'WGSE_MMSEG_MMCV_NOTICE_SHOWN')}
+    if rank is not None:
+        env['RANK'] = rank
+    proc = subprocess.run([sys.executable, '-c', QUIET_RUN, config, 'child'],
+                          capture_output=True, text=True, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    notices = [line for line in lines if line.startswith('wgse_mmseg:')]
+    assert len(notices) == (0 if HAS_COMPILED_OPS or rank else 1), lines
+    others = [line for line in lines if line not in notices]
+    assert not [line for line in others
+                if 'Warning' in line and 'avg_non_ignore' not in line], others
 
 
 @pytest.mark.skipif(not HAS_COMPILED_OPS, reason='needs full mmcv')

@@ -409,6 +409,39 @@ def test_render_trajectory_moves_by_the_velocity():
 
 
 # ----------------------------------------------------------------- tools
+def test_reconstruct_cli_makes_a_dark_recording_visible(tmp_path, capsys):
+    """A stream of at most 1 spike in 50 steps per pixel (TFP about 0.03)
+    is black as it is; by default its brightest pixels become white."""
+    rng = np.random.default_rng(1)
+    rates = np.linspace(0.0, 0.02, 12)[None, None, :]
+    spikes = (rng.random((60, 8, 12)) < rates).astype(np.uint8)
+    path = str(tmp_path / 'dark.npy')
+    save_spikes(path, spikes)
+    tool = _tool('reconstruct')
+    outputs = {}
+    for exposure in ('none', 'auto', '4'):
+        out = tmp_path / exposure
+        tool.main([path, '--out', str(out), '--method', 'tfp',
+                   '--exposure', exposure])
+        outputs[exposure] = cv2.imread(str(out / 'dark_30.png'),
+                                       cv2.IMREAD_UNCHANGED).astype(float)
+    printed = capsys.readouterr().out.splitlines()
+    window = spikes[10:51]
+    plain = tfp(window)
+    gain = 1 / np.percentile(plain, 99.5)
+    assert outputs['none'].mean() < 5  # of 255
+    np.testing.assert_allclose(outputs['auto'],
+                               np.round(np.clip(plain * gain, 0, 1) * 255),
+                               atol=1)
+    assert outputs['auto'].max() == 255
+    np.testing.assert_allclose(outputs['4'], np.round(plain * 4 * 255),
+                               atol=1)
+    assert f'exposure_gain={gain:.3g}' in printed[1]
+    assert 'exposure_gain=4' in printed[2]
+    with pytest.raises(SystemExit):
+        tool.main([path, '--out', str(tmp_path), '--exposure', '-1'])
+
+
 def test_reconstruct_cli_writes_one_png_per_frame(tmp_path, capsys):
     spikes = (np.random.default_rng(0).random((50, 8, 12)) < 0.3).astype(
         np.uint8)
@@ -416,7 +449,7 @@ def test_reconstruct_cli_writes_one_png_per_frame(tmp_path, capsys):
     save_spikes(path, spikes)
     tool = _tool('reconstruct')
     tool.main([path, '--out', str(tmp_path / 'out'), '--method', 'tfp',
-               '--frames', '20,29'])
+               '--frames', '20,29', '--exposure', 'none'])
     for frame in (20, 29):
         image = cv2.imread(str(tmp_path / 'out' / f'clip_{frame}.png'),
                            cv2.IMREAD_UNCHANGED)
@@ -424,7 +457,7 @@ def test_reconstruct_cli_writes_one_png_per_frame(tmp_path, capsys):
         start = frame - 20
         expected = np.round(tfp(spikes[start:start + 41]) * 255)
         np.testing.assert_array_equal(image, expected)
-    assert 'entropy2d=' in capsys.readouterr().out
+    assert 'exposure_gain=1\t' in capsys.readouterr().out
     with pytest.raises(SystemExit, match='centre frames 20..29 fit'):
         tool.main([path, '--out', str(tmp_path), '--frames', '5',
                    '--method', 'tfi'])

@@ -128,13 +128,22 @@ def test_demo_grey_image_and_blend():
     demo = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(demo)
 
-    spikes = torch.zeros(4, 2, 3, dtype=torch.uint8)
-    spikes[:, 0, 0] = 1  # rate 1 -> white
-    spikes[:2, 1, 2] = 1  # rate 1/2 -> mid grey
-    grey = demo.rate_image(spikes)
-    assert grey.dtype == np.uint8
-    assert grey[0, 0] == 255 and grey[1, 2] == 128 and grey[0, 1] == 0
-    assert demo.rate_image(torch.zeros(4, 2, 3, dtype=torch.uint8)).max() == 0
+    spikes = torch.zeros(10, 2, 3, dtype=torch.uint8)
+    spikes[:3, 0, 0] = 1  # rate 0.3: TFP 0.5
+    spikes[:1, 1, 2] = 1  # rate 0.1: TFP 1/6
+    grey, gain = demo.clip_image(spikes, 'none')
+    assert grey.dtype == np.uint8 and gain == 1.0
+    assert grey[0, 0] == 128 and grey[1, 2] == 42 and grey[0, 1] == 0
+    # auto: the 99.5th percentile (between 0.5 and 1/6, by numpy's linear
+    # interpolation over 6 pixels) becomes white
+    bright = np.percentile([0.5, 1 / 6, 0, 0, 0, 0], 99.5)
+    grey, gain = demo.clip_image(spikes, 'auto')
+    assert gain == pytest.approx(1 / bright)
+    assert grey[0, 0] == 255
+    assert abs(int(grey[1, 2]) - 255 / 6 / bright) <= 0.5 + 1e-3
+    black, gain = demo.clip_image(torch.zeros(4, 2, 3, dtype=torch.uint8),
+                                  'auto')
+    assert black.max() == 0 and gain == 1.0
 
     labels = np.zeros((2, 3), np.int64)
     palette = [[200, 100, 0]]

@@ -2,14 +2,18 @@
 
     python tools/misc/reconstruct.py SPIKE_FILE --out DIR [--method wgse|tfp|tfi]
         [--checkpoint CKPT] [--height H --width W] [--frames 150,...]
-        [--num-steps 41] [--device cpu]
+        [--num-steps 41] [--exposure auto|none|GAIN] [--device cpu]
 
 ``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat``, ``.spk``,
 ``.npy``, ``.npz``; a ``.dat`` needs ``--height``/``--width`` or a
 ``<file>.json`` side file). For each requested centre frame (default: the
 middle frame) the window of ``--num-steps`` frames centred on it goes through
 the method, and ``DIR/<stem>_<frame>.png`` (8-bit grey, upright) is written;
-each path is printed with the image's 2-D entropy (a no-reference measure).
+each path is printed with the exposure gain applied and the image's 2-D
+entropy (a no-reference measure). ``--exposure auto`` (default) scales each
+image so that its 99.5th percentile is white, so a dark recording gives a
+visible image (:func:`wgse_mmseg.core.exposure.apply_exposure`); ``none``
+keeps the method's intensities; a number is a fixed gain.
 
 ``--method wgse`` (default) runs the trained model of ``--checkpoint``: an
 mmengine checkpoint of a ``configs/reconstruction`` config or a file of
@@ -22,6 +26,7 @@ import os.path as osp
 import sys
 
 
+from wgse_mmseg.core.exposure import apply_exposure, parse_exposure
 from wgse_mmseg.evaluation import entropy_2d
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
@@ -48,8 +53,15 @@ def parse_args(argv=None):
     parser.add_argument(
         '--num-steps', type=int, default=41,
         help='window length for tfp/tfi (wgse uses its model\'s; default 41)')
+    parser.add_argument(
+        '--exposure', default='auto',
+        help='auto (99.5th percentile to white; default), none, or a gain')
     parser.add_argument('--device', default='cpu', help='torch device')
     args = parser.parse_args(argv)
+    try:
+        args.exposure = parse_exposure(args.exposure)
+    except ValueError as err:
+        parser.error(str(err))
     if (args.height is None) != (args.width is None):
         parser.error('--height and --width go together')
     if args.checkpoint and args.method != 'wgse':
@@ -84,10 +96,12 @@ def main(argv=None):
     for frame, start in zip(frames, starts):
         window = load_spikes(args.spikes, args.height, args.width, start,
                              length)
-        image = to_uint8(method(window))
+        exposed, gain = apply_exposure(method(window), args.exposure)
+        image = to_uint8(exposed)
         path = osp.join(args.out, f'{stem}_{frame}.png')
         write_png(path, image)
-        print(f'{path}\tentropy2d={entropy_2d(image):.3f}')
+        print(f'{path}\texposure_gain={gain:.3g}\t'
+              f'entropy2d={entropy_2d(image):.3f}')
 
 
 if __name__ == '__main__':

@@ -10,7 +10,10 @@ and :mod:`wgse_mmseg.core` apply neither:
   module level (nothing is replaced under full mmcv);
 * :func:`allow_mmengine_checkpoints`: torch's weights-only unpickler learns
   exactly the classes mmengine checkpoints hold, so resuming works under
-  torch >= 2.6 with weights-only loading still on.
+  torch >= 2.6 with weights-only loading still on;
+
+and it silences the deprecation warnings of :data:`QUIETED_DEPRECATIONS`,
+which MMSeg raises about its own calls in every run.
 
 ``WGSE_MMSEG_NO_COMPAT=1`` in the environment turns both off (then MMSeg
 needs full mmcv, and resuming a checkpoint needs
@@ -18,14 +21,24 @@ needs full mmcv, and resuming a checkpoint needs
 """
 import os
 
+import warnings
+
 from .checkpoint_safety import allow_mmengine_checkpoints
 from .mmcv_ops_fallback import install_mmcv_ops_fallback
 
 __all__ = ['apply_compat', 'allow_mmengine_checkpoints',
-           'install_mmcv_ops_fallback', 'OPT_OUT']
+           'install_mmcv_ops_fallback', 'OPT_OUT', 'QUIETED_DEPRECATIONS']
 
 #: the environment variable that turns the patches off
 OPT_OUT = 'WGSE_MMSEG_NO_COMPAT'
+#: (message start, module) of the deprecation warnings MMSeg 1.2.2 gives
+#: about its own internal calls whenever a model is built; nothing a user of
+#: the configs can change
+QUIETED_DEPRECATIONS = (
+    ('``build_loss`` would be deprecated soon', 'mmseg.models.builder'),
+    ('``build_pixel_sampler`` would be deprecated soon',
+     'mmseg.structures.sampler.builder'),
+)
 _applied = False
 
 
@@ -39,5 +52,7 @@ def apply_compat() -> bool:
     if not _applied:
         install_mmcv_ops_fallback()
         allow_mmengine_checkpoints()
+        for message, module in QUIETED_DEPRECATIONS:
+            warnings.filterwarnings('ignore', message=message, module=module)
         _applied = True
     return True

@@ -8,20 +8,32 @@ stand-in ``mmcv.ops`` package that
 * loads the ops that mmcv itself writes in pure Python straight from mmcv's
   own source files (``point_sample.py``), and
 * answers every other name with a placeholder that raises a clear error when
-  it is used (not when it is imported), naming the op and how to get it.
+  it is used (not when it is imported), naming the op and how to get it, also
+  as the submodules other packages import by path
+  (``mmcv.ops.multi_scale_deform_attn``, which mmcv's own transformer bricks
+  try at import and warn about when it is missing).
 
-With full mmcv installed (``mmcv._ext`` importable) nothing is replaced.
+With full mmcv installed (``mmcv._ext`` importable) nothing is replaced. Where
+it installs the stand-in, it says so in one line on stderr, once per run: not
+in torchrun's other ranks, nor in processes started from this one (the
+environment variable :data:`NOTICE_SHOWN` carries that).
 """
 import importlib.util
+import os
 import os.path as osp
 import sys
 import types
-import warnings
 
-__all__ = ['install_mmcv_ops_fallback', 'MissingCompiledOpError']
+__all__ = ['install_mmcv_ops_fallback', 'MissingCompiledOpError',
+           'NOTICE_SHOWN']
 
 #: mmcv.ops modules that need no compiled extension, and the names they give.
 PURE_PYTHON_OPS = {'point_sample': ('point_sample', 'bilinear_grid_sample')}
+#: mmcv.ops modules imported by path elsewhere, and their compiled-only names.
+PLACEHOLDER_MODULES = {
+    'multi_scale_deform_attn': ('MultiScaleDeformableAttention',)}
+#: set in the environment once the one-line notice has been shown
+NOTICE_SHOWN = 'WGSE_MMSEG_MMCV_NOTICE_SHOWN'
 
 _INSTALL_HINT = ('install full mmcv: '
                  '`MMCV=full bash tools/setup_env.sh` (about 30 minutes on '
@@ -83,6 +95,13 @@ def install_mmcv_ops_fallback() -> bool:
             setattr(package, name, getattr(module, name))
             loaded.append(name)
 
+    for module_name, names in PLACEHOLDER_MODULES.items():
+        module = types.ModuleType(f'mmcv.ops.{module_name}')
+        for name in names:
+            setattr(module, name, _missing_op(name))
+        sys.modules[module.__name__] = module
+        setattr(package, module_name, module)
+
     def __getattr__(name):
         if name.startswith('__'):
             raise AttributeError(name)
@@ -91,10 +110,17 @@ def install_mmcv_ops_fallback() -> bool:
     package.__getattr__ = __getattr__
     sys.modules['mmcv.ops'] = package
     mmcv.ops = package
-    warnings.warn(
-        'wgse_mmseg: mmcv\'s compiled ops are not installed, so it supplies '
-        f'mmcv.ops itself: {", ".join(loaded) or "nothing"} from mmcv\'s own '
-        'pure-Python code; every other op raises MissingCompiledOpError when '
-        f'used. For the compiled ops, {_INSTALL_HINT}.',
-        stacklevel=2)
+    _notice_once(
+        f'wgse_mmseg: mmcv-lite has no compiled ops; mmcv.ops supplies '
+        f'{", ".join(loaded) or "nothing"} from mmcv\'s pure-Python code and '
+        f'raises MissingCompiledOpError for other ops. For them, '
+        f'{_INSTALL_HINT}.')
     return True
+
+
+def _notice_once(message: str) -> None:
+    """``message`` on stderr, in the first process of a run only."""
+    if os.environ.get(NOTICE_SHOWN) or os.environ.get('RANK', '0') != '0':
+        return
+    os.environ[NOTICE_SHOWN] = '1'
+    print(message, file=sys.stderr)

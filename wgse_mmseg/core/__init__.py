@@ -10,7 +10,8 @@ changes nothing outside it.
 * :mod:`.wavelets`: the DWT as matrices, equal to PyWavelets';
 * :mod:`.representations`: TFP, TFI and the mean filters as modules
   ``(B, T, H, W) -> (B, T, H, W)``; :mod:`.reconstruction_baselines`: TFP
-  and TFI images of one window;
+  and TFI images of one window; :mod:`.exposure`: exposure normalisation
+  of such images;
 * :mod:`.wgse`: WGSE, its band-network backends and kernels;
 * :mod:`.simulation`: frames to spike streams, with sensor and camera
   effects;
@@ -20,6 +21,7 @@ The MMSeg layer (``wgse_mmseg.datasets``, ``.models``, ``.evaluation``)
 registers these with MMSeg's registries.
 """
 from .constants import READOUT_HZ, REDS_THRESHOLD, REDS_WHITE_RATE
+from .exposure import apply_exposure, exposure_gain
 from .io import SpikeFileError, load_spikes, save_spikes, spike_shape
 from .representations import (TFI, TFP, SpatialMeanFilter,
                               TemporalMeanFilter)
@@ -31,5 +33,5 @@ __all__ = [
     'READOUT_HZ', 'REDS_THRESHOLD', 'REDS_WHITE_RATE', 'SpikeFileError',
     'load_spikes', 'save_spikes', 'spike_shape', 'TFI', 'TFP',
     'SpatialMeanFilter', 'TemporalMeanFilter', 'simulate_spikes', 'wavedec',
-    'waverec', 'WGSE', 'BandNetwork'
+    'waverec', 'WGSE', 'BandNetwork', 'apply_exposure', 'exposure_gain'
 ]

@@ -50,8 +50,8 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
     ``num_steps``, ``data_root`` and ``crop_size`` in ``cfg_options`` are
     applied before parsing (see module docstring); other keys are merged
     with ``Config.merge_from_dict``. Then the config's ``num_steps`` reaches
-    every field built from it (:func:`~wgse_mmseg.utils.num_steps.
-    apply_num_steps`), also where a child config set it.
+    every field built from it, also where a child config set it
+    (:func:`~wgse_mmseg.utils.num_steps.apply_num_steps`).
     """
     options = dict(cfg_options or {})
     saved = {}

@@ -1,0 +1,63 @@
+"""Exposure normalisation against hand-computed gains."""
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from wgse_mmseg.core.exposure import (apply_exposure, exposure_gain,
+                                      parse_exposure)
+
+
+def test_the_percentile_becomes_white_and_hot_pixels_do_not_count():
+    image = np.full((20, 20), 0.05)
+    image[0, 0] = 1.0  # one hot pixel in 400: above the 99.5th percentile
+    assert exposure_gain(image) == pytest.approx(20.0)
+    exposed, gain = apply_exposure(image)
+    assert gain == pytest.approx(20.0)
+    assert exposed.dtype == np.float32
+    np.testing.assert_allclose(exposed, np.minimum(image * 20, 1), rtol=1e-6)
+
+
+def test_black_limits_and_fixed_gains():
+    assert exposure_gain(np.zeros((4, 4))) == 1.0
+    sparse = np.zeros((40, 40))
+    sparse[0, 0] = 0.5  # black at the percentile, not everywhere
+    assert exposure_gain(sparse) == 64.0
+    assert exposure_gain(np.full((4, 4), 1e-6)) == 64.0
+    assert exposure_gain(np.full((4, 4), 4.0)) == 0.25
+    image = np.full((2, 2), 0.3)
+    assert apply_exposure(image, 'none')[1] == 1.0
+    np.testing.assert_allclose(apply_exposure(image, 2.0)[0], 0.6, rtol=1e-6)
+
+
+@pytest.mark.parametrize('bad', ['dim', -1.0, 0.0, float('nan'),
+                                 float('inf')])
+def test_bad_exposures_are_refused(bad):
+    with pytest.raises(ValueError, match='exposure'):
+        apply_exposure(np.ones((2, 2)), bad)
+
+
+def test_bad_images_are_refused():
+    with pytest.raises(ValueError, match='non-empty, finite'):
+        exposure_gain(np.array([[0.1, np.nan]]))
+    with pytest.raises(ValueError, match='non-empty, finite'):
+        exposure_gain(np.zeros((0, 3)))
+
+
+def test_parse_exposure():
+    assert parse_exposure('auto') == 'auto'
+    assert parse_exposure('none') == 'none'
+    assert parse_exposure('2.5') == 2.5
+    for text in ('0', '-3', 'nan', 'bright', ''):
+        with pytest.raises(ValueError, match='--exposure'):
+            parse_exposure(text)
+
+
+@given(arrays(np.float64, (6, 7), elements=st.floats(0, 10)))
+def test_auto_output_is_in_range_and_monotone(image):
+    exposed, gain = apply_exposure(image)
+    assert 1 / 64 <= gain <= 64
+    assert exposed.min() >= 0 and exposed.max() <= 1
+    order = np.argsort(image, axis=None, kind='stable')
+    assert np.all(np.diff(exposed.ravel()[order]) >= 0)
