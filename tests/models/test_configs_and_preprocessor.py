@@ -1,6 +1,7 @@
 """The four main configs build and train a step; the preprocessor's contract."""
 import os.path as osp
 
+import numpy as np
 import pytest
 import torch
 from mmengine.structures import PixelData
@@ -157,3 +158,38 @@ def test_labels_of_the_classes_and_ignore_index_pass():
     label.view(-1)[:20] = torch.tensor(list(range(19)) + [255])
     out = preprocessor(batch, training=True)
     assert torch.equal(out['data_samples'][0].gt_sem_seg.data, label)
+
+
+def test_paramwise_cfg_gives_the_enhancer_its_own_learning_rate():
+    """The enhancer's parameters are the model's
+    (``data_preprocessor.enhancer.*``), so MMSeg's ``paramwise_cfg`` reaches
+    them like any other."""
+    from mmengine.optim import build_optim_wrapper
+    cfg, model = build('segformer_b0_wgse', num_steps=9)
+    optim_wrapper = dict(cfg.optim_wrapper, paramwise_cfg=dict(
+        custom_keys={'data_preprocessor.enhancer': dict(lr_mult=10.0)}))
+    optimizer = build_optim_wrapper(model, optim_wrapper).optimizer
+    names = {id(p): n for n, p in model.named_parameters()}
+    rates = {names[id(p)]: group['lr'] for group in optimizer.param_groups
+             for p in group['params']}
+    base = cfg.optim_wrapper.optimizer.lr
+    enhancer = [n for n in rates if n.startswith('data_preprocessor.enhancer')]
+    assert len(enhancer) == len(list(
+        model.data_preprocessor.enhancer.parameters()))
+    assert all(rates[n] == pytest.approx(10 * base) for n in enhancer)
+    assert all(rates[n] == pytest.approx(base) for n in rates
+               if n not in enhancer)
+
+
+def test_inference_model_takes_a_spike_file(tmp_path):
+    from mmseg.apis import inference_model, init_model
+
+    from wgse_mmseg.core.io import save_spikes
+    cfg = load_config(config_path('segformer_b0_wgse'),
+                      dict(num_steps=9))
+    path = str(tmp_path / 'clip.npy')
+    save_spikes(path, (np.random.default_rng(0).random((9, 32, 64)) <
+                       0.3).astype(np.uint8))
+    result = inference_model(init_model(cfg, None, device='cpu'), path)
+    assert result.pred_sem_seg.data.shape == (1, 32, 64)
+    assert result.img_path == path

@@ -23,4 +23,8 @@ default_hooks = dict(
     checkpoint=dict(type='CheckpointHook', by_epoch=True, interval=10,
                     max_keep_ckpts=3),
     sampler_seed=dict(type='DistSamplerSeedHook'),
-    visualization=dict(type='SegVisualizationHook'))
+    # MMSeg's visualisation hook for spike files: the clip drawn as a TFP
+    # image under the prediction (default_hooks.visualization.draw=True; add
+    # dict(type='TensorboardVisBackend') to visualizer.vis_backends for
+    # TensorBoard)
+    visualization=dict(type='SpikeVisualizationHook'))

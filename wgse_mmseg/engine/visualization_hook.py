@@ -1,0 +1,68 @@
+"""MMSeg's visualisation hook for spike streams: it draws the clip as a TFP
+image (spike rate / 0.6, exposure-normalised) under the prediction and the
+ground truth, where MMSeg's reads ``img_path`` as an image file."""
+import os.path as osp
+from typing import Optional, Sequence
+
+import numpy as np
+from mmengine.runner import Runner
+
+from mmseg.engine.hooks import SegVisualizationHook
+from mmseg.registry import HOOKS
+from mmseg.structures import SegDataSample
+from ..core.exposure import apply_exposure
+from ..core.io import to_uint8
+from ..core.reconstruction_baselines import tfp
+from ..datasets.transforms import LoadSpikeFromFile
+
+__all__ = ['SpikeVisualizationHook']
+
+
+@HOOKS.register_module()
+class SpikeVisualizationHook(SegVisualizationHook):
+    """:class:`~mmseg.engine.hooks.SegVisualizationHook` for spike files.
+
+    Every ``interval``-th validation or test batch, each sample's clip is
+    read again as the test pipeline reads it (``num_steps`` frames centred on
+    the stream; ``height``/``width`` for ``.dat`` files without a side file),
+    drawn as a grey TFP image with exposure normalisation, and handed with
+    the prediction to the visualiser, whose backends (local files,
+    TensorBoard through mmengine's ``TensorboardVisBackend``) store it.
+
+    Args:
+        num_steps: frames per clip; ``None`` for the config's ``num_steps``
+            (or the whole stream where the config has none).
+        height, width: frame size of ``.dat`` files.
+        **kwargs: ``draw``, ``interval``, ``show``, ``wait_time`` of MMSeg's
+            hook.
+    """
+
+    def __init__(self, num_steps: Optional[int] = None,
+                 height: Optional[int] = None, width: Optional[int] = None,
+                 **kwargs):
+        super().__init__(**kwargs)
+        self.loader_args = dict(num_steps=num_steps, height=height,
+                                width=width)
+
+    def clip_image(self, path: str, num_steps: Optional[int]) -> np.ndarray:
+        """``(H, W, 3)`` uint8 grey TFP image of the clip at ``path``."""
+        args = dict(self.loader_args)
+        args['num_steps'] = args['num_steps'] or num_steps
+        spikes = LoadSpikeFromFile(**args)(dict(img_path=path))['img']
+        grey, _ = apply_exposure(tfp(spikes.transpose(2, 0, 1)))
+        return np.repeat(to_uint8(grey)[..., None], 3, axis=2)
+
+    def _after_iter(self, runner: Runner, batch_idx: int, data_batch: dict,
+                    outputs: Sequence[SegDataSample],
+                    mode: str = 'val') -> None:
+        if self.draw is False or mode == 'train':
+            return
+        if not self.every_n_inner_iters(batch_idx, self.interval):
+            return
+        for output in outputs:
+            image = self.clip_image(output.img_path,
+                                    runner.cfg.get('num_steps'))
+            self._visualizer.add_datasample(
+                f'{mode}_{osp.basename(output.img_path)}', image,
+                data_sample=output, show=self.show,
+                wait_time=self.wait_time, step=runner.iter)
