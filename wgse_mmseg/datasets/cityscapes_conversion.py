@@ -14,7 +14,7 @@ Output, the layout :class:`~wgse_mmseg.datasets.SpikeCityscapesDataset`
 reads::
 
     spike/<split>/<city>/<stem>_spike.spk               (T, H, W) 0/1 spikes
-    spike/<split>/<city>/<stem>_spike.json              what made them
+    spike/<split>/<city>/<stem>_spike.json              the sample's marker
     gtFine/<split>/<city>/<stem>_gtFine_labelTrainIds.png   (H, W) train ids
 
 Time span. A spike camera reads out at 40 kHz, so ``T`` steps last
@@ -29,10 +29,14 @@ step, where the label holds. Without those frames (or with ``K = 0``) the
 scene's static model is used: the annotated frame alone, optionally moved
 by a ``camera_motion`` effect.
 
-Every file is written atomically; a sample whose three files exist, read
-back whole, and record the current settings is skipped, so an interrupted
-conversion resumes. Each sample's seed is derived from its name, so reruns
-give identical files.
+Complete or absent. A sample's json is its marker: the settings that made it
+(the recipe) and the SHA-256 of its spike file and label. A sample is done
+only when its marker exists, holds the current recipe and matches both
+files; a run removes the marker before it writes a sample's files and
+writes it last, each file atomically, so a run killed at any point leaves
+that sample without a marker, and the next run (with any settings) redoes
+it. Each sample's seed is derived from its name, so reruns give identical
+files.
 """
 import contextlib
 import hashlib
@@ -52,7 +56,7 @@ import torch
 from tqdm import tqdm
 
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
-from ..core.io import atomic_output, save_spikes, spike_shape, write_png
+from ..core.io import atomic_output, save_spikes, write_png
 from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = [
@@ -375,19 +379,31 @@ def _recipe(sample: CityscapesSample, settings: ConversionSettings,
     return json.loads(json.dumps(recipe))
 
 
+#: the files of a sample that its marker covers
+MARKED_FILES = ('spike', 'label')
+
+
+def _digest(path: str) -> str:
+    """SHA-256 of the file at ``path``, hex."""
+    digest = hashlib.sha256()
+    with open(path, 'rb') as f:
+        for block in iter(lambda: f.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()
+
+
 def _is_done(paths: Dict[str, str], recipe: dict) -> bool:
-    """Whether all three files exist, read back whole, and match ``recipe``."""
+    """Whether the marker exists, holds ``recipe`` and matches the files."""
     try:
         with open(paths['meta']) as f:
-            if json.load(f).get('recipe') != recipe:
-                return False
-        shape = (recipe['num_steps'], recipe['height'], recipe['width'])
-        if spike_shape(paths['spike']) != shape:
+            marker = json.load(f)
+        if not isinstance(marker, dict) or marker.get('recipe') != recipe:
             return False
-        label = cv2.imread(paths['label'], cv2.IMREAD_UNCHANGED)
-    except (OSError, ValueError):  # SpikeFileError is a ValueError
+        files = marker.get('files')
+        return isinstance(files, dict) and all(
+            files.get(name) == _digest(paths[name]) for name in MARKED_FILES)
+    except (OSError, ValueError):  # json.JSONDecodeError is a ValueError
         return False
-    return label is not None and label.shape == shape[1:]
 
 
 def _jsonable(value):
@@ -403,10 +419,11 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
                    settings: ConversionSettings) -> str:
     """Write one sample's spike stream, label and metadata.
 
-    Everything is computed before anything is written, and each file is
-    written atomically, metadata last. Returns ``'skipped'`` when the sample
-    is already done (see :func:`_is_done`), else its model, ``'sequence'``
-    or ``'static'``.
+    Everything is computed before anything is written; then the marker is
+    removed, the label and the spikes are written, and the marker (recipe,
+    SHA-256 of both files, the simulator's metadata) last, each file
+    atomically. Returns ``'skipped'`` when the sample is already done (see
+    :func:`_is_done`), else its model, ``'sequence'`` or ``'static'``.
     """
     paths = output_paths(out_dir, sample)
     recipe = _recipe(sample, settings, root)
@@ -417,10 +434,13 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
     spikes, simulation = simulate_spikes(
         frames, settings.num_steps, threshold=settings.threshold,
         effects=recipe['effects'], seed=recipe['seed'])
+    if osp.exists(paths['meta']):  # not done until it is rewritten
+        os.remove(paths['meta'])
     write_png(paths['label'], label)
     save_spikes(paths['spike'], spikes)
-    meta = json.dumps(dict(recipe=recipe, simulation=simulation), indent=1,
-                      default=_jsonable)
+    files = {name: _digest(paths[name]) for name in MARKED_FILES}
+    meta = json.dumps(dict(recipe=recipe, files=files, simulation=simulation),
+                      indent=1, default=_jsonable)
     with atomic_output(paths['meta']) as f:
         f.write(meta.encode())
     return recipe['model']
