@@ -56,7 +56,8 @@ import torch
 from tqdm import tqdm
 
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
-from ..core.io import atomic_output, save_spikes, write_png
+from ..core.io import save_spikes, write_png
+from ..core.markers import invalidate, is_complete, write_marker
 from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = [
@@ -379,31 +380,9 @@ def _recipe(sample: CityscapesSample, settings: ConversionSettings,
     return json.loads(json.dumps(recipe))
 
 
-#: the files of a sample that its marker covers
-MARKED_FILES = ('spike', 'label')
-
-
-def _digest(path: str) -> str:
-    """SHA-256 of the file at ``path``, hex."""
-    digest = hashlib.sha256()
-    with open(path, 'rb') as f:
-        for block in iter(lambda: f.read(1 << 20), b''):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def _is_done(paths: Dict[str, str], recipe: dict) -> bool:
-    """Whether the marker exists, holds ``recipe`` and matches the files."""
-    try:
-        with open(paths['meta']) as f:
-            marker = json.load(f)
-        if not isinstance(marker, dict) or marker.get('recipe') != recipe:
-            return False
-        files = marker.get('files')
-        return isinstance(files, dict) and all(
-            files.get(name) == _digest(paths[name]) for name in MARKED_FILES)
-    except (OSError, ValueError):  # json.JSONDecodeError is a ValueError
-        return False
+def _marked_files(paths: Dict[str, str]) -> Dict[str, str]:
+    """The files of a sample that its marker covers."""
+    return dict(spike=paths['spike'], label=paths['label'])
 
 
 def _jsonable(value):
@@ -422,27 +401,24 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
     Everything is computed before anything is written; then the marker is
     removed, the label and the spikes are written, and the marker (recipe,
     SHA-256 of both files, the simulator's metadata) last, each file
-    atomically. Returns ``'skipped'`` when the sample is already done (see
-    :func:`_is_done`), else its model, ``'sequence'`` or ``'static'``.
+    atomically (:mod:`wgse_mmseg.core.markers`). Returns ``'skipped'`` when
+    the sample is already done, else its model, ``'sequence'`` or
+    ``'static'``.
     """
     paths = output_paths(out_dir, sample)
     recipe = _recipe(sample, settings, root)
-    if _is_done(paths, recipe):
+    if is_complete(paths['meta'], recipe, _marked_files(paths)):
         return 'skipped'
     frames, size = _rgb_frames(sample, settings.height, settings.width)
     label = _train_id_label(sample, settings.height, settings.width, size)
     spikes, simulation = simulate_spikes(
         frames, settings.num_steps, threshold=settings.threshold,
         effects=recipe['effects'], seed=recipe['seed'])
-    if osp.exists(paths['meta']):  # not done until it is rewritten
-        os.remove(paths['meta'])
+    invalidate(paths['meta'])
     write_png(paths['label'], label)
     save_spikes(paths['spike'], spikes)
-    files = {name: _digest(paths[name]) for name in MARKED_FILES}
-    meta = json.dumps(dict(recipe=recipe, files=files, simulation=simulation),
-                      indent=1, default=_jsonable)
-    with atomic_output(paths['meta']) as f:
-        f.write(meta.encode())
+    write_marker(paths['meta'], recipe, _marked_files(paths),
+                 dict(simulation=simulation), default=_jsonable)
     return recipe['model']
 
 

@@ -16,6 +16,7 @@ from tqdm import tqdm
 
 from ..core.constants import REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
+from ..core.markers import invalidate, is_complete, write_marker
 from ..core.simulation import simulate_spikes
 
 __all__ = ['render_street_scene', 'make_synthetic_dataset']
@@ -127,12 +128,17 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                            progress: bool = True) -> int:
     """Write a Spike-Cityscapes-layout dataset to ``out_dir``.
 
-    Files: ``spike/{train,val}/synth/synth_<scene>_000019_spike.spk`` and
-    ``gtFine/{train,val}/synth/synth_<scene>_000019_gtFine_labelTrainIds.png``.
-    Files that exist are kept, so an interrupted run resumes; each file is
-    written atomically. Returns the number of samples written now.
+    Files: ``spike/{train,val}/synth/synth_<scene>_000019_spike.spk``,
+    ``gtFine/{train,val}/synth/synth_<scene>_000019_gtFine_labelTrainIds.png``
+    and the sample's marker ``..._spike.json`` (the settings and the files'
+    SHA-256, written last: :mod:`wgse_mmseg.core.markers`). A sample whose
+    marker matches these settings and its files is kept, so an interrupted
+    run resumes; any other is made again. Returns the number of samples
+    written now.
     """
     written = 0
+    recipe = dict(height=height, width=width, num_steps=num_steps,
+                  num_frames=num_frames, threshold=threshold, seed=seed)
     jobs = [('train', i) for i in range(num_train)] + [
         ('val', num_train + i) for i in range(num_val)]
     for split, scene in tqdm(jobs, desc='synthetic scenes',
@@ -142,13 +148,18 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                               f'{stem}_spike.spk')
         label_path = osp.join(out_dir, 'gtFine', split, 'synth',
                               f'{stem}_gtFine_labelTrainIds.png')
-        if osp.exists(spike_path) and osp.exists(label_path):
+        marker = osp.join(out_dir, 'spike', split, 'synth',
+                          f'{stem}_spike.json')
+        files = dict(spike=spike_path, label=label_path)
+        if is_complete(marker, recipe, files):
             continue
         rng = np.random.default_rng([seed, scene])
         frames, label = render_street_scene(rng, height, width, num_frames)
         spikes, _ = simulate_spikes(frames, num_steps, threshold=threshold,
                                     seed=seed * 100003 + scene)
+        invalidate(marker)
         write_png(label_path, label)
         save_spikes(spike_path, spikes)
+        write_marker(marker, recipe, files)
         written += 1
     return written

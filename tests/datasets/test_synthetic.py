@@ -1,0 +1,32 @@
+"""The embedded synthetic street-scene dataset: layout, resume, settings."""
+import os
+
+from wgse_mmseg.core.io import load_spikes, spike_shape
+from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
+
+
+def _tree(out):
+    return sorted(os.path.relpath(os.path.join(d, f), out)
+                  for d, _, files in os.walk(out) for f in files)
+
+
+def test_resume_keeps_done_samples_and_redoes_stale_ones(tmp_path):
+    out = str(tmp_path / 'synth')
+    args = dict(num_train=2, num_val=1, height=16, width=32, progress=False)
+    assert make_synthetic_dataset(out, num_steps=9, **args) == 3
+    tree = _tree(out)
+    assert len(tree) == 9  # spikes, label and marker per sample
+    assert make_synthetic_dataset(out, num_steps=9, **args) == 0
+    # a truncated stream and a lost marker are redone
+    spike = os.path.join(out, 'spike', 'train', 'synth',
+                         'synth_000000_000019_spike.spk')
+    with open(spike, 'r+b') as f:
+        f.truncate(30)
+    os.remove(os.path.join(out, 'spike', 'val', 'synth',
+                           'synth_000002_000019_spike.json'))
+    assert make_synthetic_dataset(out, num_steps=9, **args) == 2
+    assert load_spikes(spike).shape == (9, 16, 32)
+    # other settings in the same directory redo every sample
+    assert make_synthetic_dataset(out, num_steps=11, **args) == 3
+    assert spike_shape(spike) == (11, 16, 32)
+    assert _tree(out) == tree
