@@ -1,11 +1,15 @@
 """The shipped configs' runner: mmengine's ``Runner`` that first gives the
 config's ``num_steps`` to every field built from it
-(:func:`wgse_mmseg.utils.num_steps.apply_num_steps`).
+(:func:`wgse_mmseg.utils.num_steps.apply_num_steps`), and writes each
+checkpoint whole or not at all.
 
 The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 ``tools/train.py``, which builds ``RUNNERS.build(cfg)`` when a config has a
 ``runner_type``, uses it as this package's tools do.
 """
+import os
+import os.path as osp
+
 from mmengine.logging import print_log
 # mmengine's root registry: RUNNERS.build(cfg) looks the runner up there
 # (a config's default_scope is not in force yet)
@@ -20,7 +24,8 @@ __all__ = ['SpikeRunner']
 @RUNNERS.register_module()
 class SpikeRunner(Runner):
     """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` applies
-    ``cfg.num_steps`` first; otherwise the same."""
+    ``cfg.num_steps`` first and whose :meth:`save_checkpoint` is atomic on
+    local disks; otherwise the same."""
 
     @classmethod
     def from_cfg(cls, cfg) -> 'SpikeRunner':
@@ -31,3 +36,17 @@ class SpikeRunner(Runner):
                       f'{sorted(set(changed.values()))[0]}, from a base '
                       f'config)', logger='current')
         return super().from_cfg(cfg)
+
+    def save_checkpoint(self, out_dir: str, filename: str, *args, **kwargs):
+        """mmengine's, but on a local ``out_dir`` written under a temporary
+        name and renamed over ``filename`` once whole: a job killed while it
+        saves leaves the previous checkpoints and ``last_checkpoint`` (which
+        mmengine's checkpoint hook updates after this returns) as they were,
+        so ``--resume`` continues from the last complete checkpoint."""
+        if not osp.isdir(out_dir):  # a remote backend: as mmengine does it
+            return super().save_checkpoint(out_dir, filename, *args,
+                                           **kwargs)
+        temporary = osp.join(osp.dirname(filename),
+                             f'.tmp-{osp.basename(filename)}')
+        super().save_checkpoint(out_dir, temporary, *args, **kwargs)
+        os.replace(osp.join(out_dir, temporary), osp.join(out_dir, filename))
