@@ -19,6 +19,7 @@ from typing import Dict, List, Optional
 
 import torch
 
+from ..io import atomic_output
 from ..machine import cpu_model
 from . import band_network_backends
 from .wgse import WGSE
@@ -219,8 +220,8 @@ def run_benchmark(shapes: List[List[int]], impls: List[str], repeat: int,
           f'peak (peak = growth of {peak} during one forward+backward)')
     report = dict(machine=info, results=rows, agreement=checks)
     if out:
-        with open(out, 'w') as f:
-            json.dump(report, f, indent=2)
+        with atomic_output(out) as f:
+            f.write(json.dumps(report, indent=2).encode())
     return report
 
 
