@@ -443,3 +443,52 @@ def test_write_png_round_trip_and_nothing_on_failure(tmp_path):
         spike_io.write_png(str(tmp_path / 'empty.png'),
                            np.zeros((0, 3), np.uint8))
     assert sorted(os.listdir(tmp_path)) == ['out']  # no file, no temp file
+
+
+# ---------------------------------------------------------------- fuzzing
+@st.composite
+def _damaged_files(draw):
+    """A valid spike file's bytes, then truncated, overwritten in places or
+    replaced by random bytes."""
+    ext = draw(st.sampled_from(['.dat', '.spk', '.npy', '.npz']))
+    spikes = _random_spikes((draw(st.integers(1, 6)), 4, 6),
+                            draw(st.integers(0, 2**16)))
+    with tempfile.TemporaryDirectory() as tmp:
+        path = osp.join(tmp, f'clip{ext}')
+        save_spikes(path, spikes)
+        with open(path, 'rb') as f:
+            data = bytearray(f.read())
+    damage = draw(st.sampled_from(['truncate', 'overwrite', 'random']))
+    if damage == 'truncate':
+        data = data[:draw(st.integers(0, max(len(data) - 1, 0)))]
+    elif damage == 'overwrite':
+        for _ in range(draw(st.integers(1, 8))):
+            index = draw(st.integers(0, len(data) - 1))
+            data[index] = draw(st.integers(0, 255))
+    else:
+        data = bytearray(draw(st.binary(max_size=400)))
+    return ext, bytes(data)
+
+
+@given(_damaged_files())
+def test_damaged_files_read_correctly_or_fail_naming_the_file(damaged):
+    """Random bytes and truncations of valid files: a stream of 0/1 uint8
+    frames of the stated shape, or a SpikeFileError naming the file; never
+    another exception."""
+    ext, data = damaged
+    with tempfile.TemporaryDirectory() as tmp:
+        path = osp.join(tmp, f'clip{ext}')
+        with open(path, 'wb') as f:
+            f.write(data)
+        if ext == '.dat':
+            with open(path + '.json', 'w') as f:
+                json.dump(dict(height=4, width=6), f)
+        try:
+            shape = spike_shape(path)
+            spikes = load_spikes(path)
+        except SpikeFileError as error:
+            assert path in str(error)
+            return
+        assert spikes.dtype == np.uint8 and spikes.shape == shape
+        assert spikes.ndim == 3 and spikes.size > 0
+        assert set(np.unique(spikes)) <= {0, 1}
