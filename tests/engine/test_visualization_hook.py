@@ -31,6 +31,9 @@ def test_test_run_draws_the_clip_under_the_prediction(tmp_path):
          'default_hooks.visualization.draw': True,
          'default_hooks.visualization.interval': 1})
     cfg.work_dir = str(tmp_path / 'work')
+    # a visualiser of its own: mmengine reuses one of the same name, with
+    # the work dir of the test that made it
+    cfg.visualizer.name = f'visualizer_{tmp_path.name}'
     runner = RUNNERS.build(cfg)
     runner.test()
     drawn = glob.glob(str(tmp_path / 'work' / '*' / 'vis_data' /

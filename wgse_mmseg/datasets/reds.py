@@ -256,6 +256,45 @@ def render_trajectory(image: np.ndarray, size: Tuple[int, int],
     return frames
 
 
+def _check_arguments(**args) -> None:
+    """Clear errors for :class:`SimulatedSpikeImageDataset`'s arguments."""
+
+    def integer(value, low):
+        return isinstance(value, (int, np.integer)) and \
+            not isinstance(value, bool) and value >= low
+
+    def interval(value, low):  # (a, b) with low < a <= b, finite
+        return (isinstance(value, (tuple, list)) and len(value) == 2 and
+                all(np.isfinite(v) and v > low for v in value) and
+                value[0] <= value[1])
+
+    checks = dict(
+        num_samples=(integer(args['num_samples'], 1), 'an integer >= 1'),
+        num_steps=(integer(args['num_steps'], 1), 'an integer >= 1'),
+        max_side=(integer(args['max_side'], 1), 'an integer >= 1'),
+        seed=(integer(args['seed'], 0) and args['seed'] < 2**63,
+              'an integer in 0 .. 2**63 - 1'),
+        crop_size=(isinstance(args['crop_size'], (tuple, list)) and
+                   len(args['crop_size']) == 2 and
+                   all(integer(v, 1) for v in args['crop_size']),
+                   '(h, w) with integers >= 1'),
+        white_rate=(np.isfinite(args['white_rate']) and
+                    args['white_rate'] > 0, 'a finite number > 0'),
+        scale_range=(interval(args['scale_range'], 0), '(low, high), 0 < '
+                     'low <= high'),
+        gain_range=(interval(args['gain_range'], 0), '(low, high), 0 < low '
+                    '<= high'),
+        gamma_range=(interval(args['gamma_range'], 0), '(low, high), 0 < '
+                     'low <= high'))
+    for name in ('max_speed', 'max_rotation', 'max_zoom'):
+        checks[name] = (np.isfinite(args[name]) and args[name] >= 0,
+                        'a finite number >= 0')
+    for name, (ok, expected) in checks.items():
+        if not ok:
+            raise ValueError(f'SimulatedSpikeImageDataset: {name} must be '
+                             f'{expected}, got {args[name]!r}')
+
+
 @DATASETS.register_module()
 class SimulatedSpikeImageDataset(BaseDataset):
     """Spike windows simulated from still images moved along trajectories.
@@ -297,10 +336,12 @@ class SimulatedSpikeImageDataset(BaseDataset):
                  gain_range: Tuple[float, float] = (0.5, 1.0),
                  gamma_range: Tuple[float, float] = (0.7, 1.4),
                  max_side: int = 1024, **kwargs):
-        if num_samples < 1 or num_steps < 1 or white_rate <= 0:
-            raise ValueError(
-                f'num_samples and num_steps must be >= 1 and white_rate > 0; '
-                f'got {num_samples}, {num_steps}, {white_rate}')
+        _check_arguments(num_samples=num_samples, crop_size=crop_size,
+                         num_steps=num_steps, seed=seed,
+                         white_rate=white_rate, max_speed=max_speed,
+                         max_rotation=max_rotation, max_zoom=max_zoom,
+                         scale_range=scale_range, gain_range=gain_range,
+                         gamma_range=gamma_range, max_side=max_side)
         self.image_dir = image_dir or default_image_dir()
         self.image_paths, self.images = _load_images(self.image_dir,
                                                      max_side)

@@ -1,4 +1,7 @@
 """Spike-Cityscapes: Cityscapes scenes as spike streams."""
+import os.path as osp
+from typing import List
+
 from mmseg.datasets import CityscapesDataset
 from mmseg.registry import DATASETS
 
@@ -26,3 +29,15 @@ class SpikeCityscapesDataset(CityscapesDataset):
                  **kwargs) -> None:
         super().__init__(
             img_suffix=img_suffix, seg_map_suffix=seg_map_suffix, **kwargs)
+
+    def load_data_list(self) -> List[dict]:
+        """MMSeg's listing, after a check that names a missing folder."""
+        for key, folder in self.data_prefix.items():
+            if folder and not osp.isdir(folder):
+                raise FileNotFoundError(
+                    f'SpikeCityscapesDataset: {folder} ({key} under '
+                    f'data_root={self.data_root!r}) is not a directory; set '
+                    f'data_root to a Spike-Cityscapes root (README, '
+                    f'"Spike-Cityscapes layout") or make one with '
+                    f'tools/dataset_converters/spike_cityscapes.py')
+        return super().load_data_list()

@@ -10,6 +10,7 @@ The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 import os
 import os.path as osp
 
+from mmengine.dist import master_only
 from mmengine.logging import print_log
 # mmengine's root registry: RUNNERS.build(cfg) looks the runner up there
 # (a config's default_scope is not in force yet)
@@ -37,12 +38,14 @@ class SpikeRunner(Runner):
                       f'config)', logger='current')
         return super().from_cfg(cfg)
 
+    @master_only
     def save_checkpoint(self, out_dir: str, filename: str, *args, **kwargs):
         """mmengine's, but on a local ``out_dir`` written under a temporary
         name and renamed over ``filename`` once whole: a job killed while it
         saves leaves the previous checkpoints and ``last_checkpoint`` (which
         mmengine's checkpoint hook updates after this returns) as they were,
-        so ``--resume`` continues from the last complete checkpoint."""
+        so ``--resume`` continues from the last complete checkpoint. Only
+        the main process saves, as in mmengine."""
         if not osp.isdir(out_dir):  # a remote backend: as mmengine does it
             return super().save_checkpoint(out_dir, filename, *args,
                                            **kwargs)

@@ -9,6 +9,18 @@ from mmseg.registry import MODELS
 __all__ = ['SpikeSegDataPreProcessor']
 
 
+def _is_positive_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and \
+        value >= 1
+
+
+def _source(data_samples: Optional[list], index: int) -> str:
+    """The file of sample ``index``, for error messages."""
+    if data_samples is not None and 'img_path' in data_samples[index]:
+        return data_samples[index].img_path
+    return f'sample {index}'
+
+
 @MODELS.register_module()
 class SpikeSegDataPreProcessor(SegDataPreProcessor):
     """Batch ``T``-channel spike tensors and optionally enhance them.
@@ -32,6 +44,9 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
             ``0 .. num_classes - 1`` and ``seg_pad_val`` (the ignore index);
             another value fails at once, naming the label file and the
             values, instead of deep inside the loss.
+
+    Every input must hold only 0 and 1 (any dtype); another value (NaN, a
+    grey level, a negative) fails naming the file.
         size, size_divisor, pad_val, seg_pad_val, batch_augments, test_cfg:
             as in ``SegDataPreProcessor``. No mean/std normalisation and no
             colour conversion: spikes have neither.
@@ -58,10 +73,22 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
             rgb_to_bgr=False,
             batch_augments=batch_augments,
             test_cfg=test_cfg)
-        if num_steps is not None and num_steps < 1:
-            raise ValueError(f'num_steps must be >= 1, got {num_steps}')
-        if num_classes is not None and num_classes < 1:
-            raise ValueError(f'num_classes must be >= 1, got {num_classes}')
+        for name, value in (('num_steps', num_steps),
+                            ('num_classes', num_classes),
+                            ('size_divisor', size_divisor)):
+            if value is not None and not _is_positive_int(value):
+                raise ValueError(f'{name} must be an integer >= 1, got '
+                                 f'{value!r}')
+        if size is not None and not (
+                len(size) == 2 and all(_is_positive_int(v) for v in size)):
+            raise ValueError(f'size must be (H, W) with integers >= 1, got '
+                             f'{size!r}')
+        if pad_val not in (0, 1):
+            raise ValueError(f'pad_val pads spike streams, so it must be 0 '
+                             f'(no spike) or 1; got {pad_val!r}')
+        if isinstance(seg_pad_val, bool) or seg_pad_val not in range(256):
+            raise ValueError(f'seg_pad_val must be an integer label in '
+                             f'0..255 (the ignore index), got {seg_pad_val!r}')
         self.num_steps = num_steps
         self.num_classes = num_classes
         self.enhancer = MODELS.build(enhancer) if enhancer else None
@@ -72,10 +99,7 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
             return
         for index, spikes in enumerate(inputs):
             if spikes.dim() != 3 or spikes.shape[0] != self.num_steps:
-                source = 'sample %d' % index
-                if data_samples is not None and 'img_path' in data_samples[
-                        index]:
-                    source = data_samples[index].img_path
+                source = _source(data_samples, index)
                 found = (f'T={spikes.shape[0]}' if spikes.dim() == 3 else
                          f'shape {tuple(spikes.shape)}')
                 raise ValueError(
@@ -86,15 +110,44 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
                     f'config, e.g. --cfg-options num_steps='
                     f'{spikes.shape[0] if spikes.dim() == 3 else "T"}')
 
-    def _check_labels(self, data_samples: Optional[list]) -> None:
-        if self.num_classes is None or not data_samples:
+    @staticmethod
+    def _check_values(inputs: Sequence[torch.Tensor],
+                      data_samples: Optional[list]) -> None:
+        """Every input holds spikes: 0 or 1, nothing else (no NaN)."""
+        for index, spikes in enumerate(inputs):
+            if 0 in spikes.shape:
+                raise ValueError(
+                    f'{_source(data_samples, index)}: empty spike stream, '
+                    f'shape {tuple(spikes.shape)}')
+            if spikes.dtype == torch.bool:
+                continue
+            bad = (spikes != 0) & (spikes != 1)
+            if bad.any():
+                values = spikes[bad].unique()[:5].tolist()
+                raise ValueError(
+                    f'{_source(data_samples, index)}: a spike stream holds '
+                    f'only 0 and 1, found {values} ({spikes.dtype})')
+
+    def _check_labels(self, inputs: Sequence[torch.Tensor],
+                      data_samples: Optional[list], training: bool) -> None:
+        """Labels in range; in training also of the stream's size (a test
+        pipeline may resize the stream and keep labels at full size)."""
+        if not data_samples:
             return
-        for sample in data_samples:
+        for spikes, sample in zip(inputs, data_samples):
             if 'gt_sem_seg' not in sample:
                 continue
             labels = sample.gt_sem_seg.data
-            bad = ((labels < 0) | (labels >= self.num_classes)) & (
-                labels != self.seg_pad_val)
+            if training and labels.shape[-2:] != spikes.shape[-2:]:
+                raise ValueError(
+                    f'{sample.get("seg_map_path", "a label map")}: label '
+                    f'map is {tuple(labels.shape[-2:])} but its spike '
+                    f'stream {sample.get("img_path", "")} is '
+                    f'{tuple(spikes.shape[-2:])} (H, W)')
+            if self.num_classes is None:
+                continue
+            bad = ((labels < 0) | (labels >= self.num_classes) |
+                   (labels != labels.round())) & (labels != self.seg_pad_val)
             if bad.any():
                 values = labels[bad].unique().tolist()
                 raise ValueError(
@@ -108,7 +161,14 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
     def forward(self, data: dict, training: bool = False) -> Dict[str, Any]:
         """``data['inputs']``: list of ``(T, H, W)``; returns ``(B, C, H, W)``."""
         self._check_num_steps(data['inputs'], data.get('data_samples'))
-        self._check_labels(data.get('data_samples'))
+        self._check_values(data['inputs'], data.get('data_samples'))
+        self._check_labels(data['inputs'], data.get('data_samples'),
+                           training)
+        if training and self.size is None and self.size_divisor is None:
+            raise ValueError(
+                'SpikeSegDataPreProcessor needs size (H, W) or size_divisor '
+                'to stack a training batch (the configs set size to '
+                'crop_size)')
         data = super().forward(data, training)
         if self.enhancer is not None:
             data['inputs'] = self.enhancer(data['inputs'])

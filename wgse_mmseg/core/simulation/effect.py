@@ -38,13 +38,13 @@ __all__ = [
 
 
 def check_seed(name: str, value: Any, allow_none: bool = False) -> Any:
-    """A non-negative integer seed (or ``None`` where allowed)."""
+    """A seed in ``0 .. 2**63 - 1`` (or ``None`` where allowed)."""
     if value is None and allow_none:
         return None
     if isinstance(value, bool) or not isinstance(value, Integral) \
-            or value < 0:
+            or not 0 <= value < 2**63:
         raise ValueError(
-            f'{name} must be a non-negative integer'
+            f'{name} must be an integer in 0 .. 2**63 - 1'
             f'{" or null" if allow_none else ""}, got {value!r}')
     return int(value)
 

@@ -58,6 +58,11 @@ class _ResidualLayer(nn.Module):
         return F.relu(self.conv_b(F.relu(self.conv_a(x))) + x)
 
 
+def _is_positive_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and \
+        value >= 1
+
+
 class BandNetwork(nn.Module):
     """The per-band network: residual layers, then output convolutions.
 
@@ -73,11 +78,14 @@ class BandNetwork(nn.Module):
     def __init__(self, dim: int = 1, kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1):
         super().__init__()
-        if kernel_size < 1 or kernel_size % 2 == 0:
+        if not _is_positive_int(kernel_size) or kernel_size % 2 == 0:
             raise ValueError(
-                f'kernel_size must be odd and positive, got {kernel_size}')
-        if num_blocks < 1:
-            raise ValueError(f'num_blocks must be >= 1, got {num_blocks}')
+                f'kernel_size must be odd and positive, got {kernel_size!r}')
+        for name, value in (('hidden_channels', hidden_channels),
+                            ('num_blocks', num_blocks)):
+            if not _is_positive_int(value):
+                raise ValueError(f'{name} must be an integer >= 1, got '
+                                 f'{value!r}')
         self.dim = dim
         self.kernel_size = kernel_size
         self.hidden_channels = hidden_channels
@@ -152,13 +160,14 @@ class WGSE(nn.Module):
                  hidden_channels: int = 32, num_blocks: int = 1,
                  backend: str = 'auto'):
         super().__init__()
-        if dim not in (1, 2, 3):
-            raise ValueError(f'dim must be 1, 2 or 3, got {dim}')
+        if isinstance(dim, bool) or dim not in (1, 2, 3):
+            raise ValueError(f'dim must be 1, 2 or 3, got {dim!r}')
         if wavelet is not None:
             get_wavelet(wavelet)
             check_mode(mode)
-            if level < 1:
-                raise ValueError(f'level must be >= 1, got {level}')
+            if not _is_positive_int(level):
+                raise ValueError(f'level must be an integer >= 1, got '
+                                 f'{level!r}')
         self.dim = dim
         self.wavelet = wavelet
         self.level = level
@@ -199,6 +208,12 @@ class WGSE(nn.Module):
                 f'{tuple(spikes.shape)}')
         batch, num_steps, height, width = spikes.shape
         dtype = torch.float64 if spikes.dtype == torch.float64 else torch.float32
+        weights = self.band_networks[0].output_convs[-1].weight.dtype
+        if dtype == torch.float64 and weights != torch.float64:
+            raise ValueError(
+                f'WGSE got float64 spikes but its parameters are {weights}; '
+                f'pass float32 (or integer) spikes, or convert the module '
+                f'with .double()')
         device_type = spikes.device.type
         with torch.autocast(device_type, enabled=False):
             # (B, P, T), P = H*W: pixel-major, one time series per row.

@@ -44,8 +44,16 @@ class LoadSpikeFromFile(BaseTransform):
                  height: Optional[int] = None, width: Optional[int] = None,
                  center: Optional[int] = None):
         super().__init__()
-        if num_steps is not None and num_steps < 1:
-            raise ValueError(f'num_steps must be >= 1, got {num_steps}')
+        for name, value in (('num_steps', num_steps), ('height', height),
+                            ('width', width)):
+            if value is not None and (not isinstance(value, int) or
+                                      isinstance(value, bool) or value < 1):
+                raise ValueError(f'{name} must be an integer >= 1, got '
+                                 f'{value!r}')
+        if center is not None and (not isinstance(center, int) or
+                                   isinstance(center, bool) or center < 0):
+            raise ValueError(f'center must be a frame index >= 0, got '
+                             f'{center!r}')
         self.num_steps = num_steps
         self.height = height
         self.width = width

@@ -38,7 +38,26 @@ class SpikeRandomCrop(RandomCrop):
     ``cat_max_ratio`` (retry up to 10 times until no class covers more than
     that share of the crop); ``ignore_index`` pixels are not counted. Streams
     smaller than the crop are kept whole (the preprocessor pads them).
+
+    Args:
+        crop_size: ``(h, w)``, integers >= 1 (or one integer for both).
+        cat_max_ratio: in ``(0, 1]``; 1 accepts every crop.
+        ignore_index: label not counted for ``cat_max_ratio``.
     """
+
+    def __init__(self, crop_size, cat_max_ratio: float = 1.,
+                 ignore_index: int = 255):
+        sizes = (crop_size, crop_size) if isinstance(crop_size, int) else \
+            tuple(crop_size)
+        if len(sizes) != 2 or not all(
+                isinstance(v, int) and not isinstance(v, bool) and v >= 1
+                for v in sizes):
+            raise ValueError(f'crop_size must be (h, w) with integers >= 1, '
+                             f'got {crop_size!r}')
+        if not 0 < cat_max_ratio <= 1:
+            raise ValueError(f'cat_max_ratio must be in (0, 1], got '
+                             f'{cat_max_ratio!r}')
+        super().__init__(sizes, cat_max_ratio, ignore_index)
 
     def transform(self, results: dict) -> dict:
         _check_label_matches(results)

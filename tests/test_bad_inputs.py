@@ -1,0 +1,215 @@
+"""Bad input at the public entry points: a clear error that names the
+parameter or the file and what was expected, never an exception from deep
+inside numpy, torch, OpenCV or mmengine (readers' random bytes and
+truncations: tests/core/test_io.py; converters and tools: their tests)."""
+import numpy as np
+import pytest
+import torch
+from mmengine.structures import PixelData
+
+import wgse_mmseg
+from mmseg.registry import DATASETS, MODELS, TRANSFORMS
+from mmseg.structures import SegDataSample
+from wgse_mmseg.core import TFI, TFP, WGSE, simulate_spikes
+from wgse_mmseg.core.io import SpikeFileError
+
+wgse_mmseg.register_all_modules()
+
+FRAMES = np.full((2, 6, 8), 0.5)
+
+
+def _raises(match, call, error=ValueError):
+    with pytest.raises(error, match=match) as info:
+        call()
+    # raised by this package, not from inside a dependency
+    assert 'wgse_mmseg' in info.traceback[-1].path.as_posix(), info
+
+
+@pytest.mark.parametrize('kwargs, match', [
+    (dict(level=0), 'level must be an integer >= 1'),
+    (dict(level=1.5), 'level must be an integer >= 1'),
+    (dict(level=True), 'level must be an integer >= 1'),
+    (dict(hidden_channels=0), 'hidden_channels must be an integer >= 1'),
+    (dict(hidden_channels=-3), 'hidden_channels must be an integer >= 1'),
+    (dict(hidden_channels=2.5), 'hidden_channels must be an integer >= 1'),
+    (dict(num_blocks=0), 'num_blocks must be an integer >= 1'),
+    (dict(kernel_size=2), 'kernel_size must be odd and positive'),
+    (dict(kernel_size=True), 'kernel_size must be odd and positive'),
+    (dict(wavelet='nope'), 'wavelet must be a discrete wavelet'),
+    (dict(mode='bogus'), 'mode must be one of'),
+    (dict(dim=4), 'dim must be 1, 2 or 3'),
+    (dict(backend='x'), 'backend must be one of'),
+])
+def test_wgse_arguments(kwargs, match):
+    _raises(match, lambda: WGSE(**kwargs))
+
+
+@pytest.mark.parametrize('spikes, match', [
+    (torch.zeros(9, 4, 4), r'shaped \(B, T, H, W\)'),
+    (torch.zeros(1, 1, 9, 4, 4), r'shaped \(B, T, H, W\)'),
+    (torch.zeros(1, 0, 4, 4), 'signal length must be >= 1'),
+    (torch.zeros(1, 9, 4, 4, dtype=torch.float64), 'float64 spikes'),
+])
+def test_wgse_inputs(spikes, match):
+    _raises(match, lambda: WGSE()(spikes))
+
+
+@pytest.mark.parametrize('module', [TFP(window=5), TFI()])
+@pytest.mark.parametrize('spikes', [torch.zeros(9, 4, 4),
+                                    torch.zeros(1, 0, 4, 4)])
+def test_representation_inputs(module, spikes):
+    _raises(r'expects spikes shaped \(B, T, H, W\)', lambda: module(spikes))
+
+
+@pytest.mark.parametrize('value', [float('nan'), float('inf'), -1.0, 5.0])
+def test_tfi_refuses_what_cannot_be_spikes(value):
+    _raises('TFI expects binary spikes',
+            lambda: TFI()(torch.full((1, 9, 2, 2), value)))
+
+
+@pytest.mark.parametrize('args, kwargs, match', [
+    ((FRAMES, 0), {}, 'num_steps must be an integer >= 1'),
+    ((FRAMES, 2.5), {}, 'num_steps must be an integer >= 1'),
+    ((np.full((2, 6, 8), np.nan), 9), {}, r'must lie in \[0, 1\]'),
+    ((np.full((2, 6, 8), np.inf), 9), {}, r'must lie in \[0, 1\]'),
+    ((-FRAMES, 9), {}, r'must lie in \[0, 1\]'),
+    ((np.zeros((0, 6, 8)), 9), {}, 'non-empty'),
+    ((np.zeros(5), 9), {}, 'non-empty'),
+    ((np.full((2, 6, 8), 300, np.uint16), 9), {}, 'uint8 or float'),
+    ((FRAMES, 9), dict(threshold=0), 'threshold must be a finite number'),
+    ((FRAMES, 9), dict(threshold=float('nan')), 'threshold must be'),
+    ((FRAMES, 9), dict(seed=-1), r'seed must be an integer in 0 \.\. 2\*\*63'),
+    ((FRAMES, 9), dict(seed=2**80), r'seed must be an integer in 0'),
+    ((FRAMES, 9), dict(seed=1.5), 'seed must be an integer'),
+    ((FRAMES, 9), dict(effects={'nope': {}}), r"unknown effect\(s\)"),
+    ((FRAMES, 9), dict(effects={'shot_noise': {'bogus': 1}}),
+     r'shot_noise: unknown parameter\(s\)'),
+])
+def test_simulator_inputs(args, kwargs, match):
+    _raises(match, lambda: simulate_spikes(*args, **kwargs))
+
+
+def _preprocessor(**kwargs):
+    return MODELS.build(dict(dict(type='SpikeSegDataPreProcessor',
+                                  num_steps=9, num_classes=19, size=(4, 4)),
+                             **kwargs))
+
+
+@pytest.mark.parametrize('kwargs, match', [
+    (dict(num_steps=0), 'num_steps must be an integer >= 1'),
+    (dict(num_steps=4.5), 'num_steps must be an integer >= 1'),
+    (dict(num_classes=0), 'num_classes must be an integer >= 1'),
+    (dict(size=(0, 4)), r'size must be \(H, W\)'),
+    (dict(size=(-4, 4)), r'size must be \(H, W\)'),
+    (dict(size=(4, )), r'size must be \(H, W\)'),
+    (dict(pad_val=2), 'pad_val pads spike streams'),
+    (dict(pad_val=float('nan')), 'pad_val pads spike streams'),
+    (dict(seg_pad_val=300), 'seg_pad_val must be an integer label'),
+])
+def test_preprocessor_arguments(kwargs, match):
+    _raises(match, lambda: _preprocessor(**kwargs))
+
+
+def _batch(spikes, labels=None):
+    sample = SegDataSample()
+    sample.set_metainfo(dict(img_shape=spikes.shape[-2:],
+                             ori_shape=spikes.shape[-2:],
+                             img_path='clip.spk', seg_map_path='label.png'))
+    if labels is not None:
+        sample.gt_sem_seg = PixelData(data=labels)
+    return dict(inputs=[spikes], data_samples=[sample])
+
+
+@pytest.mark.parametrize('spikes, match', [
+    (torch.full((9, 4, 4), float('nan')), 'clip.spk: a spike stream holds '
+                                          'only 0 and 1'),
+    (torch.rand(9, 4, 4) + 0.01, 'clip.spk: a spike stream holds only'),
+    (3 * torch.ones(9, 4, 4, dtype=torch.uint8), r'found \[3\]'),
+    (-torch.ones(9, 4, 4), r'found \[-1.0\]'),
+    (torch.zeros(5, 4, 4), 'clip.spk: spike stream has T=5'),
+    (torch.zeros(4, 4), r'clip.spk: spike stream has shape \(4, 4\)'),
+    (torch.zeros(9, 0, 4), 'clip.spk: empty spike stream'),
+])
+def test_preprocessor_inputs(spikes, match):
+    _raises(match, lambda: _preprocessor()(_batch(spikes), True))
+
+
+@pytest.mark.parametrize('labels, match', [
+    (torch.full((1, 4, 4), 19, dtype=torch.uint8), r'label.png: label '
+                                                   r'values \[19\]'),
+    (torch.full((1, 4, 4), -1), r'label values \[-1\]'),
+    (torch.full((1, 4, 4), 0.5), r'label values \[0.5\]'),
+    (torch.zeros((1, 3, 3), dtype=torch.uint8), r'label.png: label map is '
+                                                r'\(3, 3\)'),
+])
+def test_preprocessor_labels(labels, match):
+    spikes = torch.zeros(9, 4, 4, dtype=torch.uint8)
+    _raises(match, lambda: _preprocessor()(_batch(spikes, labels), True))
+
+
+def test_all_good_binary_dtypes_pass():
+    for dtype in (torch.uint8, torch.bool, torch.int64, torch.float32):
+        out = _preprocessor()(_batch(torch.ones(9, 4, 4, dtype=dtype)), True)
+        assert out['inputs'].shape == (1, 9, 4, 4)
+
+
+@pytest.mark.parametrize('cfg, match', [
+    (dict(type='LoadSpikeFromFile', num_steps=0), 'num_steps must be an'),
+    (dict(type='LoadSpikeFromFile', num_steps=2.5), 'num_steps must be an'),
+    (dict(type='LoadSpikeFromFile', height=-2, width=4), 'height must be'),
+    (dict(type='LoadSpikeFromFile', center=-1), 'center must be a frame'),
+    (dict(type='SpikeRandomCrop', crop_size=(0, 4)), r'crop_size must be'),
+    (dict(type='SpikeRandomCrop', crop_size=(-1, 4)), r'crop_size must be'),
+    (dict(type='SpikeRandomCrop', crop_size=(4, 4), cat_max_ratio=-1),
+     r'cat_max_ratio must be in \(0, 1\]'),
+    (dict(type='SpikeRandomFlip', prob=2), 'prob must be one probability'),
+    (dict(type='SpikeRandomFlip', direction='diagonal'), 'direction must'),
+    (dict(type='SimulateSpikes', num_steps=0), 'num_steps must be an'),
+])
+def test_transform_arguments(cfg, match):
+    _raises(match, lambda: TRANSFORMS.build(cfg))
+
+
+@pytest.mark.parametrize('path, match', [
+    ('/nonexistent/clip.spk', 'no such spike file'),
+    ('/tmp', "unknown spike file extension ''"),
+])
+def test_loading_names_the_file(path, match):
+    load = TRANSFORMS.build(dict(type='LoadSpikeFromFile', num_steps=9))
+    _raises(match, lambda: load(dict(img_path=path)), SpikeFileError)
+
+
+def test_loading_a_text_file_names_it(tmp_path):
+    path = tmp_path / 'notes.spk'
+    path.write_text('hello')
+    load = TRANSFORMS.build(dict(type='LoadSpikeFromFile', num_steps=9))
+    _raises(f'{path}: 5 bytes is shorter than the 32-byte .spk header',
+            lambda: load(dict(img_path=str(path))), SpikeFileError)
+
+
+def test_a_missing_dataset_root_is_named(tmp_path):
+    _raises(f'{tmp_path}/spike/train .* is not a directory', lambda:
+            DATASETS.build(dict(
+                type='SpikeCityscapesDataset', data_root=str(tmp_path),
+                data_prefix=dict(img_path='spike/train',
+                                 seg_map_path='gtFine/train'),
+                pipeline=[])), FileNotFoundError)
+
+
+@pytest.mark.parametrize('kwargs, name', [
+    (dict(num_samples=0), 'num_samples'), (dict(num_samples=2.5),
+                                           'num_samples'),
+    (dict(crop_size=(0, 4)), 'crop_size'), (dict(crop_size=(4, )),
+                                            'crop_size'),
+    (dict(num_steps=0), 'num_steps'), (dict(seed=-1), 'seed'),
+    (dict(white_rate=0), 'white_rate'),
+    (dict(white_rate=float('nan')), 'white_rate'),
+    (dict(gain_range=(1, 0)), 'gain_range'),
+    (dict(gamma_range=(0, 1)), 'gamma_range'),
+    (dict(scale_range=(1, float('inf'))), 'scale_range'),
+    (dict(max_speed=-1), 'max_speed'), (dict(max_side=0), 'max_side'),
+])
+def test_simulated_image_dataset_arguments(kwargs, name):
+    _raises(f'SimulatedSpikeImageDataset: {name} must be', lambda:
+            DATASETS.build(dict(type='SimulatedSpikeImageDataset',
+                                pipeline=[], **kwargs)))
