@@ -32,13 +32,14 @@ import wgse_mmseg
 wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
 from mmengine.dataset import Compose  # noqa: E402
 from mmengine.registry import init_default_scope  # noqa: E402
-from mmengine.runner import load_checkpoint  # noqa: E402
+from mmengine.runner.checkpoint import load_state_dict  # noqa: E402
 from mmseg.apis import init_model  # noqa: E402
 from wgse_mmseg.core.exposure import (apply_exposure,  # noqa: E402
                                       parse_exposure)
 from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
 from wgse_mmseg.core.reconstruction_baselines import tfp  # noqa: E402
 from wgse_mmseg.datasets import SpikeCityscapesDataset  # noqa: E402
+from wgse_mmseg.utils.checkpoint import read_checkpoint  # noqa: E402
 from wgse_mmseg.utils.config import load_config  # noqa: E402
 
 
@@ -109,9 +110,9 @@ def load_model(cfg, checkpoint: str, device: str):
     a logged warning.
     """
     model = init_model(cfg, None, device='cpu')
+    state = read_checkpoint(checkpoint)  # weights only; names a bad file
     try:
-        state = load_checkpoint(model, checkpoint, map_location='cpu',
-                                strict=True)
+        load_state_dict(model, state.get('state_dict', state), strict=True)
     except RuntimeError as err:
         raise ValueError(
             f'{checkpoint}: does not fit the model built from the config '

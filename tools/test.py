@@ -6,11 +6,13 @@
 Prints mIoU, mAcc and aAcc (MMSeg's IoUMetric).
 """
 import argparse
+import os.path as osp
+import sys
 
-from mmengine.registry import RUNNERS
-from mmengine.runner import Runner
-
-from wgse_mmseg.utils.config import add_runner_arguments, config_from_args
+from wgse_mmseg.core.io import SpikeFileError
+from wgse_mmseg.utils.checkpoint import read_checkpoint
+from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
+                                     config_from_args)
 
 
 def parse_args():
@@ -24,17 +26,25 @@ def parse_args():
 
 def main():
     args = parse_args()
-    cfg = config_from_args(args)
-    if args.out is not None:
-        cfg.test_evaluator['output_dir'] = args.out
-        cfg.test_evaluator['keep_results'] = True
-    # as MMSeg's tools: the config's runner_type (SpikeRunner) where it has one
-    runner = RUNNERS.build(cfg) if 'runner_type' in cfg else \
-        Runner.from_cfg(cfg)
-    # Strict: a checkpoint made for another T (or model) must not be scored
-    # with some layers left at random initialisation.
-    runner.load_checkpoint(args.checkpoint, strict=True)
-    runner.test()
+    try:
+        cfg = config_from_args(args)
+        if args.out is not None:
+            cfg.test_evaluator['output_dir'] = args.out
+            cfg.test_evaluator['keep_results'] = True
+        runner = build_runner(cfg)
+        # Strict: a checkpoint made for another T (or model) must not be
+        # scored with some layers left at random initialisation. Read here
+        # first, weights only, so that a file that is no checkpoint is named.
+        read_checkpoint(args.checkpoint)
+        runner.load_checkpoint(args.checkpoint, strict=True)
+    except (ValueError, OSError, RuntimeError) as err:
+        sys.exit(f'{osp.basename(__file__)}: error: {err}')
+    try:
+        runner.test()
+    except (FileNotFoundError, SpikeFileError) as err:
+        # data files: the message names the file
+        sys.exit(f'{osp.basename(__file__)}: error: {type(err).__name__}: '
+                 f'{err}')
 
 
 if __name__ == '__main__':

@@ -6,11 +6,13 @@
 ``mim train wgse_mmseg configs/pspnet_wgse.py`` runs this script.
 """
 import argparse
+import os.path as osp
+import sys
 
-from mmengine.registry import RUNNERS
-from mmengine.runner import Runner
-
-from wgse_mmseg.utils.config import add_runner_arguments, config_from_args
+from wgse_mmseg.core.io import SpikeFileError
+from wgse_mmseg.utils.checkpoint import CheckpointError
+from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
+                                     config_from_args)
 
 
 def parse_args():
@@ -27,15 +29,21 @@ def parse_args():
 
 def main():
     args = parse_args()
-    cfg = config_from_args(args)
-    if args.amp:
-        cfg.optim_wrapper.type = 'AmpOptimWrapper'
-        cfg.optim_wrapper.loss_scale = 'dynamic'
-    cfg.resume = args.resume
-    # as MMSeg's tools: the config's runner_type (SpikeRunner) where it has one
-    runner = RUNNERS.build(cfg) if 'runner_type' in cfg else \
-        Runner.from_cfg(cfg)
-    runner.train()
+    try:
+        cfg = config_from_args(args)
+        if args.amp:
+            cfg.optim_wrapper.type = 'AmpOptimWrapper'
+            cfg.optim_wrapper.loss_scale = 'dynamic'
+        cfg.resume = args.resume
+        runner = build_runner(cfg)
+    except (ValueError, OSError) as err:  # the config, the model, the files
+        sys.exit(f'{osp.basename(__file__)}: error: {err}')
+    try:
+        runner.train()
+    except (FileNotFoundError, SpikeFileError, CheckpointError) as err:
+        # data and checkpoint files: the message names the file
+        sys.exit(f'{osp.basename(__file__)}: error: {type(err).__name__}: '
+                 f'{err}')
 
 
 if __name__ == '__main__':

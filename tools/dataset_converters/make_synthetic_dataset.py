@@ -2,9 +2,12 @@
 
     python tools/dataset_converters/make_synthetic_dataset.py data/synthetic_spike_cityscapes
 
-Resumable: existing files are kept. See wgse_mmseg/datasets/synthetic.py.
+Resumable: a sample whose marker matches the settings and its files is kept;
+any other is made again. See wgse_mmseg/datasets/synthetic.py.
 """
 import argparse
+import os.path as osp
+import sys
 
 from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
@@ -25,9 +28,13 @@ def parse_args():
 
 def main():
     args = parse_args()
-    written = make_synthetic_dataset(
-        args.out_dir, args.num_train, args.num_val, args.height, args.width,
-        args.num_steps, threshold=args.threshold, seed=args.seed)
+    try:
+        written = make_synthetic_dataset(
+            args.out_dir, args.num_train, args.num_val, args.height,
+            args.width, args.num_steps, threshold=args.threshold,
+            seed=args.seed)
+    except (ValueError, OSError) as err:
+        sys.exit(f'{osp.basename(__file__)}: error: {err}')
     print(f'{written} samples written to {args.out_dir} '
           f'({args.num_train} train, {args.num_val} val in all)')
 

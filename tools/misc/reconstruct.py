@@ -64,6 +64,10 @@ def parse_args(argv=None):
         parser.error(str(err))
     if (args.height is None) != (args.width is None):
         parser.error('--height and --width go together')
+    for name in ('height', 'width'):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            parser.error(f'--{name} must be >= 1, got {value}')
     if args.checkpoint and args.method != 'wgse':
         parser.error('--checkpoint is for --method wgse')
     if args.num_steps < 1:
@@ -99,7 +103,11 @@ def main(argv=None):
         exposed, gain = apply_exposure(method(window), args.exposure)
         image = to_uint8(exposed)
         path = osp.join(args.out, f'{stem}_{frame}.png')
-        write_png(path, image)
+        try:
+            write_png(path, image)
+        except OSError as err:
+            sys.exit(f'{osp.basename(__file__)}: error: --out {args.out}: '
+                     f'cannot write {path}: {err}')
         print(f'{path}\texposure_gain={gain:.3g}\t'
               f'entropy2d={entropy_2d(image):.3f}')
 

@@ -41,6 +41,7 @@ files.
 import contextlib
 import hashlib
 import json
+import math
 import multiprocessing
 import os
 import os.path as osp
@@ -165,8 +166,12 @@ class ConversionSettings:
                 f'{SNIPPET_LENGTH - 1 - ANNOTATED_INDEX}] (a snippet holds '
                 f'{SNIPPET_LENGTH} frames, the annotated one at index '
                 f'{ANNOTATED_INDEX}), got {self.frames_around}')
-        if self.threshold <= 0:
-            raise ValueError(f'threshold must be > 0, got {self.threshold}')
+        if not math.isfinite(self.threshold) or self.threshold <= 0:
+            raise ValueError(f'threshold must be a finite number > 0, got '
+                             f'{self.threshold}')
+        if not 0 <= self.seed < 2**63:
+            raise ValueError(f'seed must be an integer in 0 .. 2**63 - 1, '
+                             f'got {self.seed}')
 
 
 def _require_dir(path: str, what: str) -> None:

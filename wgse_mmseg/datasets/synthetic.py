@@ -136,6 +136,21 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
     run resumes; any other is made again. Returns the number of samples
     written now.
     """
+    sizes = dict(num_train=num_train, num_val=num_val, height=height,
+                 width=width, num_steps=num_steps, num_frames=num_frames)
+    for name, value in sizes.items():
+        low = 0 if name in ('num_train', 'num_val') else 1
+        if isinstance(value, bool) or not isinstance(value, int) or \
+                value < low:
+            raise ValueError(f'{name} must be an integer >= {low}, got '
+                             f'{value!r}')
+    if not np.isfinite(threshold) or threshold <= 0:
+        raise ValueError(f'threshold must be a finite number > 0, got '
+                         f'{threshold!r}')
+    if isinstance(seed, bool) or not isinstance(seed, int) or \
+            not 0 <= seed < 2**31:
+        raise ValueError(f'seed must be an integer in 0 .. 2**31 - 1, got '
+                         f'{seed!r}')
     written = 0
     recipe = dict(height=height, width=width, num_steps=num_steps,
                   num_frames=num_frames, threshold=threshold, seed=seed)

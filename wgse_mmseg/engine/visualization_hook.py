@@ -2,6 +2,7 @@
 image (spike rate / 0.6, exposure-normalised) under the prediction and the
 ground truth, where MMSeg's reads ``img_path`` as an image file."""
 import os.path as osp
+import warnings
 from typing import Optional, Sequence
 
 import numpy as np
@@ -40,7 +41,11 @@ class SpikeVisualizationHook(SegVisualizationHook):
     def __init__(self, num_steps: Optional[int] = None,
                  height: Optional[int] = None, width: Optional[int] = None,
                  **kwargs):
-        super().__init__(**kwargs)
+        with warnings.catch_warnings():
+            # MMSeg's hook warns whenever draw is False, its default: not
+            # news in every run
+            warnings.simplefilter('ignore', UserWarning)
+            super().__init__(**kwargs)
         self.loader_args = dict(num_steps=num_steps, height=height,
                                 width=width)
 

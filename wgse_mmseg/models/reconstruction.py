@@ -25,6 +25,7 @@ from mmengine.structures import BaseDataElement, PixelData
 from mmseg.registry import MODELS
 from ..core.io import atomic_output
 from ..core.reconstruction_baselines import tfi, tfp
+from ..utils.checkpoint import CheckpointError, read_checkpoint
 from ..utils.config_data import ConfigDataError, read_config_data
 
 __all__ = ['SpikeReconstructor', 'ResidualBlock', 'DEFAULT_WEIGHTS',
@@ -181,10 +182,13 @@ def _model_config(checkpoint: dict, path: str) -> dict:
     return dict(model)
 
 
-def _read_checkpoint(path: str) -> dict:
-    if not osp.exists(path):
-        raise FileNotFoundError(f'{path}: no such checkpoint')
-    return torch.load(path, map_location='cpu', weights_only=True)
+def _read_weights(path: str) -> dict:
+    """A checkpoint that holds a ``state_dict`` (mmengine's or exported)."""
+    state = read_checkpoint(path)
+    if not isinstance(state.get('state_dict'), dict):
+        raise CheckpointError(f'{path}: no state_dict in the checkpoint '
+                              f'(keys: {sorted(map(str, state))[:10]})')
+    return state
 
 
 def load_reconstructor(checkpoint: Optional[str] = None,
@@ -199,7 +203,7 @@ def load_reconstructor(checkpoint: Optional[str] = None,
         device: torch device.
     """
     path = checkpoint or DEFAULT_WEIGHTS
-    state = _read_checkpoint(path)
+    state = _read_weights(path)
     model = MODELS.build(_model_config(state, path))
     try:
         model.load_state_dict(state['state_dict'], strict=True)
@@ -216,7 +220,7 @@ def export_weights(checkpoint: str, out: str) -> None:
     optimiser state or logs) is what :func:`load_reconstructor` and
     ``tools/misc/reconstruct.py`` read; about 4 bytes per parameter.
     """
-    state = _read_checkpoint(checkpoint)
+    state = _read_weights(checkpoint)
     model_cfg = _model_config(state, checkpoint)
     exported = dict(state_dict=state['state_dict'],
                     meta=dict(model=model_cfg,

@@ -14,13 +14,15 @@ import os.path as osp
 from typing import Dict, Optional
 
 from mmengine.config import Config, DictAction
+from mmengine.registry import RUNNERS
+from mmengine.runner import Runner
 
 from .distributed import prepare_launcher
 from .num_steps import apply_num_steps
 
 __all__ = [
     'SPIKE_SETTINGS', 'load_config', 'add_runner_arguments',
-    'config_from_args'
+    'config_from_args', 'build_runner'
 ]
 
 #: ``--cfg-options`` key -> environment variable read by the config files.
@@ -104,3 +106,12 @@ def config_from_args(args: argparse.Namespace) -> Config:
                                 osp.splitext(osp.basename(args.config))[0])
     prepare_launcher(cfg)
     return cfg
+
+
+def build_runner(cfg: Config) -> Runner:
+    """The runner of ``cfg``, as MMSeg's tools build it: the config's
+    ``runner_type`` (the shipped configs': ``SpikeRunner``) where it names
+    one, else mmengine's ``Runner``."""
+    if 'runner_type' in cfg:
+        return RUNNERS.build(cfg)
+    return Runner.from_cfg(cfg)

@@ -1,0 +1,127 @@
+"""Every tool's command line on bad input: a one-line error that names the
+argument or the file and what was expected (``SystemExit`` with a message),
+never a traceback."""
+import io
+import os.path as osp
+import runpy
+import sys
+from contextlib import redirect_stderr, redirect_stdout
+
+import numpy as np
+import pytest
+
+from wgse_mmseg.core.io import save_spikes
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+CONFIG = osp.join(ROOT, 'configs', 'segformer_b0_wgse.py')
+
+
+@pytest.fixture(scope='module')
+def files(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp('cli')
+    save_spikes(str(tmp / 'ok.npy'),
+                (np.random.default_rng(0).random((50, 8, 12)) < 0.3).astype(
+                    np.uint8))
+    (tmp / 'text.spk').write_text('hello')
+    (tmp / 'notes.pth').write_text('not a checkpoint')
+    (tmp / 'empty.npy').write_bytes(b'')
+    return tmp
+
+
+def _run(tool, args, monkeypatch):
+    monkeypatch.setattr(sys, 'argv', [tool] + args)
+    err = io.StringIO()
+    with pytest.raises(SystemExit) as info, redirect_stderr(err), \
+            redirect_stdout(io.StringIO()):
+        runpy.run_path(osp.join(ROOT, 'tools', tool), run_name='__main__')
+    assert info.value.code != 0
+    message = (info.value.code if isinstance(info.value.code, str) else
+               err.getvalue())
+    assert 'Traceback' not in err.getvalue()
+    return message
+
+
+CASES = [
+    ('misc/reconstruct.py', ['{t}/missing.npy', '--out', '{t}/o', '--method',
+                             'tfp'], '{t}/missing.npy: no such spike file'),
+    ('misc/reconstruct.py', ['{t}/text.spk', '--out', '{t}/o'],
+     '{t}/text.spk: 5 bytes is shorter than the 32-byte .spk header'),
+    ('misc/reconstruct.py', ['{t}/empty.npy', '--out', '{t}/o', '--method',
+                             'tfp'], '{t}/empty.npy: cannot read the array'),
+    ('misc/reconstruct.py', ['{t}', '--out', '{t}/o'],
+     "unknown spike file extension ''"),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--num-steps',
+                             '0', '--method', 'tfp'],
+     '--num-steps must be >= 1'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--height', '-3',
+                             '--width', '4'], '--height must be >= 1'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--frames',
+                             '-5', '--method', 'tfp'],
+     'centred on frame -5 does not fit'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--checkpoint',
+                             '{t}/notes.pth'],
+     '{t}/notes.pth: not a readable checkpoint'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--checkpoint',
+                             '{t}/missing.pth'],
+     '{t}/missing.pth: no such checkpoint'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/ok.npy', '--method',
+                             'tfp'], '--out {t}/ok.npy: cannot write'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--exposure',
+                             'dim'], '--exposure must be auto, none or'),
+    ('dataset_converters/make_synthetic_dataset.py',
+     ['{t}/syn', '--num-train', '-1'], 'num_train must be an integer >= 0'),
+    ('dataset_converters/make_synthetic_dataset.py',
+     ['{t}/syn', '--height', '0'], 'height must be an integer >= 1'),
+    ('dataset_converters/make_synthetic_dataset.py',
+     ['{t}/syn', '--threshold', 'nan'], 'threshold must be a finite number'),
+    ('dataset_converters/spike_cityscapes.py', ['{t}/none', '{t}/out'],
+     '{t}/none/leftImg8bit/train: missing'),
+    ('dataset_converters/spike_cityscapes.py', ['{t}', '{t}/out', '--height',
+                                                '0'],
+     'height, width and num_steps must be >= 1'),
+    ('dataset_converters/spike_cityscapes.py', ['{t}', '{t}/out',
+                                                '--threshold', 'nan'],
+     'threshold must be a finite number > 0'),
+    ('dataset_converters/spike_cityscapes.py', ['{t}', '{t}/out', '--seed',
+                                                '-4'], 'seed must be'),
+    ('dataset_converters/spike_cityscapes.py', ['{t}', '{t}/out', '--scene',
+                                                '{{bad json'],
+     'is neither a file nor inline JSON'),
+    ('dataset_converters/spike_cityscapes.py', ['{t}', '{t}/out', '--nproc',
+                                                '0'], 'nproc must be >= 1'),
+    ('analysis_tools/benchmark_wgse.py', ['--shapes', '1x0x3x4'],
+     'shape must be BxTxHxW with positive sizes'),
+    ('analysis_tools/benchmark_wgse.py', ['--repeat', '0'],
+     '--repeat must be >= 1'),
+    ('analysis_tools/benchmark_simulator.py', ['--repeat', '-1'],
+     '--repeat must be >= 1'),
+    ('train.py', ['{t}/missing.py'], '{t}/missing.py'),
+    ('train.py', [CONFIG, '--cfg-options', 'num_steps=0'],
+     'num_steps must be >= 1'),
+    ('train.py', [CONFIG, '--cfg-options', 'crop_size=abc'],
+     'crop_size must be H,W'),
+    ('train.py', [CONFIG, '--work-dir', '{t}/work', '--cfg-options',
+                  'data_root={t}/none'],
+     '{t}/none/spike/train (img_path under data_root'),
+    ('test.py', [CONFIG, '{t}/missing.pth', '--work-dir', '{t}/work'],
+     '{t}/missing.pth: no such checkpoint'),
+    ('test.py', [CONFIG, '{t}/notes.pth', '--work-dir', '{t}/work'],
+     '{t}/notes.pth: not a readable checkpoint'),
+    ('demo.py', ['{t}/missing.npy', CONFIG, '{t}/missing.pth'],
+     '{t}/missing.npy: no such spike file'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--cfg-options',
+                 'num_steps=9'], '{t}/notes.pth: not a readable checkpoint'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/missing.pth', '--cfg-options',
+                 'num_steps=9'], '{t}/missing.pth: no such checkpoint'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--opacity', '2'],
+     '--opacity must be in [0, 1]'),
+]
+
+
+@pytest.mark.parametrize('tool, args, expected', CASES,
+                         ids=[f'{c[0]}-{i}' for i, c in enumerate(CASES)])
+def test_bad_input_gives_a_one_line_error(tool, args, expected, files,
+                                          monkeypatch):
+    args = [a.format(t=files) for a in args]
+    message = _run(tool, args, monkeypatch)
+    assert expected.format(t=files) in message, message
