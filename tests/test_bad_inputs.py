@@ -165,6 +165,9 @@ def test_all_good_binary_dtypes_pass():
     (dict(type='SpikeRandomFlip', prob=2), 'prob must be one probability'),
     (dict(type='SpikeRandomFlip', direction='diagonal'), 'direction must'),
     (dict(type='SimulateSpikes', num_steps=0), 'num_steps must be an'),
+    (dict(type='LoadSpikeImagePair', num_steps=0), 'num_steps must be an'),
+    (dict(type='LoadSpikeImagePair', num_steps=2.5), 'num_steps must be'),
+    (dict(type='LoadSpikeImagePair', height=-1, width=3), 'height must be'),
 ])
 def test_transform_arguments(cfg, match):
     _raises(match, lambda: TRANSFORMS.build(cfg))

@@ -74,6 +74,8 @@ class LoadSpikeImagePair(BaseTransform):
         super().__init__()
         if (height is None) != (width is None):
             raise ValueError('height and width go together')
+        # the checks LoadSpikeFromFile makes, at construction
+        LoadSpikeFromFile(num_steps, height, width)
         self.num_steps = num_steps
         self.height = height
         self.width = width
