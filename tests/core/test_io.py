@@ -8,7 +8,7 @@ import tempfile
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 import wgse_mmseg.core.io as spike_io
@@ -471,6 +471,11 @@ def _damaged_files(draw):
 
 
 @given(_damaged_files())
+@example(('.npz', b'PK\x03\x04'))  # a zip's magic and nothing else
+@example(('.npy', b'\x93NUMPY\x01\x00'))
+@example(('.npy', b"\x93NUMPY\x01\x00v\x00{'descr': '|u1'{ 'fortran_order': "
+                  b"False, 'shape': (1, 4, 6), }" + b' ' * 55 + b'\n' +
+          bytes(24)))  # a header NumPy's tokenizer cannot parse
 def test_damaged_files_read_correctly_or_fail_naming_the_file(damaged):
     """Random bytes and truncations of valid files: a stream of 0/1 uint8
     frames of the stated shape, or a SpikeFileError naming the file; never

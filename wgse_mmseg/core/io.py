@@ -228,10 +228,14 @@ def _array(path: str) -> np.ndarray:
                         f'{path}: .npz holds {keys}; expected a key '
                         f'"spikes" or a single array')
                 array = archive[key]
-    except (ValueError, OSError, EOFError) as err:
-        if isinstance(err, SpikeFileError):
-            raise
-        raise SpikeFileError(f'{path}: cannot read the array: {err}') from err
+    except SpikeFileError:
+        raise
+    except Exception as err:  # noqa: BLE001 NumPy's parsers raise many types
+        # for bad bytes (ValueError, EOFError, zipfile.BadZipFile, zlib.error,
+        # tokenize.TokenError, SyntaxError, ...); nothing is executed
+        # (allow_pickle stays False)
+        raise SpikeFileError(f'{path}: cannot read the array: '
+                             f'{type(err).__name__}: {err}') from err
     if array.ndim != 3:
         raise SpikeFileError(
             f'{path}: expected a (T, H, W) array, got shape {array.shape}')
