@@ -1,6 +1,7 @@
-"""What the tools run: model benchmarks (:mod:`.benchmarking`) and the
-reconstruction benchmark (:mod:`.reconstruction_benchmark`). Import the
-module you need; importing this package registers nothing."""
+"""What the tools and users run: inference on spike files
+(:mod:`.inferencer`), model benchmarks (:mod:`.benchmarking`), the
+experiment grid (:mod:`.experiments`) and the reconstruction and simulator
+benchmarks. Import the module you need."""
 from .._openmmlab import prepare_mmseg_layer
 
 prepare_mmseg_layer('wgse_mmseg.apis')

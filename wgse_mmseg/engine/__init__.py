@@ -8,7 +8,8 @@ prepare_mmseg_layer('wgse_mmseg.engine')
 
 from .model_wrappers import CPUDistributedDataParallel  # noqa: E402
 from .runner import SpikeRunner  # noqa: E402
-from .visualization_hook import SpikeVisualizationHook  # noqa: E402
+from .visualization_hook import (SpikeVisualizationHook,  # noqa: E402
+                                 spike_clip_image)
 
 __all__ = ['CPUDistributedDataParallel', 'SpikeRunner',
-           'SpikeVisualizationHook']
+           'SpikeVisualizationHook', 'spike_clip_image']

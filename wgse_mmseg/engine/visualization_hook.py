@@ -16,7 +16,19 @@ from ..core.io import to_uint8
 from ..core.reconstruction_baselines import tfp
 from ..datasets.transforms import LoadSpikeFromFile
 
-__all__ = ['SpikeVisualizationHook']
+__all__ = ['SpikeVisualizationHook', 'spike_clip_image']
+
+
+def spike_clip_image(path: str, num_steps: Optional[int] = None,
+                     height: Optional[int] = None,
+                     width: Optional[int] = None) -> np.ndarray:
+    """``(H, W, 3)`` uint8 grey TFP image of the clip at ``path``, read as
+    the test pipeline reads it (``num_steps`` frames centred on the stream,
+    ``None`` for all) and exposure-normalised."""
+    spikes = LoadSpikeFromFile(num_steps, height, width)(
+        dict(img_path=path))['img']
+    grey, _ = apply_exposure(tfp(spikes.transpose(2, 0, 1)))
+    return np.repeat(to_uint8(grey)[..., None], 3, axis=2)
 
 
 @HOOKS.register_module()
@@ -50,12 +62,11 @@ class SpikeVisualizationHook(SegVisualizationHook):
                                 width=width)
 
     def clip_image(self, path: str, num_steps: Optional[int]) -> np.ndarray:
-        """``(H, W, 3)`` uint8 grey TFP image of the clip at ``path``."""
+        """:func:`spike_clip_image` with the hook's loader arguments
+        (``num_steps`` where the hook has none)."""
         args = dict(self.loader_args)
         args['num_steps'] = args['num_steps'] or num_steps
-        spikes = LoadSpikeFromFile(**args)(dict(img_path=path))['img']
-        grey, _ = apply_exposure(tfp(spikes.transpose(2, 0, 1)))
-        return np.repeat(to_uint8(grey)[..., None], 3, axis=2)
+        return spike_clip_image(path, **args)
 
     def _after_iter(self, runner: Runner, batch_idx: int, data_batch: dict,
                     outputs: Sequence[SegDataSample],
