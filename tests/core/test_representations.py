@@ -198,8 +198,16 @@ def test_selectable_in_a_config_like_wgse(enhancer):
     model = MODELS.build(cfg.model)
     built = model.data_preprocessor.enhancer
     assert type(built).__name__ == enhancer['type']
-    data = dict(inputs=[random_spikes((9, 8, 8)).to(torch.uint8)],
+    data = dict(inputs=[random_spikes((9, 32, 32)).to(torch.uint8)],
                 data_samples=None)
-    out = model.data_preprocessor(data)['inputs']
-    assert out.shape == (1, 9, 8, 8)
-    torch.testing.assert_close(out, built(data['inputs'][0][None].float()))
+    batch = model.data_preprocessor(data)['inputs']  # batched, not enhanced
+    raw = data['inputs'][0][None].float()
+    torch.testing.assert_close(batch, raw)
+    seen = []  # what the backbone receives: the enhancer's output
+    model.backbone.register_forward_pre_hook(
+        lambda module, args: seen.append(args[0]))
+    model.eval()
+    with torch.no_grad():
+        model(batch, mode='tensor')
+    assert seen[0].shape == (1, 9, 32, 32)
+    torch.testing.assert_close(seen[0], built(raw))

@@ -171,14 +171,22 @@ def inference_parameters(model: nn.Module) -> Dict[str, int]:
 
 class _Segmentor(nn.Module):
     """The segmentor's ``mode='tensor'`` forward (backbone and decode head)
-    as a module of its own, for tracing."""
+    without the enhancer, as a module of its own, for tracing: a
+    ``SpikeEncoderDecoder`` runs its preprocessor's enhancer in that
+    forward, so it is set aside while this runs."""
 
     def __init__(self, model: nn.Module):
         super().__init__()
         self.model = model
 
     def forward(self, inputs: torch.Tensor) -> torch.Tensor:
-        return self.model(inputs, mode='tensor')
+        preprocessor = self.model.data_preprocessor
+        enhancer = getattr(preprocessor, 'enhancer', None)
+        preprocessor.enhancer = None
+        try:
+            return self.model(inputs, mode='tensor')
+        finally:
+            preprocessor.enhancer = enhancer
 
 
 def _analyze(module: nn.Module, inputs: torch.Tensor) -> FlopAnalyzer:
