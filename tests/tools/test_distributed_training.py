@@ -1,6 +1,6 @@
 """Distributed training on CPUs (gloo): two processes keep the WGSE
-enhancer, which runs in the data preprocessor outside DDP's forward,
-identical, and match one process with the same total batch."""
+enhancer (a module of the data preprocessor, run in the segmentor's
+forward) identical, and match one process with the same total batch."""
 import os
 import os.path as osp
 import re
