@@ -12,6 +12,8 @@ Markdown table with each method's PSNR margin over TFP.
 import argparse
 from typing import Dict, Optional, Sequence
 
+from tqdm import tqdm
+
 from ..datasets.reds import (LoadSpikeImagePair, PackReconstructionInputs,
                              REDSSpikeDataset)
 from ..models.reconstruction import (METHODS, load_reconstructor,
@@ -23,9 +25,10 @@ __all__ = ['benchmark', 'format_table']
 
 def benchmark(data_root: str, methods: Sequence[str] = METHODS,
               checkpoint: Optional[str] = None, num_steps: int = 41,
-              spike_suffix: str = '.dat',
-              device: str = 'cpu') -> Dict[str, Dict[str, float]]:
-    """``{method: {'PSNR', 'SSIM', 'Entropy2D'}}`` over the folder's samples.
+              spike_suffix: str = '.dat', device: str = 'cpu',
+              progress: bool = True) -> Dict[str, Dict[str, float]]:
+    """``{method: {'PSNR', 'SSIM', 'Entropy2D'}}`` over the folder's samples
+    (a progress bar on stderr unless ``progress`` is False).
 
     ``checkpoint`` is the ``wgse`` model (default: the shipped weights); its
     ``num_steps`` must equal ``num_steps``.
@@ -45,7 +48,8 @@ def benchmark(data_root: str, methods: Sequence[str] = METHODS,
         data_root=data_root, spike_suffix=spike_suffix,
         pipeline=[LoadSpikeImagePair(num_steps), PackReconstructionInputs()])
     metrics = {method: ReconstructionMetric() for method in functions}
-    for index in range(len(dataset)):
+    for index in tqdm(range(len(dataset)), desc='reconstruction benchmark',
+                      disable=not progress):
         data = dataset[index]
         spikes = data['inputs'].numpy()
         gt = data['data_samples'].gt_image
