@@ -1,7 +1,7 @@
 """Install wgse_mmseg.
 
 Like MMSegmentation, the package carries its ``configs/`` and ``tools/`` inside
-``wgse_mmseg/.mim/`` so that ``mim train wgse_mmseg configs/pspnet_wgse.py``
+``wgse_mmseg/.mim/`` so that ``mim train wgse_mmseg configs/<config>.py``
 finds both from a regular install. A regular build copies them there; an
 editable install (``pip install -e .``, i.e. ``setup.py develop``) links them,
 so edits in the repository take effect at once.

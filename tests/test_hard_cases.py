@@ -47,8 +47,13 @@ STREAMS = {'empty': 0.0, 'saturated': 1.0}
 CPU_AUTOCAST = [None, torch.bfloat16, torch.float16]
 
 
+RAW_CONFIGS = {
+    'segformer_b0': 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512',
+    'pspnet': 'pspnet_r50-d8_raw_1xb4-100e_spike-cityscapes-256x512'}
+
+
 def config(model):
-    return load_config(osp.join(ROOT, 'configs', f'{model}_raw.py'),
+    return load_config(osp.join(ROOT, 'configs', f'{RAW_CONFIGS[model]}.py'),
                        dict(num_steps=NUM_STEPS,
                             crop_size=','.join(map(str, SIZE))))
 

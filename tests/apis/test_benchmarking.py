@@ -18,6 +18,9 @@ from wgse_mmseg.apis.benchmarking import (build_model, count_flops,
 pytestmark = pytest.mark.usefixtures('single_thread')
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+PSPNET_WGSE = 'pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512'
+SEGFORMER_WGSE = 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512'
+SEGFORMER_RAW = 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512'
 TINY = dict(num_steps=9, crop_size='32,64')
 
 
@@ -33,7 +36,7 @@ def test_cli_prints_the_table_and_writes_json(tmp_path):
     out = tmp_path / 'bench.json'
     proc = subprocess.run(
         [sys.executable, osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark.py'),
-         config_path('segformer_b0_wgse'), '--crop', '32', '64', '--repeat',
+         config_path(SEGFORMER_WGSE), '--crop', '32', '64', '--repeat',
          '1', '--warmup', '0', '--threads', '1', '--cfg-options',
          'num_steps=9', 'model.data_preprocessor.enhancer.dim=2', '--out',
          str(out)],
@@ -45,7 +48,7 @@ def test_cli_prints_the_table_and_writes_json(tmp_path):
                    'throughput img/s', 'train step ms', 'enh. share',
                    'peak mem MB'):
         assert header in table
-    assert '| segformer_b0_wgse | 9 | 32x64 |' in table
+    assert f'| {SEGFORMER_WGSE} | 9 | 32x64 |' in table
     assert 'torch 2.' in table and 'mmsegmentation' in table
     assert 'CPU:' in table and '1 torch threads' in table
 
@@ -58,7 +61,7 @@ def test_cli_prints_the_table_and_writes_json(tmp_path):
     assert result['enhancer'] == 'WGSE'
     assert result['enhancer_backend'] == 'torch'  # dim=2: nn.Conv3d
     row, = [line for line in table.splitlines()
-            if line.startswith('| segformer_b0_wgse')]
+            if line.startswith(f'| {SEGFORMER_WGSE}')]
     assert row.split('|')[6].strip() == 'torch'  # the 'enh. backend' cell
     assert result['enhancer_params'] == count(wgse)
     assert result['num_steps'] == 9 and result['crop'] == [32, 64]
@@ -95,7 +98,7 @@ def test_time_calls_warms_up_then_times_each_repeat():
 
 
 def test_flops_split_between_enhancer_and_segmentor():
-    _, raw = build_model(config_path('segformer_b0_raw'), TINY)
+    _, raw = build_model(config_path(SEGFORMER_RAW), TINY)
     base = count_flops(raw, 9, (32, 64))
     assert base['enhancer'] == 0 and base['total'] > 0
 
@@ -125,7 +128,7 @@ class Untraceable(nn.Module):
 
 
 def test_flops_of_an_untraceable_enhancer_are_unknown_not_wrong():
-    _, model = build_model(config_path('segformer_b0_raw'), TINY)
+    _, model = build_model(config_path(SEGFORMER_RAW), TINY)
     base = count_flops(model, 9, (32, 64))
     model.data_preprocessor.enhancer = Untraceable()
     flops = count_flops(model, 9, (32, 64))
@@ -136,14 +139,14 @@ def test_flops_of_an_untraceable_enhancer_are_unknown_not_wrong():
 
 
 def test_parameters_exclude_the_auxiliary_head():
-    _, model = build_model(config_path('pspnet_wgse'), TINY)
+    _, model = build_model(config_path(PSPNET_WGSE), TINY)
     parameters = inference_parameters(model)
     assert parameters['total'] == count(model) - count(model.auxiliary_head)
     assert parameters['enhancer'] == count(model.data_preprocessor.enhancer)
 
 
 def test_train_step_time_and_peak_memory():
-    cfg, model = build_model(config_path('segformer_b0_raw'), TINY)
+    cfg, model = build_model(config_path(SEGFORMER_RAW), TINY)
     before = [p.detach().clone() for p in model.parameters()]
     train = measure_train_step(model, cfg.optim_wrapper, 9, (32, 64),
                                batch_size=2, repeat=2, warmup=1)

@@ -14,8 +14,12 @@ from wgse_mmseg.utils.config import load_config
 wgse_mmseg.register_all_modules()  # before mmseg builds anything
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-MAIN_CONFIGS = ['pspnet_wgse', 'pspnet_raw', 'segformer_b0_wgse',
-                'segformer_b0_raw']
+PSPNET_WGSE = 'pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512'
+PSPNET_RAW = 'pspnet_r50-d8_raw_1xb4-100e_spike-cityscapes-256x512'
+SEGFORMER_WGSE = 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512'
+SEGFORMER_RAW = 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512'
+MAIN_CONFIGS = [PSPNET_WGSE, PSPNET_RAW, SEGFORMER_WGSE,
+                SEGFORMER_RAW]
 WGSE_PARAMETERS = 19974  # db8, 5 levels, kernel 3, 32 hidden channels
 
 
@@ -62,13 +66,13 @@ def test_config_defaults_are_the_papers(name):
     assert cfg.model.decode_head.loss_decode.type == 'CrossEntropyLoss'
     assert cfg.param_scheduler[0].end == 10  # 10-epoch warm-up
     has_wgse = cfg.model.data_preprocessor.enhancer is not None
-    assert has_wgse == name.endswith('_wgse')
+    assert has_wgse == ('_wgse_' in name)
     assert cfg.model.get('pretrained') is None
     assert tuple(cfg.custom_imports.imports) == wgse_mmseg.MMSEG_LAYER
 
 
 def test_spike_settings_override_every_dependent_field():
-    cfg = load_config(config_path('pspnet_wgse'),
+    cfg = load_config(config_path(PSPNET_WGSE),
                       dict(num_steps=41, crop_size='64,128',
                            data_root='/elsewhere'))
     assert cfg.model.backbone.in_channels == 41
@@ -79,13 +83,14 @@ def test_spike_settings_override_every_dependent_field():
                                                                        128)
     assert cfg.val_dataloader.dataset.data_root == '/elsewhere'
     # and the override did not leak into the next load
-    assert load_config(config_path('pspnet_wgse')).num_steps == 129
+    assert load_config(config_path(PSPNET_WGSE)).num_steps == 129
 
 
-@pytest.mark.parametrize('model_name', ['pspnet', 'segformer_b0'])
-def test_wgse_twin_adds_exactly_the_wgse_parameters(model_name):
-    _, with_wgse = build(f'{model_name}_wgse', num_steps=9)
-    _, raw = build(f'{model_name}_raw', num_steps=9)
+@pytest.mark.parametrize('wgse_name, raw_name', [
+    (PSPNET_WGSE, PSPNET_RAW), (SEGFORMER_WGSE, SEGFORMER_RAW)])
+def test_wgse_twin_adds_exactly_the_wgse_parameters(wgse_name, raw_name):
+    _, with_wgse = build(wgse_name, num_steps=9)
+    _, raw = build(raw_name, num_steps=9)
     assert count(with_wgse) - count(raw) == WGSE_PARAMETERS
 
 
@@ -103,7 +108,7 @@ def test_forward_backward_on_a_spike_batch(name):
     total.backward()
     grads = [p.grad for p in model.parameters() if p.grad is not None]
     assert grads and all(torch.isfinite(g).all() for g in grads)
-    if name.endswith('_wgse'):
+    if '_wgse_' in name:
         enhancer = model.data_preprocessor.enhancer
         assert any(p.grad is not None and p.grad.abs().sum() > 0
                    for p in enhancer.parameters())
@@ -123,7 +128,7 @@ def test_preprocessor_pads_spikes_with_zero_and_labels_with_ignore():
 
 
 def test_mismatched_num_steps_names_both_numbers_and_the_file():
-    _, model = build('segformer_b0_wgse', num_steps=41)
+    _, model = build(SEGFORMER_WGSE, num_steps=41)
     batch = spike_batch(17, 16, 16, batch=1)
     batch['data_samples'][0].set_metainfo(dict(img_path='clip_0001_spike.spk'))
     with pytest.raises(ValueError) as err:
@@ -165,7 +170,7 @@ def test_paramwise_cfg_gives_the_enhancer_its_own_learning_rate():
     (``data_preprocessor.enhancer.*``), so MMSeg's ``paramwise_cfg`` reaches
     them like any other."""
     from mmengine.optim import build_optim_wrapper
-    cfg, model = build('segformer_b0_wgse', num_steps=9)
+    cfg, model = build(SEGFORMER_WGSE, num_steps=9)
     optim_wrapper = dict(cfg.optim_wrapper, paramwise_cfg=dict(
         custom_keys={'data_preprocessor.enhancer': dict(lr_mult=10.0)}))
     optimizer = build_optim_wrapper(model, optim_wrapper).optimizer
@@ -185,7 +190,7 @@ def test_inference_model_takes_a_spike_file(tmp_path):
     from mmseg.apis import inference_model, init_model
 
     from wgse_mmseg.core.io import save_spikes
-    cfg = load_config(config_path('segformer_b0_wgse'),
+    cfg = load_config(config_path(SEGFORMER_WGSE),
                       dict(num_steps=9))
     path = str(tmp_path / 'clip.npy')
     save_spikes(path, (np.random.default_rng(0).random((9, 32, 64)) <

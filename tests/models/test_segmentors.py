@@ -12,6 +12,8 @@ from wgse_mmseg.utils.config import load_config
 wgse_mmseg.register_all_modules()
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+SEGFORMER_WGSE = 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512'
+SEGFORMER_RAW = 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512'
 
 
 def _model(name):
@@ -21,7 +23,7 @@ def _model(name):
 
 
 def test_the_enhancer_runs_once_inside_the_forward():
-    model = _model('segformer_b0_wgse')
+    model = _model(SEGFORMER_WGSE)
     assert type(model).__name__ == 'SpikeEncoderDecoder'
     assert not model.data_preprocessor.run_enhancer
     calls = []
@@ -38,16 +40,16 @@ def test_the_enhancer_runs_once_inside_the_forward():
 def test_mmengines_flop_counter_sees_the_enhancer():
     inputs = (torch.rand(1, 9, 32, 64) < 0.3).float()
     counts = {}
-    for name in ('segformer_b0_wgse', 'segformer_b0_raw'):
+    for name in (SEGFORMER_WGSE, SEGFORMER_RAW):
         counts[name] = get_model_complexity_info(
             _model(name), inputs=inputs, show_table=False,
             show_arch=False)
     enhancer = get_model_complexity_info(
-        _model('segformer_b0_wgse').data_preprocessor.enhancer,
+        _model(SEGFORMER_WGSE).data_preprocessor.enhancer,
         inputs=inputs, show_table=False, show_arch=False)
     assert enhancer['flops'] > 0
-    added = counts['segformer_b0_wgse']['flops'] - \
-        counts['segformer_b0_raw']['flops']
+    added = counts[SEGFORMER_WGSE]['flops'] - \
+        counts[SEGFORMER_RAW]['flops']
     assert added == enhancer['flops']
-    assert counts['segformer_b0_wgse']['params'] - \
-        counts['segformer_b0_raw']['params'] == enhancer['params']
+    assert counts[SEGFORMER_WGSE]['params'] - \
+        counts[SEGFORMER_RAW]['params'] == enhancer['params']

@@ -57,18 +57,18 @@ def test_mim_in_the_readme_install_mode(tmp_path):
         env.pop(name, None)
     mim = osp.join(BIN, 'mim')
     work_dir = tmp_path / 'work'
-    train = [mim, 'train', 'wgse_mmseg', 'configs/pspnet_wgse.py', '--gpus',
+    train = [mim, 'train', 'wgse_mmseg', 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py', '--gpus',
              '0', '--launcher', 'none', '--work-dir', str(work_dir)]
     # elsewhere: mim finds the config in the package's .mim/configs
     log = run(train + options_for(data) + ['train_cfg.max_epochs=1'],
               cwd=tmp_path, env=env)
-    assert osp.join(ROOT, 'configs', 'pspnet_wgse.py') in log
+    assert osp.join(ROOT, 'configs', 'pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py') in log
     assert (work_dir / 'epoch_1.pth').is_file()
     # the repository root: the path is the checkout's own config
     log = run(train + ['--resume'] + options_for(data) +
               ['train_cfg.max_epochs=2'], cwd=ROOT, env=env)
     assert re.search(r'resumed epoch: 1, iter: 1', log), log[-3000:]
-    log = run([mim, 'test', 'wgse_mmseg', 'configs/pspnet_wgse.py',
+    log = run([mim, 'test', 'wgse_mmseg', 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py',
                '--checkpoint', str(work_dir / 'epoch_2.pth'), '--gpus', '0',
                '--launcher', 'none', '--work-dir', str(tmp_path / 'test')] +
               options_for(data), cwd=tmp_path, env=env)
@@ -96,7 +96,7 @@ def installed(tmp_path_factory):
     run([sys.executable, '-m', 'pip', 'install', '--no-deps', '-q',
          '--target', str(target), str(wheel)], cwd=work, env=env)
     assert (target / 'wgse_mmseg' / '.mim' / 'configs' /
-            'pspnet_wgse.py').is_file()
+            'pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py').is_file()
     assert (target / 'wgse_mmseg' / '.mim' / 'tools' / 'train.py').is_file()
     return target
 
@@ -109,12 +109,12 @@ def test_mim_train_and_test_from_a_regular_install(installed, tmp_path):
                PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
     work_dir = tmp_path / 'work'
     mim = osp.join(BIN, 'mim')
-    log = run([mim, 'train', 'wgse_mmseg', 'configs/pspnet_wgse.py',
+    log = run([mim, 'train', 'wgse_mmseg', 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py',
                '--gpus', '0', '--launcher', 'none', '--work-dir',
                str(work_dir)] + options_for(data) +
               ['train_cfg.max_epochs=1'], cwd=tmp_path, env=env)
     assert str(installed) in log  # the installed copy's config was used
-    log = run([mim, 'test', 'wgse_mmseg', 'configs/pspnet_wgse.py',
+    log = run([mim, 'test', 'wgse_mmseg', 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py',
                '--checkpoint', str(work_dir / 'epoch_1.pth'), '--gpus', '0',
                '--launcher', 'none', '--work-dir', str(tmp_path / 'test')] +
               options_for(data), cwd=tmp_path, env=env)

@@ -81,7 +81,7 @@ def schedule_cfg(**kwargs):
     parser = argparse.ArgumentParser()
     add_runner_arguments(parser)
     args = parser.parse_args(['--cfg-options', *runner.as_cli(options)])
-    return load_config(osp.join(ROOT, 'configs', 'segformer_b0_raw.py'),
+    return load_config(osp.join(ROOT, 'configs', 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512.py'),
                        args.cfg_options), checkpoint
 
 
