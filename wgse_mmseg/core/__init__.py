@@ -5,6 +5,7 @@ installed (a GPU machine with torch alone, a notebook), and importing it
 changes nothing outside it.
 
 * :mod:`.constants`: the readout rate and the REDS intensity scale;
+  :mod:`.checks`: the integer check of argument validation;
 * :mod:`.io`: spike files (``.dat``, ``.spk``, ``.npy``, ``.npz``) and
   atomic writes;
 * :mod:`.wavelets`: the DWT as matrices, equal to PyWavelets';

@@ -32,6 +32,7 @@ from mmengine.dataset import BaseDataset
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
+from ..core.checks import is_integer
 from ..core.constants import REDS_WHITE_RATE
 from ..core.simulation import simulate_spikes, trajectory_source_maps
 from .transforms import LoadSpikeFromFile
@@ -261,24 +262,20 @@ def render_trajectory(image: np.ndarray, size: Tuple[int, int],
 def _check_arguments(**args) -> None:
     """Clear errors for :class:`SimulatedSpikeImageDataset`'s arguments."""
 
-    def integer(value, low):
-        return isinstance(value, (int, np.integer)) and \
-            not isinstance(value, bool) and value >= low
-
     def interval(value, low):  # (a, b) with low < a <= b, finite
         return (isinstance(value, (tuple, list)) and len(value) == 2 and
                 all(np.isfinite(v) and v > low for v in value) and
                 value[0] <= value[1])
 
     checks = dict(
-        num_samples=(integer(args['num_samples'], 1), 'an integer >= 1'),
-        num_steps=(integer(args['num_steps'], 1), 'an integer >= 1'),
-        max_side=(integer(args['max_side'], 1), 'an integer >= 1'),
-        seed=(integer(args['seed'], 0) and args['seed'] < 2**63,
+        num_samples=(is_integer(args['num_samples'], 1), 'an integer >= 1'),
+        num_steps=(is_integer(args['num_steps'], 1), 'an integer >= 1'),
+        max_side=(is_integer(args['max_side'], 1), 'an integer >= 1'),
+        seed=(is_integer(args['seed'], 0) and args['seed'] < 2**63,
               'an integer in 0 .. 2**63 - 1'),
         crop_size=(isinstance(args['crop_size'], (tuple, list)) and
                    len(args['crop_size']) == 2 and
-                   all(integer(v, 1) for v in args['crop_size']),
+                   all(is_integer(v, 1) for v in args['crop_size']),
                    '(h, w) with integers >= 1'),
         white_rate=(np.isfinite(args['white_rate']) and
                     args['white_rate'] > 0, 'a finite number > 0'),

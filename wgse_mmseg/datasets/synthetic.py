@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from ..core.checks import is_integer
 from ..core.constants import REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
 from ..core.markers import invalidate, is_complete, write_marker
@@ -140,15 +141,13 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                  width=width, num_steps=num_steps, num_frames=num_frames)
     for name, value in sizes.items():
         low = 0 if name in ('num_train', 'num_val') else 1
-        if isinstance(value, bool) or not isinstance(value, int) or \
-                value < low:
+        if not is_integer(value, low):
             raise ValueError(f'{name} must be an integer >= {low}, got '
                              f'{value!r}')
     if not np.isfinite(threshold) or threshold <= 0:
         raise ValueError(f'threshold must be a finite number > 0, got '
                          f'{threshold!r}')
-    if isinstance(seed, bool) or not isinstance(seed, int) or \
-            not 0 <= seed < 2**31:
+    if not is_integer(seed, 0) or seed >= 2**31:
         raise ValueError(f'seed must be an integer in 0 .. 2**31 - 1, got '
                          f'{seed!r}')
     written = 0

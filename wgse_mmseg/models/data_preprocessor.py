@@ -5,13 +5,9 @@ import torch
 
 from mmseg.models.data_preprocessor import SegDataPreProcessor
 from mmseg.registry import MODELS
+from ..core.checks import is_integer
 
 __all__ = ['SpikeSegDataPreProcessor']
-
-
-def _is_positive_int(value) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and \
-        value >= 1
 
 
 def _source(data_samples: Optional[list], index: int) -> str:
@@ -78,17 +74,17 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
         for name, value in (('num_steps', num_steps),
                             ('num_classes', num_classes),
                             ('size_divisor', size_divisor)):
-            if value is not None and not _is_positive_int(value):
+            if value is not None and not is_integer(value, 1):
                 raise ValueError(f'{name} must be an integer >= 1, got '
                                  f'{value!r}')
         if size is not None and not (
-                len(size) == 2 and all(_is_positive_int(v) for v in size)):
+                len(size) == 2 and all(is_integer(v, 1) for v in size)):
             raise ValueError(f'size must be (H, W) with integers >= 1, got '
                              f'{size!r}')
         if pad_val not in (0, 1):
             raise ValueError(f'pad_val pads spike streams, so it must be 0 '
                              f'(no spike) or 1; got {pad_val!r}')
-        if isinstance(seg_pad_val, bool) or seg_pad_val not in range(256):
+        if not is_integer(seg_pad_val, 0) or seg_pad_val > 255:
             raise ValueError(f'seg_pad_val must be an integer label in '
                              f'0..255 (the ignore index), got {seg_pad_val!r}')
         self.num_steps = num_steps

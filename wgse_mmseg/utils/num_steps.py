@@ -21,6 +21,8 @@ told.
 """
 from typing import Any, Dict, List, Tuple
 
+from ..core.checks import is_integer
+
 __all__ = ['NumStepsError', 'apply_num_steps', 'RUNTIME_KEYS']
 
 #: the parts of a config that the runner builds
@@ -75,7 +77,7 @@ def apply_num_steps(cfg) -> Dict[str, int]:
     target = cfg.get('num_steps')
     if target is None:
         return {}
-    if isinstance(target, bool) or not isinstance(target, int) or target < 1:
+    if not is_integer(target, 1):
         raise NumStepsError(
             f'num_steps must be a positive integer (T, spike frames per '
             f'sample), got {target!r}')

@@ -24,11 +24,13 @@ draws.
 import math
 import zlib
 from dataclasses import dataclass
-from numbers import Integral, Real
+from numbers import Real
 from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Type
 
 import numpy as np
 import torch
+
+from ..checks import is_integer
 
 __all__ = [
     'SimulationContext', 'Effect', 'LightEffect', 'SensorEffect',
@@ -41,8 +43,7 @@ def check_seed(name: str, value: Any, allow_none: bool = False) -> Any:
     """A seed in ``0 .. 2**63 - 1`` (or ``None`` where allowed)."""
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, Integral) \
-            or not 0 <= value < 2**63:
+    if not is_integer(value, 0) or value >= 2**63:
         raise ValueError(
             f'{name} must be an integer in 0 .. 2**63 - 1'
             f'{" or null" if allow_none else ""}, got {value!r}')

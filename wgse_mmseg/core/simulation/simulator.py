@@ -1,11 +1,12 @@
 """``simulate_spikes``: frames in, a spike stream and what made it out."""
 import math
-from numbers import Integral, Real
+from numbers import Real
 from typing import Any, Dict, Tuple
 
 import numpy as np
 import torch
 
+from ..checks import is_integer
 from ..constants import READOUT_HZ
 from .effect import SimulationContext, check_seed
 from .fixed_point import MAX_BLOCK_STEPS, Integrator, quantise
@@ -82,8 +83,7 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
         ``'flow'`` or ``'camera_motion'``) and ``effects``: name -> every
         parameter used, for each effect that ran (``{}`` when none).
     """
-    if isinstance(num_steps, bool) or not isinstance(num_steps, Integral) \
-            or num_steps < 1:
+    if not is_integer(num_steps, 1):
         raise ValueError(f'num_steps must be an integer >= 1, got '
                          f'{num_steps!r}')
     threshold = _positive('threshold', threshold)

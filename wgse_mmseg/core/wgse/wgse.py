@@ -22,6 +22,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .band_network_backends import get_backend, resolve_backend
+from ..checks import is_integer
 from ..wavelets import (analysis_matrix, band_lengths, check_mode, get_wavelet,
                         synthesis_matrix)
 
@@ -58,11 +59,6 @@ class _ResidualLayer(nn.Module):
         return F.relu(self.conv_b(F.relu(self.conv_a(x))) + x)
 
 
-def _is_positive_int(value) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and \
-        value >= 1
-
-
 class BandNetwork(nn.Module):
     """The per-band network: residual layers, then output convolutions.
 
@@ -78,12 +74,12 @@ class BandNetwork(nn.Module):
     def __init__(self, dim: int = 1, kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1):
         super().__init__()
-        if not _is_positive_int(kernel_size) or kernel_size % 2 == 0:
+        if not is_integer(kernel_size, 1) or kernel_size % 2 == 0:
             raise ValueError(
                 f'kernel_size must be odd and positive, got {kernel_size!r}')
         for name, value in (('hidden_channels', hidden_channels),
                             ('num_blocks', num_blocks)):
-            if not _is_positive_int(value):
+            if not is_integer(value, 1):
                 raise ValueError(f'{name} must be an integer >= 1, got '
                                  f'{value!r}')
         self.dim = dim
@@ -165,7 +161,7 @@ class WGSE(nn.Module):
         if wavelet is not None:
             get_wavelet(wavelet)
             check_mode(mode)
-            if not _is_positive_int(level):
+            if not is_integer(level, 1):
                 raise ValueError(f'level must be an integer >= 1, got '
                                  f'{level!r}')
         self.dim = dim

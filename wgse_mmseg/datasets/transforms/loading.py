@@ -12,6 +12,7 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
+from ...core.checks import is_integer
 from ...core.io import centered_window, load_spikes, spike_shape
 
 __all__ = ['LoadSpikeFromFile']
@@ -46,12 +47,10 @@ class LoadSpikeFromFile(BaseTransform):
         super().__init__()
         for name, value in (('num_steps', num_steps), ('height', height),
                             ('width', width)):
-            if value is not None and (not isinstance(value, int) or
-                                      isinstance(value, bool) or value < 1):
+            if value is not None and not is_integer(value, 1):
                 raise ValueError(f'{name} must be an integer >= 1, got '
                                  f'{value!r}')
-        if center is not None and (not isinstance(center, int) or
-                                   isinstance(center, bool) or center < 0):
+        if center is not None and not is_integer(center, 0):
             raise ValueError(f'center must be a frame index >= 0, got '
                              f'{center!r}')
         self.num_steps = num_steps

@@ -19,6 +19,7 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
+from ...core.checks import is_integer
 from ...core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = ['SimulateSpikes']
@@ -66,15 +67,13 @@ class SimulateSpikes(BaseTransform):
                  seed: Optional[int] = None, channel_order: str = 'bgr',
                  device: str = 'cpu'):
         super().__init__()
-        if isinstance(num_steps, bool) or not isinstance(num_steps, int) \
-                or num_steps < 1:
+        if not is_integer(num_steps, 1):
             raise ValueError(f'num_steps must be an integer >= 1, got '
                              f'{num_steps!r}')
         if channel_order not in ('bgr', 'rgb'):
             raise ValueError(f"channel_order must be 'bgr' or 'rgb', got "
                              f'{channel_order!r}')
-        if seed is not None and (isinstance(seed, bool) or
-                                 not isinstance(seed, int) or seed < 0):
+        if seed is not None and not is_integer(seed, 0):
             raise ValueError(f'seed must be None or an integer >= 0, got '
                              f'{seed!r}')
         if isinstance(effects, (str, os.PathLike)):

@@ -10,6 +10,7 @@ from mmcv.transforms import BaseTransform
 
 from mmseg.datasets.transforms import RandomCrop
 from mmseg.registry import TRANSFORMS
+from ...core.checks import is_integer
 
 __all__ = ['SpikeRandomCrop', 'SpikeRandomFlip']
 
@@ -49,9 +50,7 @@ class SpikeRandomCrop(RandomCrop):
                  ignore_index: int = 255):
         sizes = (crop_size, crop_size) if isinstance(crop_size, int) else \
             tuple(crop_size)
-        if len(sizes) != 2 or not all(
-                isinstance(v, int) and not isinstance(v, bool) and v >= 1
-                for v in sizes):
+        if len(sizes) != 2 or not all(is_integer(v, 1) for v in sizes):
             raise ValueError(f'crop_size must be (h, w) with integers >= 1, '
                              f'got {crop_size!r}')
         if not 0 < cat_max_ratio <= 1:
