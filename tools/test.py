@@ -33,10 +33,14 @@ def main():
             cfg.test_evaluator['keep_results'] = True
         runner = build_runner(cfg)
         # Strict: a checkpoint made for another T (or model) must not be
-        # scored with some layers left at random initialisation. Read here
-        # first, weights only, so that a file that is no checkpoint is named.
-        read_checkpoint(args.checkpoint)
-        runner.load_checkpoint(args.checkpoint, strict=True)
+        # scored with some layers left at random initialisation.
+        try:
+            runner.load_checkpoint(args.checkpoint, strict=True)
+        except Exception:
+            # a file that is no checkpoint is named (weights-only read);
+            # else the loader's own error stands
+            read_checkpoint(args.checkpoint)
+            raise
     except (ValueError, OSError, RuntimeError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     try:
