@@ -62,3 +62,34 @@ def interpreter_bfloat16_dot():
     interpreter.InterpreterBuilder.create_dot = create_dot
     yield
     interpreter.InterpreterBuilder.create_dot = original
+
+
+@pytest.fixture(scope='session')
+def tiny_spike_dataset(tmp_path_factory):
+    """A synthetic Spike-Cityscapes-layout set for short runs of the tools:
+    4 training and 1 validation sample, T=9, 32x64. Tests that change it
+    work on a copy."""
+    from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
+    root = tmp_path_factory.mktemp('tiny_spike_dataset')
+    make_synthetic_dataset(str(root), num_train=4, num_val=1, height=32,
+                           width=64, num_steps=9, progress=False)
+    return root
+
+
+@pytest.fixture(scope='session')
+def tiny_run_options():
+    """``options(data, *extra, batch_size=2, workers=0)``: the
+    ``--cfg-options`` of a tool run on a set like ``tiny_spike_dataset``
+    (T=9, crop 32x64, a log line per iteration, ``workers`` loader workers,
+    none persistent), then ``extra`` ``key=value`` settings."""
+
+    def options(data, *extra, batch_size=2, workers=0):
+        loaders = [f'{split}_dataloader.{key}={value}'
+                   for split in ('train', 'val', 'test')
+                   for key, value in (('num_workers', workers),
+                                      ('persistent_workers', False))]
+        return ['--cfg-options', f'data_root={data}', 'num_steps=9',
+                'crop_size=32,64', f'train_dataloader.batch_size={batch_size}',
+                'default_hooks.logger.interval=1', *loaders, *extra]
+
+    return options

@@ -11,7 +11,6 @@ import wgse_mmseg
 from wgse_mmseg.core.exposure import apply_exposure
 from wgse_mmseg.core.io import load_spikes, to_uint8
 from wgse_mmseg.core.reconstruction_baselines import tfp
-from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 from wgse_mmseg.utils.config import load_config
 
 wgse_mmseg.register_all_modules()
@@ -19,12 +18,12 @@ wgse_mmseg.register_all_modules()
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 
 
-def test_test_run_draws_the_clip_under_the_prediction(tmp_path):
-    data = tmp_path / 'data'
-    make_synthetic_dataset(str(data), num_train=1, num_val=1, height=32,
-                           width=64, num_steps=9, progress=False)
+def test_test_run_draws_the_clip_under_the_prediction(tiny_spike_dataset,
+                                                      tmp_path):
+    data = tiny_spike_dataset
     cfg = load_config(
-        osp.join(ROOT, 'configs', 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py'),
+        osp.join(ROOT, 'configs',
+                 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py'),
         {'data_root': str(data), 'num_steps': 9, 'crop_size': '32,64',
          'test_dataloader.num_workers': 0,
          'test_dataloader.persistent_workers': False,

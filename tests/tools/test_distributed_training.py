@@ -11,11 +11,11 @@ import sys
 import pytest
 import torch
 
-from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 DRIVER = osp.join(osp.dirname(osp.abspath(__file__)), 'ddp_training_run.py')
-CONFIG = osp.join(ROOT, 'configs', 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py')
+CONFIG = osp.join(ROOT, 'configs',
+                  'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py')
 
 
 def _free_port():
@@ -34,25 +34,14 @@ def _run(cmd, cwd, **extra):
     return proc.stdout + proc.stderr
 
 
-@pytest.fixture(scope='module')
-def data(tmp_path_factory):
-    root = tmp_path_factory.mktemp('ddp_data')
-    make_synthetic_dataset(str(root), num_train=4, num_val=1, height=32,
-                           width=64, num_steps=9, progress=False)
-    return root
+#: 2 epochs of the 4 training samples, no validation, no checkpoints
+SHORT_RUN = ('train_cfg.max_epochs=2', 'train_cfg.val_interval=100',
+             'default_hooks.checkpoint.interval=100')
 
 
-def _options(data, batch_size):
-    return ['--cfg-options', f'data_root={data}', 'num_steps=9',
-            'crop_size=32,64', f'train_dataloader.batch_size={batch_size}',
-            'train_dataloader.num_workers=0',
-            'train_dataloader.persistent_workers=False',
-            'train_cfg.max_epochs=2', 'train_cfg.val_interval=100',
-            'default_hooks.logger.interval=1',
-            'default_hooks.checkpoint.interval=100']
-
-
-def test_two_processes_keep_the_enhancer_in_sync(data, tmp_path):
+def test_two_processes_keep_the_enhancer_in_sync(tiny_spike_dataset,
+                                                 tiny_run_options, tmp_path):
+    data = tiny_spike_dataset
     two, one = tmp_path / 'two', tmp_path / 'one'
     two.mkdir()
     one.mkdir()
@@ -60,10 +49,12 @@ def test_two_processes_keep_the_enhancer_in_sync(data, tmp_path):
                 '--nproc_per_node=2', f'--master_port={_free_port()}',
                 DRIVER, CONFIG, str(two), '--launcher', 'pytorch',
                 '--work-dir', str(tmp_path / 'work_two')] +
-               _options(data, 1), cwd=tmp_path)
+               tiny_run_options(data, *SHORT_RUN, batch_size=1),
+               cwd=tmp_path)
     assert 'gloo' in log
     _run([sys.executable, DRIVER, CONFIG, str(one), '--work-dir',
-          str(tmp_path / 'work_one')] + _options(data, 2), cwd=tmp_path)
+          str(tmp_path / 'work_one')] +
+         tiny_run_options(data, *SHORT_RUN, batch_size=2), cwd=tmp_path)
     rank0 = torch.load(two / 'rank0.pt', weights_only=False)
     rank1 = torch.load(two / 'rank1.pt', weights_only=False)
     single = torch.load(one / 'rank0.pt', weights_only=False)
@@ -80,15 +71,13 @@ def test_two_processes_keep_the_enhancer_in_sync(data, tmp_path):
                                    rtol=1e-4, atol=1e-6)
 
 
-def test_dist_train_and_dist_test_scripts_on_cpu(data, tmp_path):
+def test_dist_train_and_dist_test_scripts_on_cpu(tiny_spike_dataset,
+                                                 tiny_run_options, tmp_path):
     """MMSeg's interface, two processes with gloo; the configs' SyncBN
     switch is set aside on CPUs, with a warning."""
     work = tmp_path / 'work'
-    options = _options(data, 1)[:-3] + ['train_cfg.max_epochs=1',
-                                        'val_dataloader.num_workers=0',
-                                        'val_dataloader.persistent_workers=False',
-                                        'test_dataloader.num_workers=0',
-                                        'test_dataloader.persistent_workers=False']
+    options = tiny_run_options(tiny_spike_dataset, 'train_cfg.max_epochs=1',
+                               batch_size=1)
     log = _run(['bash', osp.join(ROOT, 'tools', 'dist_train.sh'), CONFIG,
                 '2', '--work-dir', str(work)] + options, cwd=tmp_path,
                PYTHON=sys.executable, PORT=str(_free_port()))

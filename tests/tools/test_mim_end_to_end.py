@@ -17,7 +17,6 @@ import sys
 
 import pytest
 
-from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 BIN = osp.dirname(sys.executable)
@@ -31,47 +30,46 @@ def run(cmd, cwd, env, timeout=900):
     return log
 
 
-def options_for(data):
-    """--cfg-options of a tiny run on the synthetic set at ``data``, with
-    the data loaders in the main process."""
-    loaders = [f'{split}_dataloader.{key}={value}'
-               for split in ('train', 'val', 'test')
-               for key, value in (('num_workers', 0),
-                                  ('persistent_workers', False))]
-    return ['--cfg-options', f'data_root={data}', 'num_steps=9',
-            'crop_size=32,64', 'train_dataloader.batch_size=2',
-            'train_cfg.val_interval=1', 'default_hooks.checkpoint.interval=1',
-            'default_hooks.logger.interval=1'] + loaders
+CONFIG = 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py'
 
 
-def test_mim_in_the_readme_install_mode(tmp_path):
+#: validation and a checkpoint every epoch; with batch 4 an epoch of
+#: ``tiny_spike_dataset`` is one iteration
+EVERY_EPOCH = ('train_cfg.val_interval=1',
+               'default_hooks.checkpoint.interval=1')
+
+
+def test_mim_in_the_readme_install_mode(tiny_spike_dataset, tiny_run_options,
+                                        tmp_path):
     """mim train / test / run against this checkout's editable install."""
     from mim.utils import get_installed_path
     assert get_installed_path('wgse_mmseg') == osp.join(ROOT, 'wgse_mmseg'), (
         'not the README install mode: run `bash tools/setup_env.sh`')
-    data = tmp_path / 'data'
-    make_synthetic_dataset(str(data), num_train=2, num_val=1, height=32,
-                           width=64, num_steps=9, progress=False)
+    data = tiny_spike_dataset
     env = dict(os.environ, PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
     for name in ('PYTHONPATH', 'TRITON_INTERPRET'):  # the user's own shell
         env.pop(name, None)
     mim = osp.join(BIN, 'mim')
     work_dir = tmp_path / 'work'
-    train = [mim, 'train', 'wgse_mmseg', 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py', '--gpus',
-             '0', '--launcher', 'none', '--work-dir', str(work_dir)]
+    train = [mim, 'train', 'wgse_mmseg', CONFIG, '--gpus', '0',
+             '--launcher', 'none', '--work-dir', str(work_dir)]
+
+    def options(*extra):
+        return tiny_run_options(data, *EVERY_EPOCH, *extra, batch_size=4)
+
     # elsewhere: mim finds the config in the package's .mim/configs
-    log = run(train + options_for(data) + ['train_cfg.max_epochs=1'],
-              cwd=tmp_path, env=env)
-    assert osp.join(ROOT, 'configs', 'pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py') in log
+    log = run(train + options('train_cfg.max_epochs=1'), cwd=tmp_path,
+              env=env)
+    assert osp.join(ROOT, CONFIG) in log
     assert (work_dir / 'epoch_1.pth').is_file()
     # the repository root: the path is the checkout's own config
-    log = run(train + ['--resume'] + options_for(data) +
-              ['train_cfg.max_epochs=2'], cwd=ROOT, env=env)
+    log = run(train + ['--resume'] + options('train_cfg.max_epochs=2'),
+              cwd=ROOT, env=env)
     assert re.search(r'resumed epoch: 1, iter: 1', log), log[-3000:]
-    log = run([mim, 'test', 'wgse_mmseg', 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py',
+    log = run([mim, 'test', 'wgse_mmseg', CONFIG,
                '--checkpoint', str(work_dir / 'epoch_2.pth'), '--gpus', '0',
                '--launcher', 'none', '--work-dir', str(tmp_path / 'test')] +
-              options_for(data), cwd=tmp_path, env=env)
+              options(), cwd=tmp_path, env=env)
     assert re.search(r'mIoU: [\d.]+', log), log[-3000:]
     log = run([mim, 'run', 'wgse_mmseg', 'benchmark_wgse', '--impls',
                'torch', '--shapes', '1x12x3x4', '--repeat', '1'],
@@ -101,23 +99,24 @@ def installed(tmp_path_factory):
     return target
 
 
-def test_mim_train_and_test_from_a_regular_install(installed, tmp_path):
-    data = tmp_path / 'data'
-    make_synthetic_dataset(str(data), num_train=2, num_val=1, height=32,
-                           width=64, num_steps=9, progress=False)
+def test_mim_train_and_test_from_a_regular_install(installed,
+                                                   tiny_spike_dataset,
+                                                   tiny_run_options,
+                                                   tmp_path):
+    data = tiny_spike_dataset
     env = dict(os.environ, PYTHONPATH=str(installed),
                PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
     work_dir = tmp_path / 'work'
     mim = osp.join(BIN, 'mim')
-    log = run([mim, 'train', 'wgse_mmseg', 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py',
-               '--gpus', '0', '--launcher', 'none', '--work-dir',
-               str(work_dir)] + options_for(data) +
+    options = tiny_run_options(data, *EVERY_EPOCH, batch_size=4)
+    log = run([mim, 'train', 'wgse_mmseg', CONFIG, '--gpus', '0',
+               '--launcher', 'none', '--work-dir', str(work_dir)] + options +
               ['train_cfg.max_epochs=1'], cwd=tmp_path, env=env)
     assert str(installed) in log  # the installed copy's config was used
-    log = run([mim, 'test', 'wgse_mmseg', 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py',
+    log = run([mim, 'test', 'wgse_mmseg', CONFIG,
                '--checkpoint', str(work_dir / 'epoch_1.pth'), '--gpus', '0',
                '--launcher', 'none', '--work-dir', str(tmp_path / 'test')] +
-              options_for(data), cwd=tmp_path, env=env)
+              options, cwd=tmp_path, env=env)
     metrics = re.search(r'aAcc: ([\d.]+)\s+mIoU: ([\d.]+)\s+mAcc: ([\d.]+)',
                         log)
     assert metrics, log[-3000:]
