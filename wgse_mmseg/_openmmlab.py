@@ -50,7 +50,8 @@ def prepare_mmseg_layer(what: str) -> None:
     process, unless turned off; :func:`wgse_mmseg.compat.apply_compat`)."""
     require_openmmlab(what)
     from .compat import OPT_OUT, apply_compat
-    if not apply_compat() and importlib.util.find_spec('mmcv._ext') is None:
+    from .compat.mmcv_ops_fallback import has_compiled_ops
+    if not apply_compat() and not has_compiled_ops():
         raise ImportError(
             f'{what} needs mmcv.ops, which mmcv-lite lacks: {OPT_OUT} is set, '
             f'so the stand-in of wgse_mmseg.compat is off. Unset it, or '

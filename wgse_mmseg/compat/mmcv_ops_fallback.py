@@ -24,8 +24,8 @@ import os.path as osp
 import sys
 import types
 
-__all__ = ['install_mmcv_ops_fallback', 'MissingCompiledOpError',
-           'NOTICE_SHOWN']
+__all__ = ['install_mmcv_ops_fallback', 'has_compiled_ops',
+           'MissingCompiledOpError', 'NOTICE_SHOWN']
 
 #: mmcv.ops modules that need no compiled extension, and the names they give.
 PURE_PYTHON_OPS = {'point_sample': ('point_sample', 'bilinear_grid_sample')}
@@ -57,7 +57,8 @@ def _missing_op(name: str):
     return placeholder
 
 
-def _has_compiled_ops() -> bool:
+def has_compiled_ops() -> bool:
+    """Whether mmcv's compiled extension (``mmcv._ext``) can be imported."""
     try:
         return importlib.util.find_spec('mmcv._ext') is not None
     except (ImportError, ValueError):
@@ -74,7 +75,7 @@ def install_mmcv_ops_fallback() -> bool:
     if current is not None:
         return getattr(current, '__wgse_fallback__', False)
     import mmcv
-    if _has_compiled_ops():
+    if has_compiled_ops():
         return False
     ops_dir = osp.join(osp.dirname(mmcv.__file__), 'ops')
     package = types.ModuleType('mmcv.ops')
