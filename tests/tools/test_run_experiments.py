@@ -12,6 +12,7 @@ import sys
 import pytest
 
 from mmseg.registry import MODELS
+from wgse_mmseg import register_all_modules
 from wgse_mmseg.apis import experiments as runner
 from wgse_mmseg.utils.config import add_runner_arguments, load_config
 from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
@@ -20,6 +21,8 @@ ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 RUNNER = osp.join(ROOT, 'tools', 'analysis_tools', 'run_experiments.py')
 GRID_CPU = osp.join(ROOT, 'configs', 'experiments', 'grid_cpu.py')
 GRID_FULL = osp.join(ROOT, 'configs', 'experiments', 'grid_full.py')
+GRID_CONVERGED = osp.join(ROOT, 'configs', 'experiments',
+                          'grid_converged_cpu.py')
 
 _spec = importlib.util.spec_from_file_location('run_experiments', RUNNER)
 cli = importlib.util.module_from_spec(_spec)
@@ -33,6 +36,7 @@ def wgse_sweep(entries):
 
 
 def test_cpu_grid_covers_every_representation_on_both_models():
+    register_all_modules()  # the enhancers' registry names
     grid, entries = runner.load_grid(GRID_CPU)
     names = {e.name for e in entries}
     for model in ('segformer_b0', 'pspnet'):
@@ -74,6 +78,94 @@ def test_entry_options_survive_the_command_line(name):
     assert cfg.model.backbone.in_channels == grid.cfg_options.num_steps
     assert cfg.train_dataloader.dataset.data_root == '/data/x'
     assert tuple(cfg.crop_size) == (64, 128)
+
+
+def cfg_of(grid, entry):
+    """The config a run of ``entry`` trains, through the command line."""
+    run, = runner.plan([entry], cli.parse_args(
+        [GRID_CPU, '--data-root', '/data/x', '--work-dir', '/tmp/w',
+         '--seeds', '0', '--max-iters', '10']), grid)
+    parser = argparse.ArgumentParser()
+    add_runner_arguments(parser)
+    args = parser.parse_args(['--cfg-options',
+                              *runner.as_cli(run.train_options)])
+    return load_config(entry.config, args.cfg_options)
+
+
+def test_converged_grid_has_the_comparison_and_the_ablations():
+    register_all_modules()
+    grid, entries = runner.load_grid(GRID_CONVERGED)
+    by_name = {e.name: e for e in entries}
+    for model in ('segformer_b0', 'pspnet_r18'):
+        for name in ('raw', 'tfp', 'tfi', 'mean_spatial', 'mean_temporal',
+                     'wgse1d', 'wgse2d', 'wgse3d', 'wgse1d_long', 'trcnn',
+                     'wgse1d_lr10', 'wgse1d_lowpass_init', 'wgse1d_norm',
+                     'wgse1d_w16', 'wgse1d_w8'):
+            entry = by_name[f'{model}_{name}']
+            if entry.enhancer is not None:  # each builds
+                MODELS.build(entry.enhancer)
+    assert by_name['pspnet_r18_trcnn'].enhancer['wavelet'] is None
+    assert by_name['pspnet_r18_wgse1d_long'].enhancer['num_blocks'] == 2
+
+    cfg = cfg_of(grid, by_name['pspnet_r18_wgse1d_lr10'])
+    assert cfg.model.backbone.depth == 18
+    assert cfg.model.backbone.in_channels == 41
+    assert cfg.model.decode_head.in_channels == 512
+    assert cfg.optim_wrapper.paramwise_cfg.custom_keys == dict(
+        enhancer=dict(lr_mult=10))
+    assert cfg.model.data_preprocessor.enhancer == dict(type='WGSE', dim=1)
+    assert tuple(cfg.crop_size) == (32, 64)
+    cfg = cfg_of(grid, by_name['segformer_b0_wgse1d_norm'])
+    assert 'paramwise_cfg' not in cfg.optim_wrapper
+    assert cfg.model.data_preprocessor.enhancer.output_norm is True
+    assert cfg.model.backbone.type == 'MixVisionTransformer'
+
+
+@pytest.mark.parametrize('models, enhancers, match', [
+    ("dict(m=dict(config='{c}', extra=1))", 'dict(raw=None)', 'model .m.'),
+    ("dict(m=dict(cfg_options=dict()))", 'dict(raw=None)', 'model .m.'),
+    ("dict(m='{c}')", "dict(v=dict(enhancer=None, lr=1))", 'enhancer .v.'),
+    ("dict(m='{c}')", "dict(v=dict(cfg_options=dict(a=1)))", 'enhancer .v.'),
+    ("dict(m='{c}')", "dict(v=dict(enhancer=None, cfg_options={'a': [1]}))",
+     'only str'),
+])
+def test_malformed_grid_entries_are_named(tmp_path, models, enhancers,
+                                          match):
+    config = osp.join(ROOT, 'configs', 'segformer_mit-b0_raw_1xb4-100e_spike-'
+                      'cityscapes-256x512.py')
+    grid = tmp_path / 'grid.py'
+    grid.write_text(f'models = {models.format(c=config)}\n'
+                    f'enhancers = {enhancers}\n'
+                    "cfg_options = dict(num_steps=9)\nepochs = 1\n"
+                    "seeds = [0]\nlatency = dict(repeat=1, warmup=0)\n")
+    with pytest.raises((ValueError, TypeError), match=match):
+        runner.load_grid(str(grid))
+
+
+def write_scalars(run_dir, timestamp, records):
+    log = run_dir / timestamp / 'vis_data'
+    log.mkdir(parents=True)
+    (log / 'scalars.json').write_text(''.join(
+        json.dumps(r) + '\n' for r in records))
+
+
+def test_loss_curve_joins_attempts_and_measures_flatness(tmp_path):
+    write_scalars(tmp_path, '20260101_000000', [
+        dict(loss=4.0, iter=10, lr=1.0), dict(loss=3.0, iter=20),
+        dict(loss=9.0, iter=30)])  # the attempt that was interrupted
+    write_scalars(tmp_path, '20260101_010000', [
+        dict(loss=2.0, iter=30), dict(loss=2.0, iter=40),
+        dict(mIoU=50.0, step=40)] + [
+        dict(loss=loss, iter=step) for step, loss in
+        ((50, 1.5), (60, 1.5), (70, 1.2), (80, 1.2))])
+    curve = runner.loss_curve(str(tmp_path))
+    assert curve == [[10, 4.0], [20, 3.0], [30, 2.0], [40, 2.0],
+                     [50, 1.5], [60, 1.5], [70, 1.2], [80, 1.2]]
+    # last quarter (60, 80]: 1.2; the quarter before, (40, 60]: 1.5
+    assert math.isclose(runner.loss_change(curve), 1.2 / 1.5 - 1)
+    assert runner.loss_change(curve[:3]) is None
+    assert runner.loss_change([]) is None
+    assert runner.loss_curve(str(tmp_path / 'nothing')) == []
 
 
 def schedule_cfg(**kwargs):
@@ -151,11 +243,12 @@ def test_runs_made_with_other_settings_are_not_mixed_in(tmp_path):
         runner.finished(run)
 
 
-def fake_result(path, entry, seed, miou, ms, seconds):
+def fake_result(path, entry, seed, miou, ms, seconds, loss_curve=None):
     result = dict(name=entry.name, model=entry.model, seed=seed, mIoU=miou,
                   mAcc=miou + 10, aAcc=miou + 20, params=1000,
                   enhancer_params=0, ms_per_image=dict(median=ms),
                   image_size=[64, 128], train_seconds=seconds,
+                  loss_curve=loss_curve or [],
                   environment=dict(cpu='test cpu', cpu_count=2,
                                    torch_threads=2, torch='2.x', mmcv='2.1',
                                    mmengine='0.10', mmsegmentation='1.2',
@@ -170,9 +263,15 @@ def test_aggregate_and_report(tmp_path):
     raw, tfp, tfi = runner.select(entries, ['segformer_b0_raw',
                                             'segformer_b0_tfi',
                                             'segformer_b0_tfp'])
-    fake_result(tmp_path, raw, 0, 10.0, 5.0, 60.0)
-    fake_result(tmp_path, raw, 1, 14.0, 7.0, 120.0)
-    fake_result(tmp_path, tfi, 0, 20.0, 6.0, 90.0)
+    curve = [[10, 2.0], [20, 1.6], [30, 1.4], [40, 1.2], [50, 1.0],
+             [60, 1.0], [70, 0.9], [80, 0.9]]
+    fake_result(tmp_path, raw, 0, 10.0, 5.0, 60.0, curve)
+    fake_result(tmp_path, raw, 1, 14.0, 7.0, 120.0,
+                [[s, 2 * loss] for s, loss in curve])
+    fake_result(tmp_path, tfi, 0, 20.0, 6.0, 90.0)  # logged no loss
+    (tmp_path / raw.name / 'benchmark.json').write_text(json.dumps(dict(
+        flops=2.5e9, enhancer_flops=0, train_step_ms=dict(median=123.4),
+        memory=dict(peak_mb=456.7))))
     rows = runner.aggregate([raw, tfi, tfp], [0, 1], str(tmp_path))
     assert [r['name'] for r in rows] == ['segformer_b0_raw',
                                          'segformer_b0_tfi']
@@ -180,12 +279,21 @@ def test_aggregate_and_report(tmp_path):
     assert math.isclose(rows[0]['mIoU_std'], math.sqrt(8))
     assert rows[0]['ms_per_image_mean'] == 6.0 and rows[0]['seeds'] == 2
     assert rows[1]['mIoU_std'] is None and rows[1]['enhancer'] == 'TFI()'
+    # final loss: the mean over iterations > 60 (0.9 and 1.8); change: the
+    # last quarter against (40, 60] (1.0 and 2.0): -10 % for both seeds
+    assert math.isclose(rows[0]['final_loss_mean'], 1.35)
+    assert math.isclose(rows[0]['loss_change_mean'], -0.1)
+    assert rows[1]['final_loss_mean'] is None
+    assert rows[1]['benchmark'] is None
 
     runner.write_csv(rows, str(tmp_path / 'results.csv'))
     with open(tmp_path / 'results.csv') as f:
         table = list(csv.DictReader(f))
     assert table[0]['aAcc_mean'] == '32.0' and table[1]['mIoU_std'] == ''
     assert list(table[0]) == runner.CSV_COLUMNS
+    assert (table[0]['gflops'], table[0]['train_step_ms'],
+            table[0]['train_memory_mb']) == ('2.5', '123.4', '456.7')
+    assert table[1]['gflops'] == '' and table[1]['loss_change_mean'] == ''
 
     args = cli.parse_args([GRID_CPU, '--data-root', 'data/x',
                               '--work-dir', str(tmp_path), '--seeds', '0',
@@ -196,11 +304,18 @@ def test_aggregate_and_report(tmp_path):
     assert '```bash\npython cmd\n```' in text
     assert '3 epochs, seeds 0 1' in text and 'test cpu' in text
     assert '| segformer_b0_raw | none     |     2 | 12.00 ± 2.83 |' in text
+    raw_line = next(line for line in text.splitlines()
+                    if line.startswith('| segformer_b0_raw'))
+    assert [c.strip() for c in raw_line.strip('|').split('|')][-5:] == [
+        '1.35 ± 0.64', '-10.0 ± 0.0', '2.50', '123', '457']
     assert '![mIoU against ms per image](plot.png)' in text
+    assert '![Training loss curves](loss_curves.png)' in text
 
     pytest.importorskip('matplotlib')
     runner.plot(rows, str(tmp_path / 'plot.png'))
     assert (tmp_path / 'plot.png').read_bytes()[:4] == b'\x89PNG'
+    runner.plot_loss_curves(rows, str(tmp_path / 'loss.png'))
+    assert (tmp_path / 'loss.png').read_bytes()[:4] == b'\x89PNG'
 
 
 def test_tiny_grid_end_to_end_and_resume(tmp_path):
@@ -225,6 +340,8 @@ def test_tiny_grid_end_to_end_and_resume(tmp_path):
     assert all(0 <= result[m] <= 100 for m in ('mIoU', 'mAcc', 'aAcc'))
     assert result['ms_per_image']['median'] > 0
     assert result['image_size'] == [32, 64] and result['train_attempts'] == 1
+    assert result['loss_curve'] == [[1, pytest.approx(
+        result['loss_curve'][0][1])]] and result['loss_curve'][0][1] > 0
     assert not list(run_dir.glob('*.pth'))  # removed once done
     for name in ('results.md', 'results.csv', 'accuracy_vs_time.png'):
         assert (report / name).exists()
@@ -242,13 +359,20 @@ def test_tiny_grid_end_to_end_and_resume(tmp_path):
         command[:command.index('--seeds')] + [
             '--seeds', '0', '1', '--max-iters', '1', '--only',
             'segformer_b0_tfi', 'segformer_b0_raw', '--report-dir',
-            str(report), '--report-only'],
+            str(report), '--report-only', '--benchmark'],
         cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert 'segformer_b0_raw seed 0: not run (--report-only)' in proc.stdout
     assert 'segformer_b0_tfi seed 1: not run (--report-only)' in proc.stdout
     assert not (work / 'segformer_b0_raw').exists()
     assert not (work / 'segformer_b0_tfi' / 'seed_1').exists()
+    # the benchmark measured the entry that has a run, once
+    measured = json.loads((work / 'segformer_b0_tfi' /
+                           'benchmark.json').read_text())
+    assert measured['crop'] == [32, 64] and measured['num_steps'] == 9
+    assert measured['memory']['peak_mb'] > 0 and measured['flops'] > 0
+    assert 'benchmark segformer_b0_tfi: ' in proc.stdout
+    assert not (work / 'segformer_b0_raw' / 'benchmark.json').exists()
     with open(report / 'results.csv') as f:
         rows = list(csv.DictReader(f))
     assert [(r['name'], r['seeds']) for r in rows] == [

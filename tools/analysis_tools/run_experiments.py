@@ -2,7 +2,8 @@
 
     python tools/analysis_tools/run_experiments.py GRID --data-root DIR --work-dir DIR
         [--seeds 0 1 2] [--epochs N | --max-iters N] [--only NAME ...]
-        [--report-dir DIR] [--keep-checkpoints] [--list]
+        [--report-dir DIR] [--keep-checkpoints] [--list] [--report-only]
+        [--benchmark]
 
 GRID (e.g. configs/experiments/grid_cpu.py) lists models and enhancers; each
 entry ``<model>_<enhancer>`` is the model's config with
@@ -14,8 +15,11 @@ when ``WORK_DIR/<entry>/seed_<seed>/result.json`` exists (written
 atomically): re-running the command skips finished runs and resumes an
 interrupted one from its last checkpoint. At the end, every finished run of
 the selected entries and seeds is aggregated into ``results.csv``,
-``results.md`` and ``accuracy_vs_time.png`` in ``--report-dir`` (default:
-the work dir). See docs/benchmark.md.
+``results.md``, ``accuracy_vs_time.png`` and ``loss_curves.png`` in
+``--report-dir`` (default: the work dir). ``--benchmark`` first measures
+each reported entry once with the package's benchmark (FLOPs, training-step
+time, peak memory: the table's cost columns; run it with nothing else
+loading the machine). See docs/benchmark.md.
 """
 import argparse
 import os
@@ -24,9 +28,9 @@ import shlex
 import sys
 import time
 
-from wgse_mmseg.apis.experiments import (RunFailed, describe, finished,
-                                         load_grid, plan, report, run_one,
-                                         select)
+from wgse_mmseg.apis.experiments import (RunFailed, benchmark_entry,
+                                         describe, finished, load_grid, plan,
+                                         report, run_one, select)
 
 
 def parse_args(argv=None):
@@ -59,7 +63,34 @@ def parse_args(argv=None):
                         help='train nothing: report the finished runs of '
                         'the selected entries and seeds (a grid run in '
                         'stages with different seeds per entry)')
+    parser.add_argument('--benchmark', action='store_true',
+                        help='before reporting, measure FLOPs, training-step '
+                        'time and memory of each entry with finished runs '
+                        '(once per entry, in WORK_DIR/<entry>/benchmark.json)')
     return parser.parse_args(argv)
+
+
+def measure_entries(runs, grid, work_dir):
+    """Benchmark each entry that has a finished run; the names that
+    failed."""
+    timing = grid.get('benchmark', dict(repeat=5, warmup=2))
+    failures, seen = [], set()
+    for run in runs:
+        if run.entry.name in seen or not finished(run):
+            continue
+        seen.add(run.entry.name)
+        print(f'benchmark {run.entry.name} ...', flush=True)
+        try:
+            measured = benchmark_entry(run.entry, run.model_options,
+                                       work_dir, **timing)
+        except RunFailed as error:
+            print(f'benchmark {run.entry.name}: FAILED: {error}', flush=True)
+            failures.append(f'benchmark of {run.entry.name}')
+            continue
+        print(f"benchmark {run.entry.name}: "
+              f"{measured['train_step_ms']['median']:.0f} ms per training "
+              f"step, {measured['memory']['peak_mb']:.0f} MB", flush=True)
+    return failures
 
 
 def main(argv=None):
@@ -70,7 +101,8 @@ def main(argv=None):
     entries = select(entries, args.only)
     if args.list:
         for entry in entries:
-            print(f'{entry.name:32s} {describe(entry.enhancer)}')
+            print(f'{entry.name:32s} '
+                  f'{describe(entry.enhancer, entry.variant_options)}')
         return 0
     if not args.report_only and not osp.isdir(
             osp.join(args.data_root, 'spike', 'train')):
@@ -103,6 +135,8 @@ def main(argv=None):
         print(f"{prefix} mIoU {result['mIoU']:.2f}, "
               f"{result['ms_per_image']['median']:.1f} ms/image, "
               f'{time.perf_counter() - start:.0f} s', flush=True)
+    if args.benchmark:
+        failures += measure_entries(runs, grid, args.work_dir)
     report(entries, args, grid, command)
     if failures:
         print(f'{len(failures)} runs failed: {", ".join(failures)}')

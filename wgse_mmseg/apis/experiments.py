@@ -30,7 +30,8 @@ from typing import Any, Dict, List, NamedTuple, Optional, Tuple
 
 from mmengine.config import Config
 
-from .benchmarking import markdown_table, validation_cost
+from .benchmarking import (benchmark_config, markdown_table, run_isolated,
+                           validation_cost)
 from ..core.io import atomic_output
 
 #: where the package keeps its ``configs/`` and ``tools/`` (``setup.py``
@@ -42,23 +43,50 @@ ENHANCER_KEY = 'model.data_preprocessor.enhancer'
 
 
 class Entry(NamedTuple):
-    """One grid entry: a model config with one enhancer in front."""
+    """One grid entry: a model config with one enhancer in front.
+
+    Further ``--cfg-options`` for training, testing and the benchmark:
+    ``model_options``, the model's (e.g. a shallower backbone), then
+    ``variant_options``, the enhancer variant's (e.g. its learning rate).
+    """
     name: str
     model: str
     config: str
     enhancer_name: str
     enhancer: Optional[dict]
+    model_options: Dict[str, Any]
+    variant_options: Dict[str, Any]
 
 
 class RunFailed(RuntimeError):
     """A training or test process of one run exited with an error."""
 
 
+def _split(path: str, what: str, value: Any, main: str,
+           is_main: bool) -> Tuple[Any, Dict[str, Any]]:
+    """``(main value, cfg_options)`` of a grid value given either alone or
+    as ``dict(<main>=..., cfg_options=dict(...))``."""
+    if not (isinstance(value, dict) and not is_main):
+        return value, {}
+    unknown = set(value) - {main, 'cfg_options'}
+    if main not in value or unknown:
+        raise ValueError(f'{path}: {what} must be given alone or as '
+                         f'dict({main}=..., cfg_options=dict(...)), got '
+                         f'{dict(value)!r}')
+    options = dict(value.get('cfg_options') or {})
+    as_cli(options)  # a clear error now for what the command line can't carry
+    return value[main], options
+
+
 def load_grid(path: str) -> Tuple[Config, List[Entry]]:
     """The grid config and its entries, models outer, enhancers inner.
 
-    Model config paths are relative to the project root, where
-    ``configs/`` is (or absolute).
+    A model is a config path, relative to the project root, where
+    ``configs/`` is (or absolute), or ``dict(config=PATH,
+    cfg_options=dict(...))``. An enhancer is ``None`` (raw spikes), an
+    enhancer config (``dict(type=...)``) or ``dict(enhancer=None | dict(
+    type=...), cfg_options=dict(...))``: a variant that also changes the
+    training recipe.
     """
     grid = Config.fromfile(path)
     for key in ('models', 'enhancers', 'cfg_options', 'epochs', 'seeds',
@@ -66,15 +94,20 @@ def load_grid(path: str) -> Tuple[Config, List[Entry]]:
         if key not in grid:
             raise ValueError(f'{path}: the grid must define {key!r}')
     entries = []
-    for model, config in grid.models.items():
+    for model, value in grid.models.items():
+        config, model_options = _split(path, f'model {model!r}', value,
+                                       'config', isinstance(value, str))
         config = osp.join(PROJECT_ROOT, config)
         if not osp.isfile(config):
             raise FileNotFoundError(f'{path}: model {model!r}: {config} '
                                     f'does not exist')
-        for name, enhancer in grid.enhancers.items():
+        for name, value in grid.enhancers.items():
+            enhancer, options = _split(
+                path, f'enhancer {name!r}', value, 'enhancer',
+                value is None or 'type' in value)
             entries.append(Entry(f'{model}_{name}', model, config, name,
                                  None if enhancer is None else
-                                 dict(enhancer)))
+                                 dict(enhancer), model_options, options))
     return grid, entries
 
 
@@ -160,12 +193,18 @@ def as_cli(options: Dict[str, Any]) -> List[str]:
     return words
 
 
-def describe(enhancer: Optional[dict]) -> str:
-    """``TFP(window=21)``; ``none`` for raw spikes."""
+def describe(enhancer: Optional[dict],
+             variant_options: Optional[Dict[str, Any]] = None) -> str:
+    """``TFP(window=21)``; ``none`` for raw spikes; a variant's options
+    follow, e.g. ``WGSE(dim=1); ...custom_keys.enhancer.lr_mult=10``."""
     if enhancer is None:
-        return 'none'
-    args = ', '.join(f'{k}={v}' for k, v in enhancer.items() if k != 'type')
-    return f"{enhancer['type']}({args})"
+        text = 'none'
+    else:
+        args = ', '.join(f'{k}={v}' for k, v in enhancer.items()
+                         if k != 'type')
+        text = f"{enhancer['type']}({args})"
+    return '; '.join([text] + [f'{k}={v}' for k, v in
+                               (variant_options or {}).items()])
 
 
 def _run_logged(command: List[str], log_path: str, what: str) -> None:
@@ -214,6 +253,38 @@ def _test_metrics(test_dir: str) -> Dict[str, float]:
     return {m: float(logged[m]) for m in METRICS}
 
 
+def loss_curve(run_dir: str) -> List[List[float]]:
+    """``[[iteration, loss], ...]``: the training loss mmengine logged
+    (``<run_dir>/<timestamp>/vis_data/scalars.json``, the mean over each
+    logging interval), in iteration order; a resumed run's later log wins
+    where attempts overlap."""
+    losses = {}
+    for path in sorted(glob.glob(osp.join(run_dir, '*', 'vis_data',
+                                          'scalars.json'))):
+        with open(path) as f:
+            for line in f:
+                record = json.loads(line)
+                if 'loss' in record and 'iter' in record:
+                    losses[int(record['iter'])] = float(record['loss'])
+    return [[step, losses[step]] for step in sorted(losses)]
+
+
+def loss_change(curve: List[List[float]]) -> Optional[float]:
+    """How far the loss still fell at the end of training: the mean logged
+    loss over the last quarter of the iterations relative to the quarter
+    before, minus one (``-0.05``: still 5 % lower); ``None`` with fewer than
+    two points in either quarter."""
+    if not curve:
+        return None
+    last = curve[-1][0]
+    third = [loss for step, loss in curve
+             if last / 2 < step <= 3 * last / 4]
+    fourth = [loss for step, loss in curve if step > 3 * last / 4]
+    if len(third) < 2 or len(fourth) < 2:
+        return None
+    return statistics.fmean(fourth) / statistics.fmean(third) - 1
+
+
 def _write_json(path: str, data: Any) -> None:
     with atomic_output(path) as f:
         f.write(json.dumps(data, indent=2).encode())
@@ -239,9 +310,11 @@ def plan(entries: List[Entry], args: argparse.Namespace,
         for entry in entries:
             run_dir = osp.join(osp.abspath(args.work_dir), entry.name,
                                f'seed_{seed}')
-            model_options = dict(grid.cfg_options,
-                                 data_root=osp.abspath(args.data_root),
-                                 **enhancer_options(entry.enhancer))
+            model_options = dict(grid.cfg_options)
+            model_options['data_root'] = osp.abspath(args.data_root)
+            for options in (entry.model_options, entry.variant_options,
+                            enhancer_options(entry.enhancer)):
+                model_options.update(options)
             train_options = dict(model_options, **schedule,
                                  **{'randomness.seed': seed})
             runs.append(Run(entry, seed, run_dir, model_options,
@@ -294,6 +367,7 @@ def run_one(run: Run, keep_checkpoints: bool,
         params=cost['params'], enhancer_params=cost['enhancer_params'],
         ms_per_image=cost['latency_ms'], image_size=cost['image_size'],
         train_seconds=timing['seconds'], train_attempts=timing['attempts'],
+        loss_curve=loss_curve(run.run_dir),
         train_options=run.train_options,
         commands=[shlex.join(train_command), shlex.join(test_command)],
         environment=cost['environment'])
@@ -315,7 +389,10 @@ def aggregate(entries: List[Entry], seeds: List[int],
               work_dir: str) -> List[Dict[str, Any]]:
     """One row per entry with finished runs: mean and standard deviation
     over seeds (``None`` with one seed) of the metrics, ms per image (each
-    run's median) and training time."""
+    run's median), training time, the final training loss (the mean logged
+    loss over the last quarter of the iterations) and :func:`loss_change`;
+    each run's loss curve (``loss_curves``); and the entry's benchmark
+    (:func:`benchmark_entry`; ``None`` where not measured)."""
     rows = []
     for entry in entries:
         results = []
@@ -328,25 +405,99 @@ def aggregate(entries: List[Entry], seeds: List[int],
         if not results:
             continue
         row = dict(name=entry.name, model=entry.model,
-                   enhancer=describe(entry.enhancer),
+                   enhancer=describe(entry.enhancer, entry.variant_options),
                    seeds=len(results), params=results[0]['params'],
                    enhancer_params=results[0]['enhancer_params'])
         columns = {m: [r[m] for r in results] for m in METRICS}
         columns['ms_per_image'] = [r['ms_per_image']['median']
                                    for r in results]
         columns['train_seconds'] = [r['train_seconds'] for r in results]
+        curves = [r.get('loss_curve') or [] for r in results]
+        columns['final_loss'] = [_final_loss(c) for c in curves]
+        columns['loss_change'] = [loss_change(c) for c in curves]
         for key, values in columns.items():
-            row[f'{key}_mean'], row[f'{key}_std'] = _mean_std(values)
+            if any(v is None for v in values):
+                row[f'{key}_mean'] = row[f'{key}_std'] = None
+            else:
+                row[f'{key}_mean'], row[f'{key}_std'] = _mean_std(values)
+        row['loss_curves'] = curves
+        row['benchmark'] = _read_benchmark(work_dir, entry)
         row['environment'] = results[0]['environment']
         row['image_size'] = results[0]['image_size']
         rows.append(row)
     return rows
 
 
+def _final_loss(curve: List[List[float]]) -> Optional[float]:
+    if not curve:
+        return None
+    last = curve[-1][0]
+    return statistics.fmean(loss for step, loss in curve
+                            if step > 3 * last / 4)
+
+
+def _benchmark_path(work_dir: str, entry: Entry) -> str:
+    return osp.join(work_dir, entry.name, 'benchmark.json')
+
+
+def _read_benchmark(work_dir: str, entry: Entry) -> Optional[Dict[str, Any]]:
+    path = _benchmark_path(work_dir, entry)
+    if not osp.exists(path):
+        return None
+    with open(path) as f:
+        return json.load(f)
+
+
+def benchmark_entry(entry: Entry, model_options: Dict[str, Any],
+                    work_dir: str, repeat: int,
+                    warmup: int) -> Dict[str, Any]:
+    """Measure the entry once with the package's benchmark
+    (:func:`~wgse_mmseg.apis.benchmarking.benchmark_config`: FLOPs,
+    training-step time and peak memory at the grid's crop and batch size,
+    in a fresh process) unless ``WORK_DIR/<entry>/benchmark.json`` exists;
+    returns (and writes) it. The result belongs to the entry, not to a
+    seed; run it while nothing else loads the machine."""
+    path = _benchmark_path(work_dir, entry)
+    measured = _read_benchmark(work_dir, entry)
+    if measured is not None:
+        return measured
+    options = {k: v for k, v in model_options.items() if k != 'data_root'}
+    try:
+        measured = run_isolated(benchmark_config, entry.config,
+                                cfg_options=options, repeat=repeat,
+                                warmup=warmup)
+    except Exception as error:  # the report goes on without it
+        raise RunFailed(f'benchmarking {entry.name} failed: '
+                        f'{type(error).__name__}: {error}') from error
+    measured['cfg_options'] = options
+    _write_json(path, measured)
+    return measured
+
+
 CSV_COLUMNS = ['name', 'model', 'enhancer', 'seeds', 'mIoU_mean',
                'mIoU_std', 'mAcc_mean', 'mAcc_std', 'aAcc_mean', 'aAcc_std',
                'params', 'enhancer_params', 'ms_per_image_mean',
-               'ms_per_image_std', 'train_seconds_mean', 'train_seconds_std']
+               'ms_per_image_std', 'train_seconds_mean', 'train_seconds_std',
+               'final_loss_mean', 'final_loss_std', 'loss_change_mean',
+               'loss_change_std', 'gflops', 'enhancer_gflops',
+               'train_step_ms', 'train_memory_mb']
+
+
+def _benchmark_columns(row: Dict[str, Any]) -> Dict[str, Any]:
+    """GFLOPs (batch 1), training-step ms and peak training memory (MB)
+    of the entry's benchmark; ``None`` each where not measured."""
+    measured = row.get('benchmark')
+    if measured is None:
+        return dict(gflops=None, enhancer_gflops=None, train_step_ms=None,
+                    train_memory_mb=None)
+
+    def giga(flops):
+        return None if flops is None else flops / 1e9
+
+    return dict(gflops=giga(measured['flops']),
+                enhancer_gflops=giga(measured['enhancer_flops']),
+                train_step_ms=measured['train_step_ms']['median'],
+                train_memory_mb=measured['memory']['peak_mb'])
 
 
 def write_csv(rows: List[Dict[str, Any]], path: str) -> None:
@@ -355,6 +506,7 @@ def write_csv(rows: List[Dict[str, Any]], path: str) -> None:
                             lineterminator='\n')
     writer.writeheader()
     for row in rows:
+        row = dict(row, **_benchmark_columns(row))
         writer.writerow({k: round(v, 4) if isinstance(v, float) else v
                          for k, v in row.items()})
     with atomic_output(path) as f:
@@ -363,6 +515,8 @@ def write_csv(rows: List[Dict[str, Any]], path: str) -> None:
 
 def _pm(row: Dict[str, Any], key: str, scale: float = 1,
         digits: int = 2) -> str:
+    if row[f'{key}_mean'] is None:
+        return '-'
     mean, std = row[f'{key}_mean'] * scale, row[f'{key}_std']
     spread = '' if std is None else f' ± {std * scale:.{digits}f}'
     return f'{mean:.{digits}f}{spread}'
@@ -372,13 +526,25 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
                    args: argparse.Namespace, grid: Config,
                    plot_name: str) -> None:
     """The results table, with the command, settings and machine."""
+    def number(value, digits):
+        return '-' if value is None else f'{value:.{digits}f}'
+
+    table_rows = []
+    for r in rows:
+        cost = _benchmark_columns(r)
+        table_rows.append([
+            r['name'], r['enhancer'], r['seeds'], _pm(r, 'mIoU'),
+            _pm(r, 'mAcc'), _pm(r, 'aAcc'), f"{r['params'] / 1e6:.3f}",
+            _pm(r, 'ms_per_image', digits=1),
+            _pm(r, 'train_seconds', 1 / 60, 1), _pm(r, 'final_loss'),
+            _pm(r, 'loss_change', 100, 1), number(cost['gflops'], 2),
+            number(cost['train_step_ms'], 0),
+            number(cost['train_memory_mb'], 0)])
     table = markdown_table(
         ['entry', 'enhancer', 'seeds', 'mIoU', 'mAcc', 'aAcc', 'params (M)',
-         'ms / image', 'train time (min)'],
-        [[r['name'], r['enhancer'], r['seeds'], _pm(r, 'mIoU'),
-          _pm(r, 'mAcc'), _pm(r, 'aAcc'), f"{r['params'] / 1e6:.3f}",
-          _pm(r, 'ms_per_image', digits=1),
-          _pm(r, 'train_seconds', 1 / 60, 1)] for r in rows])
+         'ms / image', 'train time (min)', 'final loss',
+         'loss change, last quarter (%)', 'GFLOPs', 'train step (ms)',
+         'train memory (MB)'], table_rows)
     env = rows[0]['environment']
     schedule = (f'{args.epochs} epochs' if args.max_iters is None else
                 f'{args.max_iters} iterations')
@@ -404,8 +570,19 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
         f"({'x'.join(map(str, rows[0]['image_size']))}), per run; mean ± "
         'standard deviation over seeds.',
         '- train time: wall time of the training process, start-up '
-        'included; mean ± standard deviation over seeds.', '',
-        f'![mIoU against ms per image]({plot_name})'
+        'included; mean ± standard deviation over seeds.',
+        '- final loss: the mean logged training loss over the last quarter '
+        'of the iterations; loss change: that mean against the quarter '
+        'before (-5.0: still 5 % lower), the measure of how flat the curve '
+        'had become; mean ± standard deviation over seeds.',
+        '- GFLOPs (one stream, batch 1), train step (ms) and train memory '
+        '(peak, MB): the package\'s benchmark '
+        '(`wgse_mmseg.apis.benchmarking.benchmark_config`, as '
+        '`tools/analysis_tools/benchmark.py`) of each entry at the training '
+        'crop and batch size, measured once per entry (`--benchmark`) '
+        'with nothing else running; `-`: not measured.', '',
+        f'![mIoU against ms per image]({plot_name})', '',
+        f'![Training loss curves]({LOSS_PLOT})'
     ]
     with atomic_output(path) as f:
         f.write(('\n'.join(lines) + '\n').encode())
@@ -451,6 +628,46 @@ def plot(rows: List[Dict[str, Any]], path: str) -> None:
     plt.close(figure)
 
 
+LOSS_PLOT = 'loss_curves.png'
+
+
+def plot_loss_curves(rows: List[Dict[str, Any]], path: str) -> None:
+    """The training loss against iterations, one panel per model, one line
+    per entry (the mean over its seeds at the iterations all of them
+    logged), the seeds' range shaded."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    models = list(dict.fromkeys(r['model'] for r in rows))
+    figure, axes = plt.subplots(1, len(models), squeeze=False,
+                                figsize=(6.5 * len(models), 5))
+    for axis, model in zip(axes[0], models):
+        model_rows = [r for r in rows if r['model'] == model]
+        colours = plt.get_cmap('tab20')
+        for index, row in enumerate(model_rows):
+            curves = [dict(c) for c in row['loss_curves'] if c]
+            if not curves:
+                continue
+            steps = sorted(set.intersection(*(set(c) for c in curves)))
+            losses = np.array([[c[s] for s in steps] for c in curves])
+            colour = colours(index % 20)
+            axis.plot(steps, losses.mean(0), color=colour, linewidth=1.2,
+                      label=row['name'][len(model) + 1:])
+            axis.fill_between(steps, losses.min(0), losses.max(0),
+                              color=colour, alpha=0.15, linewidth=0)
+        axis.set_title(f'{model}: training loss (mean over seeds)')
+        axis.set_xlabel('iteration')
+        axis.set_ylabel('loss')
+        axis.grid(True, alpha=0.3)
+        axis.legend(fontsize=7, ncol=2)
+    figure.tight_layout()
+    with atomic_output(path) as f:
+        figure.savefig(f, format='png', dpi=120)
+    plt.close(figure)
+
+
 def report(entries: List[Entry], args: argparse.Namespace, grid: Config,
            command: str) -> List[Dict[str, Any]]:
     """Aggregate the finished runs and write the CSV, Markdown and plot."""
@@ -461,9 +678,10 @@ def report(entries: List[Entry], args: argparse.Namespace, grid: Config,
     report_dir = args.report_dir or args.work_dir
     plot_path = osp.join(report_dir, 'accuracy_vs_time.png')
     plot(rows, plot_path)
+    plot_loss_curves(rows, osp.join(report_dir, LOSS_PLOT))
     write_csv(rows, osp.join(report_dir, 'results.csv'))
     write_markdown(rows, osp.join(report_dir, 'results.md'), command, args,
                    grid, osp.basename(plot_path))
     print(f'{len(rows)} entries reported in {report_dir}: results.md, '
-          f'results.csv, accuracy_vs_time.png')
+          f'results.csv, accuracy_vs_time.png, {LOSS_PLOT}')
     return rows

@@ -11,7 +11,8 @@ from torch.func import functional_call
 from mmseg.registry import MODELS
 from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
     fused_band_networks
-from wgse_mmseg.core.wgse.wgse import BandNetwork
+from wgse_mmseg.core.representations import TFP
+from wgse_mmseg.core.wgse.wgse import LOWPASS_DETAIL_BIAS, BandNetwork
 
 
 pytestmark = pytest.mark.usefixtures('single_thread')
@@ -450,6 +451,8 @@ def test_three_dimensional_input_raises():
     dict(dim=0), dict(dim=4), dict(kernel_size=2), dict(kernel_size=0),
     dict(level=0), dict(num_blocks=0),
     dict(wavelet='morl'), dict(wavelet='nope'), dict(mode='smooth'),
+    dict(init='tfp'), dict(init=None), dict(output_norm='yes'),
+    dict(output_norm=1),
 ])
 def test_invalid_arguments_raise(kwargs):
     with pytest.raises(ValueError):
@@ -462,3 +465,94 @@ def test_integer_input_equals_float_input():
     y_uint8 = model(x.to(torch.uint8))
     assert y_uint8.dtype == torch.float32
     assert torch.equal(y_uint8, model(x.float()))
+
+
+# ------------------------------------------------- options of the recipe
+@pytest.mark.parametrize('dim, num_blocks, wavelet, level, steps', [
+    (1, 1, 'db8', 5, 41), (1, 2, 'db8', 5, 41), (1, 1, 'haar', 3, 16),
+    (2, 1, 'db2', 2, 11), (3, 2, 'haar', 2, 10),
+])
+def test_lowpass_init_is_the_approximation_alone(dim, num_blocks, wavelet,
+                                                 level, steps):
+    """PyWavelets reference: the inverse DWT of the (non-negative part of
+    the) level-n approximation, every detail band the constant bias."""
+    model = WGSE(dim=dim, wavelet=wavelet, level=level, mode='zero',
+                 num_blocks=num_blocks, hidden_channels=4,
+                 init='lowpass').double()
+    x = (torch.rand(2, steps, 3, 2, dtype=torch.float64,
+                    generator=torch.Generator().manual_seed(steps)) <
+         0.4).double()
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')  # "level too high" warnings
+        coeffs = pywt.wavedec(x.numpy(), wavelet, mode='zero', level=level,
+                              axis=1)
+    bias = np.float32(LOWPASS_DETAIL_BIAS)  # set while the module was float32
+    bands = [np.maximum(coeffs[0], 0)] + [np.full_like(c, bias)
+                                          for c in coeffs[1:]]
+    expected = pywt.waverec(bands, wavelet, mode='zero', axis=1)[:, :steps]
+    np.testing.assert_allclose(model(x).detach().numpy(), expected,
+                               rtol=1e-10, atol=1e-10)
+
+
+def test_lowpass_init_without_wavelets_passes_spikes_through():
+    x = (torch.rand(2, 13, 4, 5) < 0.3).float()
+    model = WGSE(wavelet=None, init='lowpass')
+    assert torch.equal(model(x), x)
+
+
+def test_lowpass_init_starts_near_tfp():
+    """db8 at 5 levels on T=41 starts about where TFP's window of 21 is:
+    correlated over pixels and steps, with the same mean brightness."""
+    generator = torch.Generator().manual_seed(0)
+    rate = 0.6 * torch.rand(1, 1, 24, 24, generator=generator)
+    spikes = (torch.rand(2, 41, 24, 24, generator=generator) <
+              rate).float()
+    enhanced = WGSE(init='lowpass')(spikes).detach()
+    tfp = TFP(window=21)(spikes)
+    correlation = np.corrcoef(enhanced.flatten(), tfp.flatten())[0, 1]
+    assert correlation > 0.85
+    middle = slice(10, 31)  # away from the zero-padded ends
+    assert abs(enhanced[:, middle].mean() / tfp[:, middle].mean() - 1) < 0.1
+
+
+def test_lowpass_init_leaves_every_band_network_trainable():
+    """The first backward pass reaches every band's last convolution (no
+    ReLU starts dead); two steps later, every convolution (the zeroed
+    residual branches wake up one layer per step)."""
+    torch.manual_seed(0)
+    model = WGSE(init='lowpass')
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    spikes = (torch.rand(2, 41, 24, 24) < 0.3).float()
+    target = torch.rand(2, 41, 24, 24)
+    for step in range(3):
+        optimizer.zero_grad()
+        (model(spikes) - target).square().mean().backward()
+        for network in model.band_networks:
+            if step == 1:
+                continue
+            convs = ([network.output_convs[-1]] if step == 0 else
+                     [m for m in network.modules()
+                      if isinstance(m, torch.nn.Conv1d)])
+            assert all(c.weight.grad.abs().sum() > 0 for c in convs)
+        optimizer.step()
+
+
+def test_output_norm_standardises_the_output():
+    model = WGSE(hidden_channels=8, output_norm=True)
+    spikes = (torch.rand(2, 41, 8, 8) < 0.3).float()
+    out = model(spikes)
+    assert abs(out.mean().item()) < 1e-5
+    assert abs(out.std().item() - 1) < 1e-2
+    assert sorted(k for k in model.state_dict() if 'output_norm' in k) == [
+        'output_norm.bias', 'output_norm.num_batches_tracked',
+        'output_norm.running_mean', 'output_norm.running_var',
+        'output_norm.weight']
+    model.eval()  # running statistics now: one batch moved them by 10 %
+    plain = WGSE(hidden_channels=8)
+    plain.load_state_dict(model.state_dict(), strict=False)
+    raw = plain(spikes)
+    norm = model.output_norm
+    expected = ((raw - norm.running_mean) /
+                torch.sqrt(norm.running_var + norm.eps) * norm.weight +
+                norm.bias)
+    torch.testing.assert_close(model(spikes), expected)

@@ -14,6 +14,11 @@ Variants (all one class; MMSeg's registry name is ``WGSE``):
   convolutions doubled);
 * ``wavelet=None``: the "TRCNN without wavelets" ablation, one band network
   on the raw stream.
+
+Options of the training recipe (``docs/converged/results.md`` ablates them):
+``init='lowpass'`` starts the module at the level-``level`` approximation of
+the stream, a long window average like TFP's, instead of at random;
+``output_norm=True`` standardises the output.
 """
 from typing import List, Optional, Tuple
 
@@ -26,7 +31,17 @@ from ..checks import is_integer
 from ..wavelets import (analysis_matrix, band_lengths, check_mode, get_wavelet,
                         synthesis_matrix)
 
-__all__ = ['WGSE', 'BandNetwork']
+__all__ = ['WGSE', 'BandNetwork', 'INITS']
+
+#: ``WGSE(init=...)``: ``'default'`` (PyTorch's initialisation of every
+#: convolution) or ``'lowpass'`` (see :meth:`WGSE.init_lowpass`)
+INITS = ('default', 'lowpass')
+#: the constant a detail band's network outputs after ``init='lowpass'``:
+#: small, and far enough above zero that its final ReLU passes gradients
+#: and Adam's first steps (about the learning rate each) do not push it
+#: below zero, where the band would stay dead (at 1e-3, two of the five
+#: detail bands died within 30 steps of lr 1e-3 in a trial)
+LOWPASS_DETAIL_BIAS = 0.02
 
 
 def _conv(dim: int, in_channels: int, out_channels: int,
@@ -103,6 +118,30 @@ class BandNetwork(nn.Module):
             x = F.relu(conv(x))
         return x
 
+    @torch.no_grad()
+    def init_pass_through(self, gain: float, bias: float = 0.0) -> None:
+        """Set the weights so that the network computes
+        ``relu(gain * relu(x) + bias)`` for input ``x`` (``(N, 1, L)`` or
+        ``(B, 1, L, H, W)``): every residual branch is zero (its second
+        convolution's weights and bias; the first keeps its weights and
+        learns once the second moves), the hidden output convolutions pass
+        each channel through, and the last one averages the channels
+        times ``gain`` and adds ``bias``."""
+        for block in self.residual_layers:
+            block.conv_b.weight.zero_()
+            block.conv_b.bias.zero_()
+        for index, conv in enumerate(self.output_convs):
+            centre = tuple(size // 2 for size in conv.weight.shape[2:])
+            conv.weight.zero_()
+            conv.bias.zero_()
+            if index < len(self.output_convs) - 1:
+                for channel in range(self.hidden_channels):
+                    conv.weight[(channel, channel) + centre] = 1.0
+            else:
+                conv.weight[(0, slice(None)) + centre] = (
+                    gain / self.hidden_channels)
+                conv.bias.fill_(bias)
+
     def layers(self) -> List[Tuple[nn.Module, Optional[int]]]:
         """The convolutions in order, each with the index of the activation
         added before its ReLU (0: the input, ``i``: the output of the
@@ -139,6 +178,12 @@ class WGSE(nn.Module):
             for CPU inputs where they can run, else ``'torch'``; a named
             backend that cannot run is an error. Every backend recomputes
             hidden activations in the backward pass.
+        init: ``'default'`` or ``'lowpass'`` (:meth:`init_lowpass`).
+        output_norm: standardise the output ``(B, T, H, W)`` with one
+            batch-norm channel over all its values (batch statistics in
+            training, running statistics in evaluation, a learned scale and
+            shift), so that the network behind gets zero-mean, unit-variance
+            input whatever scale the band networks produce.
 
     Attributes:
         backend_in_use: the backend that ran the last forward pass
@@ -154,8 +199,14 @@ class WGSE(nn.Module):
     def __init__(self, dim: int = 1, wavelet: Optional[str] = 'db8',
                  level: int = 5, mode: str = 'zero', kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1,
-                 backend: str = 'auto'):
+                 backend: str = 'auto', init: str = 'default',
+                 output_norm: bool = False):
         super().__init__()
+        if init not in INITS:
+            raise ValueError(f'init must be one of {INITS}, got {init!r}')
+        if not isinstance(output_norm, bool):
+            raise ValueError(f'output_norm must be True or False, got '
+                             f'{output_norm!r}')
         if isinstance(dim, bool) or dim not in (1, 2, 3):
             raise ValueError(f'dim must be 1, 2 or 3, got {dim!r}')
         if wavelet is not None:
@@ -177,6 +228,25 @@ class WGSE(nn.Module):
         self.backend = backend
         self.backend_in_use: Optional[str] = None
         self._transforms = {}
+        self.output_norm = nn.BatchNorm1d(1) if output_norm else None
+        if init == 'lowpass':
+            self.init_lowpass()
+
+    def init_lowpass(self) -> None:
+        """Start at the stream's low-pass part: the approximation band's
+        network passes its (non-negative) coefficients through and every
+        detail band's network outputs :data:`LOWPASS_DETAIL_BIAS`, so the
+        output is about the inverse DWT of the level-``level``
+        approximation alone, a smooth window average of the stream (for
+        db8 at 5 levels and T=41, about as long as TFP's window of 21).
+        Without wavelets (``wavelet=None``) the one band network passes the
+        stream through."""
+        for index, network in enumerate(self.band_networks):
+            if index == 0:
+                network.init_pass_through(gain=1.0)
+            else:
+                network.init_pass_through(gain=0.0,
+                                          bias=LOWPASS_DETAIL_BIAS)
 
     def _matrices(self, num_steps: int, device: torch.device,
                   dtype: torch.dtype) -> Tuple[torch.Tensor, torch.Tensor,
@@ -230,4 +300,7 @@ class WGSE(nn.Module):
                 enhanced = torch.matmul(enhanced, synthesis.t())  # (B, P, T)
             out = enhanced.transpose(1, 2).reshape(batch, num_steps, height,
                                                    width)
+        if self.output_norm is not None:
+            out = self.output_norm(out.reshape(batch, 1, -1)).reshape(
+                batch, num_steps, height, width)
         return out.contiguous()
