@@ -303,6 +303,7 @@ def test_aggregate_and_report(tmp_path):
     text = (tmp_path / 'results.md').read_text()
     assert '```bash\npython cmd\n```' in text
     assert '3 epochs, seeds 0 1' in text and 'test cpu' in text
+    assert 'trained for 0.1 hours in all' in text  # 60 + 120 + 90 s
     assert '| segformer_b0_raw | none     |     2 | 12.00 ± 2.83 |' in text
     raw_line = next(line for line in text.splitlines()
                     if line.startswith('| segformer_b0_raw'))

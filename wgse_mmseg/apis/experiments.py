@@ -522,6 +522,13 @@ def _pm(row: Dict[str, Any], key: str, scale: float = 1,
     return f'{mean:.{digits}f}{spread}'
 
 
+LOSS_PLOT = 'loss_curves.png'
+
+
+def _total_hours(rows: List[Dict[str, Any]]) -> float:
+    return sum(r['train_seconds_mean'] * r['seeds'] for r in rows) / 3600
+
+
 def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
                    args: argparse.Namespace, grid: Config,
                    plot_name: str) -> None:
@@ -570,7 +577,9 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
         f"({'x'.join(map(str, rows[0]['image_size']))}), per run; mean ± "
         'standard deviation over seeds.',
         '- train time: wall time of the training process, start-up '
-        'included; mean ± standard deviation over seeds.',
+        'included; mean ± standard deviation over seeds. All runs of the '
+        f'table trained for {_total_hours(rows):.1f} hours in all (their '
+        'training processes\' wall time, summed).',
         '- final loss: the mean logged training loss over the last quarter '
         'of the iterations; loss change: that mean against the quarter '
         'before (-5.0: still 5 % lower), the measure of how flat the curve '
@@ -628,13 +637,11 @@ def plot(rows: List[Dict[str, Any]], path: str) -> None:
     plt.close(figure)
 
 
-LOSS_PLOT = 'loss_curves.png'
-
-
 def plot_loss_curves(rows: List[Dict[str, Any]], path: str) -> None:
     """The training loss against iterations, one panel per model, one line
     per entry (the mean over its seeds at the iterations all of them
-    logged), the seeds' range shaded."""
+    logged; ten colours, then the next line style), the seeds' range
+    shaded."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -645,15 +652,16 @@ def plot_loss_curves(rows: List[Dict[str, Any]], path: str) -> None:
                                 figsize=(6.5 * len(models), 5))
     for axis, model in zip(axes[0], models):
         model_rows = [r for r in rows if r['model'] == model]
-        colours = plt.get_cmap('tab20')
+        colours = plt.get_cmap('tab10')
         for index, row in enumerate(model_rows):
             curves = [dict(c) for c in row['loss_curves'] if c]
             if not curves:
                 continue
             steps = sorted(set.intersection(*(set(c) for c in curves)))
             losses = np.array([[c[s] for s in steps] for c in curves])
-            colour = colours(index % 20)
+            colour = colours(index % 10)
             axis.plot(steps, losses.mean(0), color=colour, linewidth=1.2,
+                      linestyle=('-', '--', ':')[index // 10 % 3],
                       label=row['name'][len(model) + 1:])
             axis.fill_between(steps, losses.min(0), losses.max(0),
                               color=colour, alpha=0.15, linewidth=0)
