@@ -71,6 +71,21 @@ def test_config_defaults_are_the_papers(name):
     assert tuple(cfg.custom_imports.imports) == wgse_mmseg.MMSEG_LAYER
 
 
+def test_pspnet_starts_wgse_at_the_low_pass_approximation():
+    """The recipe docs/wgse_vs_tfp.md found to put WGSE level with TFP in
+    front of PSPNet; SegFormer-B0 keeps the paper's random start, and the
+    raw-spike config inherits no enhancer."""
+    paper = dict(type='WGSE', dim=1, wavelet='db8', level=5, mode='zero',
+                 kernel_size=3, hidden_channels=32)
+    pspnet = load_config(config_path(PSPNET_WGSE))
+    assert pspnet.model.data_preprocessor.enhancer == dict(paper,
+                                                           init='lowpass')
+    segformer = load_config(config_path(SEGFORMER_WGSE))
+    assert segformer.model.data_preprocessor.enhancer == paper
+    raw = load_config(config_path(PSPNET_RAW))
+    assert raw.model.data_preprocessor.enhancer is None
+
+
 def test_spike_settings_override_every_dependent_field():
     cfg = load_config(config_path(PSPNET_WGSE),
                       dict(num_steps=41, crop_size='64,128',
