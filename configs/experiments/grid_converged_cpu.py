@@ -1,8 +1,9 @@
 # Does WGSE beat the representations it claims to improve? The comparison
 # at a schedule where the training losses have flattened, with the
 # ablations of the WGSE-versus-TFP gap, sized for a 2-core CPU
-# (docs/converged/results.md has the table, the loss curves and the
-# commands; tools/analysis_tools/run_experiments.py runs it).
+# (docs/wgse_vs_tfp.md has the findings and the commands, docs/converged/
+# and docs/converged_720/ the reports; tools/analysis_tools/run_experiments.py
+# runs it).
 #
 # Data: the embedded street scenes made at 64x128 with more samples than the
 # default (192 training, 32 validation streams, T=41):
