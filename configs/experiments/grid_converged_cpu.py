@@ -13,9 +13,9 @@
 # Training: 32x64 crops, batch 4, 240 iterations (--max-iters 240, five
 # epochs); validation on the whole 64x128 frames.
 
-# PSPNet with a ResNet-18 stem and head widths as MMSeg's pspnet_r18-d8
-# configs (the R50 model costs 3.5x as much per step here); SegFormer-B0 as
-# shipped
+# PSPNet with a ResNet-18 backbone and head widths as MMSeg's pspnet_r18-d8
+# configs (the R50 model did not fit a 2-core CPU's budget for this grid);
+# SegFormer-B0 as shipped
 models = dict(
     segformer_b0='configs/segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512.py',
     pspnet_r18=dict(

@@ -269,17 +269,20 @@ def loss_curve(run_dir: str) -> List[List[float]]:
     return [[step, losses[step]] for step in sorted(losses)]
 
 
+def _quarter(curve: List[List[float]], quarter: int) -> List[float]:
+    """The losses of ``curve`` logged in the ``quarter``-th quarter (1 to 4)
+    of its iterations, ``(q - 1) / 4 < step / last <= q / 4``."""
+    last = curve[-1][0] if curve else 0
+    return [loss for step, loss in curve
+            if (quarter - 1) * last / 4 < step <= quarter * last / 4]
+
+
 def loss_change(curve: List[List[float]]) -> Optional[float]:
     """How far the loss still fell at the end of training: the mean logged
     loss over the last quarter of the iterations relative to the quarter
     before, minus one (``-0.05``: still 5 % lower); ``None`` with fewer than
     two points in either quarter."""
-    if not curve:
-        return None
-    last = curve[-1][0]
-    third = [loss for step, loss in curve
-             if last / 2 < step <= 3 * last / 4]
-    fourth = [loss for step, loss in curve if step > 3 * last / 4]
+    third, fourth = _quarter(curve, 3), _quarter(curve, 4)
     if len(third) < 2 or len(fourth) < 2:
         return None
     return statistics.fmean(fourth) / statistics.fmean(third) - 1
@@ -429,11 +432,10 @@ def aggregate(entries: List[Entry], seeds: List[int],
 
 
 def _final_loss(curve: List[List[float]]) -> Optional[float]:
-    if not curve:
-        return None
-    last = curve[-1][0]
-    return statistics.fmean(loss for step, loss in curve
-                            if step > 3 * last / 4)
+    """The mean logged loss over the last quarter; ``None`` without a
+    curve."""
+    fourth = _quarter(curve, 4)
+    return statistics.fmean(fourth) if fourth else None
 
 
 def _benchmark_path(work_dir: str, entry: Entry) -> str:

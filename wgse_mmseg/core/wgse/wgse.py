@@ -15,7 +15,7 @@ Variants (all one class; MMSeg's registry name is ``WGSE``):
 * ``wavelet=None``: the "TRCNN without wavelets" ablation, one band network
   on the raw stream.
 
-Options of the training recipe (``docs/converged/results.md`` ablates them):
+Options of the training recipe (``docs/wgse_vs_tfp.md`` ablates them):
 ``init='lowpass'`` starts the module at the level-``level`` approximation of
 the stream, a long window average like TFP's, instead of at random;
 ``output_norm=True`` standardises the output.
