@@ -48,8 +48,8 @@ CPU_AUTOCAST = [None, torch.bfloat16, torch.float16]
 
 
 RAW_CONFIGS = {
-    'segformer_b0': 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512',
-    'pspnet': 'pspnet_r50-d8_raw_1xb4-100e_spike-cityscapes-256x512'}
+    'segformer_b0': 'segformer_b0_raw',
+    'pspnet': 'pspnet_raw'}
 
 
 def config(model):

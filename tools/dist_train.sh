@@ -2,7 +2,7 @@
 # Train on GPUS processes of this machine (or NNODES machines), MMSeg's interface:
 #
 #   bash tools/dist_train.sh CONFIG GPUS [train.py arguments...]
-#   bash tools/dist_train.sh configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py 8 --cfg-options data_root=DIR
+#   bash tools/dist_train.sh configs/pspnet_wgse.py 8 --cfg-options data_root=DIR
 #
 # One process per GPU; the batch in the config is per process (MMSeg's convention:
 # 8 GPUs x batch 2 is a total batch of 16), and BN becomes SyncBN (`sync_bn` in

@@ -4,12 +4,12 @@
 #   2. the embedded dataset (procedural street scenes as spikes, T=41),
 #   3. SegFormer-B0 + WGSE trained on it (resumes if interrupted),
 #   4. the final checkpoint evaluated: mIoU, mAcc and aAcc.
-# Variables: CONFIG (default configs/segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py), EPOCHS (default 5),
+# Variables: CONFIG (default configs/segformer_b0_wgse.py), EPOCHS (default 5),
 # DATA (dataset root), WORK (work dir).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-CONFIG=${CONFIG:-configs/segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py}
+CONFIG=${CONFIG:-configs/segformer_b0_wgse.py}
 EPOCHS=${EPOCHS:-5}
 DATA=${DATA:-data/synthetic_spike_cityscapes}
 WORK=${WORK:-work_dirs/quickstart_$(basename "$CONFIG" .py)}

@@ -1,9 +1,9 @@
 """Train a segmentor on spike streams (MMSeg's tools/train.py, for spikes).
 
-    python tools/train.py configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py [--work-dir DIR] [--resume]
+    python tools/train.py configs/pspnet_wgse.py [--work-dir DIR] [--resume]
         [--cfg-options num_steps=41 data_root=DIR crop_size=128,256 ...]
 
-``mim train wgse_mmseg configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py`` runs this script.
+``mim train wgse_mmseg configs/pspnet_wgse.py`` runs this script.
 """
 import argparse
 import os.path as osp

@@ -17,9 +17,9 @@
 # configs (the R50 model did not fit a 2-core CPU's budget for this grid);
 # SegFormer-B0 as shipped
 models = dict(
-    segformer_b0='configs/segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512.py',
+    segformer_b0='configs/segformer_b0_raw.py',
     pspnet_r18=dict(
-        config='configs/pspnet_r50-d8_raw_1xb4-100e_spike-cityscapes-256x512.py',
+        config='configs/pspnet_raw.py',
         cfg_options={
             'model.backbone.depth': 18,
             'model.decode_head.in_channels': 512,

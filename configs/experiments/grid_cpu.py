@@ -7,8 +7,8 @@
 # model name -> config (relative to the repository root); enhancer None in
 # each
 models = dict(
-    segformer_b0='configs/segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512.py',
-    pspnet='configs/pspnet_r50-d8_raw_1xb4-100e_spike-cityscapes-256x512.py',
+    segformer_b0='configs/segformer_b0_raw.py',
+    pspnet='configs/pspnet_raw.py',
 )
 
 # enhancer name -> `model.data_preprocessor.enhancer` (None: raw spikes)

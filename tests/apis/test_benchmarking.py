@@ -18,9 +18,9 @@ from wgse_mmseg.apis.benchmarking import (build_model, count_flops,
 pytestmark = pytest.mark.usefixtures('single_thread')
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-PSPNET_WGSE = 'pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512'
-SEGFORMER_WGSE = 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512'
-SEGFORMER_RAW = 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512'
+PSPNET_WGSE = 'pspnet_wgse'
+SEGFORMER_WGSE = 'segformer_b0_wgse'
+SEGFORMER_RAW = 'segformer_b0_raw'
 TINY = dict(num_steps=9, crop_size='32,64')
 
 

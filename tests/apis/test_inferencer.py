@@ -13,7 +13,7 @@ ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 
 
 def test_inferencer_predicts_and_draws_spike_files(tmp_path):
-    cfg = load_config(osp.join(ROOT, 'configs', 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py'),
+    cfg = load_config(osp.join(ROOT, 'configs', 'segformer_b0_wgse.py'),
                       dict(num_steps=9))
     rng = np.random.default_rng(0)
     paths = []

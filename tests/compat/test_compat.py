@@ -64,7 +64,7 @@ def test_a_run_is_quiet(rank):
     """One line about mmcv-lite per run (none in other ranks or child
     processes), and no warnings from importing and building the models."""
     config = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
-        os.path.abspath(__file__)))), 'configs', 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py')
+        os.path.abspath(__file__)))), 'configs', 'segformer_b0_wgse.py')
     env = {k: v for k, v in os.environ.items()
            if k not in ('RANK', 'WGSE_MMSEG_MMCV_NOTICE_SHOWN')}
     if rank is not None:

@@ -192,7 +192,7 @@ def test_even_or_invalid_windows_are_rejected(module, kwargs):
 ])
 def test_selectable_in_a_config_like_wgse(enhancer):
     options = {'num_steps': 9, 'model.data_preprocessor.enhancer': None}
-    cfg = load_config(osp.join(ROOT, 'configs', 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512.py'),
+    cfg = load_config(osp.join(ROOT, 'configs', 'segformer_b0_raw.py'),
                       options)
     cfg.model.data_preprocessor.enhancer = enhancer
     model = MODELS.build(cfg.model)

@@ -23,7 +23,7 @@ def test_test_run_draws_the_clip_under_the_prediction(tiny_spike_dataset,
     data = tiny_spike_dataset
     cfg = load_config(
         osp.join(ROOT, 'configs',
-                 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py'),
+                 'segformer_b0_wgse.py'),
         {'data_root': str(data), 'num_steps': 9, 'crop_size': '32,64',
          'test_dataloader.num_workers': 0,
          'test_dataloader.persistent_workers': False,

@@ -14,10 +14,10 @@ from wgse_mmseg.utils.config import load_config
 wgse_mmseg.register_all_modules()  # before mmseg builds anything
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-PSPNET_WGSE = 'pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512'
-PSPNET_RAW = 'pspnet_r50-d8_raw_1xb4-100e_spike-cityscapes-256x512'
-SEGFORMER_WGSE = 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512'
-SEGFORMER_RAW = 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512'
+PSPNET_WGSE = 'pspnet_wgse'
+PSPNET_RAW = 'pspnet_raw'
+SEGFORMER_WGSE = 'segformer_b0_wgse'
+SEGFORMER_RAW = 'segformer_b0_raw'
 MAIN_CONFIGS = [PSPNET_WGSE, PSPNET_RAW, SEGFORMER_WGSE,
                 SEGFORMER_RAW]
 WGSE_PARAMETERS = 19974  # db8, 5 levels, kernel 3, 32 hidden channels

@@ -12,8 +12,8 @@ from wgse_mmseg.utils.config import load_config
 wgse_mmseg.register_all_modules()
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-SEGFORMER_WGSE = 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512'
-SEGFORMER_RAW = 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512'
+SEGFORMER_WGSE = 'segformer_b0_wgse'
+SEGFORMER_RAW = 'segformer_b0_raw'
 
 
 def _model(name):

@@ -13,7 +13,7 @@ import pytest
 from wgse_mmseg.core.io import save_spikes
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-CONFIG = osp.join(ROOT, 'configs', 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py')
+CONFIG = osp.join(ROOT, 'configs', 'segformer_b0_wgse.py')
 
 
 @pytest.fixture(scope='module')

@@ -21,7 +21,7 @@ from wgse_mmseg.core.io import save_spikes
 wgse_mmseg.register_all_modules()  # before mmseg builds anything
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-EXAMPLE = osp.join(ROOT, 'configs', 'examples', 'deeplabv3plus_r18-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py')
+EXAMPLE = osp.join(ROOT, 'configs', 'examples', 'deeplabv3plus_r18_wgse.py')
 DEMO = osp.join(ROOT, 'tools', 'demo.py')
 NUM_STEPS = 9  # small T keeps WGSE fast on CPU
 CROP = (32, 64)

@@ -15,7 +15,7 @@ import torch
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 DRIVER = osp.join(osp.dirname(osp.abspath(__file__)), 'ddp_training_run.py')
 CONFIG = osp.join(ROOT, 'configs',
-                  'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py')
+                  'segformer_b0_wgse.py')
 
 
 def _free_port():

@@ -10,7 +10,7 @@ ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 HERE = osp.dirname(osp.abspath(__file__))
 CONFIG = osp.join(
     ROOT, 'configs',
-    'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py')
+    'segformer_b0_wgse.py')
 
 
 #: a checkpoint every epoch, all kept; no validation

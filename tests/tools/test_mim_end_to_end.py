@@ -30,7 +30,7 @@ def run(cmd, cwd, env, timeout=900):
     return log
 
 
-CONFIG = 'configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py'
+CONFIG = 'configs/pspnet_wgse.py'
 
 
 #: validation and a checkpoint every epoch; with batch 4 an epoch of
@@ -94,7 +94,7 @@ def installed(tmp_path_factory):
     run([sys.executable, '-m', 'pip', 'install', '--no-deps', '-q',
          '--target', str(target), str(wheel)], cwd=work, env=env)
     assert (target / 'wgse_mmseg' / '.mim' / 'configs' /
-            'pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py').is_file()
+            'pspnet_wgse.py').is_file()
     assert (target / 'wgse_mmseg' / '.mim' / 'tools' / 'train.py').is_file()
     return target
 

@@ -131,8 +131,7 @@ def test_converged_grid_has_the_comparison_and_the_ablations():
 ])
 def test_malformed_grid_entries_are_named(tmp_path, models, enhancers,
                                           match):
-    config = osp.join(ROOT, 'configs', 'segformer_mit-b0_raw_1xb4-100e_spike-'
-                      'cityscapes-256x512.py')
+    config = osp.join(ROOT, 'configs', 'segformer_b0_raw.py')
     grid = tmp_path / 'grid.py'
     grid.write_text(f'models = {models.format(c=config)}\n'
                     f'enhancers = {enhancers}\n'
@@ -173,7 +172,7 @@ def schedule_cfg(**kwargs):
     parser = argparse.ArgumentParser()
     add_runner_arguments(parser)
     args = parser.parse_args(['--cfg-options', *runner.as_cli(options)])
-    return load_config(osp.join(ROOT, 'configs', 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512.py'),
+    return load_config(osp.join(ROOT, 'configs', 'segformer_b0_raw.py'),
                        args.cfg_options), checkpoint
 
 

@@ -32,7 +32,7 @@ def _t_values(cfg):
                  for step in pipeline if step.type == 'LoadSpikeFromFile'})
 
 
-@pytest.mark.parametrize('base', ['pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py', 'segformer_mit-b0_raw_1xb4-100e_spike-cityscapes-256x512.py'])
+@pytest.mark.parametrize('base', ['pspnet_wgse.py', 'segformer_b0_raw.py'])
 def test_a_child_config_sets_t_once(tmp_path, base):
     child = _child(tmp_path, base, 'num_steps = 41\n')
     cfg = Config.fromfile(child)  # MMSeg's loader: the base's T is stale
@@ -51,7 +51,7 @@ def test_a_child_config_sets_t_once(tmp_path, base):
 
 def test_the_configs_runner_builds_the_model_with_the_childs_t(tmp_path):
     """What MMSeg's tools/train.py does with a config with runner_type."""
-    cfg = Config.fromfile(_child(tmp_path, 'segformer_mit-b0_wgse_1xb4-100e_spike-cityscapes-256x512.py',
+    cfg = Config.fromfile(_child(tmp_path, 'segformer_b0_wgse.py',
                                  'num_steps = 41\n'))
     cfg.work_dir = str(tmp_path / 'work')
     runner = RUNNERS.build(cfg)
@@ -64,7 +64,7 @@ def test_the_configs_runner_builds_the_model_with_the_childs_t(tmp_path):
 
 def test_fields_that_disagree_are_listed(tmp_path):
     cfg = Config.fromfile(_child(
-        tmp_path, 'pspnet_r50-d8_raw_1xb4-100e_spike-cityscapes-256x512.py',
+        tmp_path, 'pspnet_raw.py',
         'num_steps = 41\nmodel = dict(data_preprocessor=dict(num_steps=41))\n'))
     with pytest.raises(NumStepsError) as error:
         apply_num_steps(cfg)

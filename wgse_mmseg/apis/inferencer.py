@@ -7,7 +7,7 @@ and draws each stream as an exposure-normalised TFP image, with everything
 else (batching, ``return_datasamples``, ``out_dir``, ``show``) MMSeg's::
 
     from wgse_mmseg.apis.inferencer import SpikeSegInferencer
-    inferencer = SpikeSegInferencer('configs/pspnet_r50-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py', 'epoch_100.pth')
+    inferencer = SpikeSegInferencer('configs/pspnet_wgse.py', 'epoch_100.pth')
     result = inferencer('clip.dat', out_dir='vis/')   # or a list, a folder
 
 ``mmseg.apis.inference_model(model, 'clip.dat')`` works as it is.

@@ -18,7 +18,7 @@
 #      channels instead of 3 (WGSE maps T frames back to exactly T channels).
 # Everything else is the stock MMSeg model config.
 #
-#   python tools/train.py configs/examples/deeplabv3plus_r18-d8_wgse_1xb4-100e_spike-cityscapes-256x512.py \
+#   python tools/train.py configs/examples/deeplabv3plus_r18_wgse.py \
 #       --cfg-options num_steps=41 data_root=DIR crop_size=128,256
 _base_ = [
     'mmseg::_base_/models/deeplabv3plus_r50-d8.py',
