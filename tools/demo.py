@@ -34,8 +34,8 @@ from mmengine.dataset import Compose  # noqa: E402
 from mmengine.registry import init_default_scope  # noqa: E402
 from mmengine.runner.checkpoint import load_state_dict  # noqa: E402
 from mmseg.apis import init_model  # noqa: E402
-from wgse_mmseg.core.exposure import (apply_exposure,  # noqa: E402
-                                      parse_exposure)
+from wgse_mmseg.core.exposure import (Exposed,  # noqa: E402
+                                      apply_exposure, parse_exposure)
 from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
 from wgse_mmseg.core.reconstruction_baselines import tfp  # noqa: E402
 from wgse_mmseg.datasets import SpikeCityscapesDataset  # noqa: E402
@@ -66,8 +66,9 @@ def parse_args():
         'crop_size re-derive every field that depends on them')
     parser.add_argument(
         '--exposure', default='auto',
-        help='exposure of the grey clip under the overlay: auto (99.5th '
-        'percentile to white; default), none, or a gain')
+        help='exposure of the grey clip under the overlay: auto (default: '
+        'brightens only a clearly under-exposed clip, its 99.5th percentile '
+        'to white), none, or a gain')
     args = parser.parse_args()
     try:
         args.exposure = parse_exposure(args.exposure)
@@ -128,11 +129,11 @@ def load_model(cfg, checkpoint: str, device: str):
     return model.to(device).eval()
 
 
-def clip_image(spikes: torch.Tensor, exposure) -> Tuple[np.ndarray, float]:
+def clip_image(spikes: torch.Tensor, exposure) -> Tuple[np.ndarray, Exposed]:
     """``(T, H, W)`` spikes -> ``(H, W)`` uint8 TFP image of the whole clip
-    (spike rate / 0.6), exposure-normalised, and the gain applied."""
-    image, gain = apply_exposure(tfp(spikes.cpu().numpy()), exposure)
-    return to_uint8(image), gain
+    (spike rate / 0.6) with ``exposure`` applied, and what it did."""
+    exposed = apply_exposure(tfp(spikes.cpu().numpy()), exposure)
+    return to_uint8(exposed.image), exposed
 
 
 def overlay(grey: np.ndarray, labels: np.ndarray, palette,
@@ -168,10 +169,11 @@ def main():
     with torch.no_grad():
         result = model.test_step(batch)[0]
     labels = result.pred_sem_seg.data[0].cpu().numpy()
-    grey, gain = clip_image(data['inputs'], args.exposure)
+    grey, exposed = clip_image(data['inputs'], args.exposure)
     image = overlay(grey, labels, model.dataset_meta['palette'], args.opacity)
     write_png(args.out_file, image[..., ::-1])  # RGB -> OpenCV's BGR
-    print(f'{args.out_file}\texposure_gain={gain:.3g}')
+    print(f'{args.out_file}\texposure_gain={exposed.gain:.3g}\t'
+          f'exposure: {exposed.reason}')
 
 
 if __name__ == '__main__':

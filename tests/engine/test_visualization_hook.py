@@ -45,7 +45,7 @@ def test_test_run_draws_the_clip_under_the_prediction(tiny_spike_dataset,
     # with draw_gt both are blended over the same clip image)
     spike_file = glob.glob(str(data / 'spike' / 'val' / '**' / '*.spk'),
                            recursive=True)[0]
-    expected = to_uint8(apply_exposure(tfp(load_spikes(spike_file)))[0])
+    expected = to_uint8(apply_exposure(tfp(load_spikes(spike_file))).image)
     assert image.shape[:2] == (32, 128)
     hook = [h for h in runner.hooks
             if type(h).__name__ == 'SpikeVisualizationHook'][0]

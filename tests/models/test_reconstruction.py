@@ -437,6 +437,7 @@ def test_reconstruct_cli_makes_a_dark_recording_visible(tmp_path, capsys):
     np.testing.assert_allclose(outputs['4'], np.round(plain * 4 * 255),
                                atol=1)
     assert f'exposure_gain={gain:.3g}' in printed[1]
+    assert 'under-exposed' in printed[1]
     assert 'exposure_gain=4' in printed[2]
     with pytest.raises(SystemExit):
         tool.main([path, '--out', str(tmp_path), '--exposure', '-1'])
@@ -504,6 +505,31 @@ def test_shipped_weights_beat_tfp_on_the_reds_sample(shared_dir):
     margin = psnr(pred[8:-8, 8:-8], gt[crop][8:-8, 8:-8]) - psnr(
         tfp(window)[crop][8:-8, 8:-8], gt[crop][8:-8, 8:-8])
     assert margin > 3.0  # 30.6 vs 23.8 dB when the weights were shipped
+
+
+@pytest.mark.parametrize('split, name', [('reds_sample', REDS_NAME),
+                                         ('reds_train',
+                                          '203_part3_key_id151')])
+def test_the_default_exposure_keeps_a_calibrated_stream(shared_dir, tmp_path,
+                                                        capsys, split, name):
+    """``reconstruct.py`` with its defaults scores what ``--exposure none``
+    scores on a synthetic REDS stream: auto exposure leaves a stream of
+    normal brightness alone (it used to apply a gain of 1.29 and clip)."""
+    spike = osp.join(shared_dir, 'data', split, 'spike', name + '.dat')
+    gt = cv2.imread(osp.join(shared_dir, 'data', split, 'gt', name + '.png'),
+                    0).astype(np.float64) / 255
+    tool = _tool('reconstruct')
+    scores = {}
+    for exposure in (None, 'none'):
+        out = tmp_path / str(exposure)
+        tool.main([spike, '--out', str(out), '--height', '250', '--width',
+                   '400', '--frames', '150'] +
+                  ([] if exposure is None else ['--exposure', exposure]))
+        image = cv2.imread(str(out / f'{name}_150.png'), 0) / 255
+        scores[exposure] = psnr(image, gt)
+    assert 'left as it is' in capsys.readouterr().out
+    assert abs(scores[None] - scores['none']) <= 0.1, scores
+    assert scores[None] > 25  # the shipped WGSE, not a blank image
 
 
 def test_reconstruct_cli_on_the_real_dat_is_upright(shared_dir, tmp_path):

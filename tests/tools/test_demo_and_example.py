@@ -131,19 +131,24 @@ def test_demo_grey_image_and_blend():
     spikes = torch.zeros(10, 2, 3, dtype=torch.uint8)
     spikes[:3, 0, 0] = 1  # rate 0.3: TFP 0.5
     spikes[:1, 1, 2] = 1  # rate 0.1: TFP 1/6
-    grey, gain = demo.clip_image(spikes, 'none')
-    assert grey.dtype == np.uint8 and gain == 1.0
+    grey, exposed = demo.clip_image(spikes, 'none')
+    assert grey.dtype == np.uint8 and exposed.gain == 1.0
     assert grey[0, 0] == 128 and grey[1, 2] == 42 and grey[0, 1] == 0
-    # auto: the 99.5th percentile (between 0.5 and 1/6, by numpy's linear
-    # interpolation over 6 pixels) becomes white
-    bright = np.percentile([0.5, 1 / 6, 0, 0, 0, 0], 99.5)
-    grey, gain = demo.clip_image(spikes, 'auto')
-    assert gain == pytest.approx(1 / bright)
-    assert grey[0, 0] == 255
-    assert abs(int(grey[1, 2]) - 255 / 6 / bright) <= 0.5 + 1e-3
-    black, gain = demo.clip_image(torch.zeros(4, 2, 3, dtype=torch.uint8),
-                                  'auto')
-    assert black.max() == 0 and gain == 1.0
+    # auto: a clip of normal brightness (bright end near 0.5) is untouched
+    auto, exposed = demo.clip_image(spikes, 'auto')
+    assert exposed.gain == 1.0 and 'left as it is' in exposed.reason
+    np.testing.assert_array_equal(auto, grey)
+    # a dark one (rate 0.1 at most: TFP 1/6): its 99.5th percentile (by
+    # numpy's linear interpolation over 6 pixels) becomes white
+    spikes[1:3, 0, 0] = 0
+    dark = np.percentile([1 / 6, 1 / 6, 0, 0, 0, 0], 99.5)
+    grey, exposed = demo.clip_image(spikes, 'auto')
+    assert exposed.gain == pytest.approx(1 / dark)
+    assert 'under-exposed' in exposed.reason
+    assert grey[0, 0] == 255 and grey[1, 2] == 255 and grey[0, 1] == 0
+    black, exposed = demo.clip_image(torch.zeros(4, 2, 3, dtype=torch.uint8),
+                                     'auto')
+    assert black.max() == 0 and exposed.gain == 1.0
 
     labels = np.zeros((2, 3), np.int64)
     palette = [[200, 100, 0]]

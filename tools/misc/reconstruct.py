@@ -9,11 +9,14 @@
 ``<file>.json`` side file). For each requested centre frame (default: the
 middle frame) the window of ``--num-steps`` frames centred on it goes through
 the method, and ``DIR/<stem>_<frame>.png`` (8-bit grey, upright) is written;
-each path is printed with the exposure gain applied and the image's 2-D
-entropy (a no-reference measure). ``--exposure auto`` (default) scales each
-image so that its 99.5th percentile is white, so a dark recording gives a
-visible image (:func:`wgse_mmseg.core.exposure.apply_exposure`); ``none``
-keeps the method's intensities; a number is a fixed gain.
+each path is printed with the exposure gain applied, the image's 2-D
+entropy (a no-reference measure) and why that gain. ``--exposure auto``
+(default) leaves an image of normal brightness as the method made it (a
+calibrated stream is never made worse) and brightens only a clearly
+under-exposed one, whose 99.5th percentile is below a quarter of white, so
+that percentile becomes white: a dark recording gives a visible image
+(:func:`wgse_mmseg.core.exposure.auto_exposure`); ``none`` keeps the
+method's intensities; a number is a fixed gain.
 
 ``--method wgse`` (default) runs the trained model of ``--checkpoint``: an
 mmengine checkpoint of a ``configs/reconstruction`` config or a file of
@@ -55,7 +58,8 @@ def parse_args(argv=None):
         help='window length for tfp/tfi (wgse uses its model\'s; default 41)')
     parser.add_argument(
         '--exposure', default='auto',
-        help='auto (99.5th percentile to white; default), none, or a gain')
+        help='auto (default: brightens only a clearly under-exposed image, '
+        'its 99.5th percentile to white), none, or a gain')
     parser.add_argument('--device', default='cpu', help='torch device')
     args = parser.parse_args(argv)
     try:
@@ -100,16 +104,16 @@ def main(argv=None):
     for frame, start in zip(frames, starts):
         window = load_spikes(args.spikes, args.height, args.width, start,
                              length)
-        exposed, gain = apply_exposure(method(window), args.exposure)
-        image = to_uint8(exposed)
+        exposed = apply_exposure(method(window), args.exposure)
+        image = to_uint8(exposed.image)
         path = osp.join(args.out, f'{stem}_{frame}.png')
         try:
             write_png(path, image)
         except OSError as err:
             sys.exit(f'{osp.basename(__file__)}: error: --out {args.out}: '
                      f'cannot write {path}: {err}')
-        print(f'{path}\texposure_gain={gain:.3g}\t'
-              f'entropy2d={entropy_2d(image):.3f}')
+        print(f'{path}\texposure_gain={exposed.gain:.3g}\t'
+              f'entropy2d={entropy_2d(image):.3f}\texposure: {exposed.reason}')
 
 
 if __name__ == '__main__':

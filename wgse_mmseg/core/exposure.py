@@ -1,79 +1,134 @@
-"""Exposure normalisation of images made from spikes.
+"""Exposure of images made from spikes.
 
-A dark recording (few spikes per pixel) gives an image far below white on
-the REDS scale (spike rate / 0.6), nearly black as 8 bits. :func:`apply_exposure`
-scales an image so that its bright end (the ``percentile``-th value, which
-ignores a few hot pixels) becomes white, and says by how much; the tools
-that write images (``tools/misc/reconstruct.py``, ``tools/demo.py``) do it by
-default and take ``--exposure none`` or a fixed gain instead.
+Images on the REDS scale (spike rate / 0.6, 1 = white) are calibrated: a
+stream of normal brightness already spans black to white, and scaling it
+only shifts its intensities away from the truth. A dark recording (few
+spikes per pixel, e.g. 1 in 50 steps) gives an image far below white, nearly
+black as 8 bits. ``'auto'`` exposure (:func:`auto_exposure`) therefore acts
+only on images that are clearly under-exposed for that calibration, those
+whose bright end (the ``percentile``-th value, which ignores a few hot
+pixels) lies below :data:`UNDER_EXPOSED_BELOW` of white, and scales their
+bright end to white; every other image passes untouched. The tools that
+write images (``tools/misc/reconstruct.py``, ``tools/demo.py``) apply it by
+default, say what it did and why, and take ``--exposure none`` or a fixed
+gain instead.
 """
-from typing import Tuple, Union
+from typing import NamedTuple, Tuple, Union
 
 import numpy as np
 
-__all__ = ['EXPOSURE_CHOICES', 'exposure_gain', 'apply_exposure',
+__all__ = ['EXPOSURE_CHOICES', 'UNDER_EXPOSED_BELOW', 'Exposed',
+           'auto_exposure', 'exposure_gain', 'apply_exposure',
            'parse_exposure']
 
 #: the non-numeric values of an ``exposure`` argument
 EXPOSURE_CHOICES = ('auto', 'none')
 
+#: ``'auto'`` brightens an image only when its bright end is below this
+#: fraction of white, i.e. when it would need a gain above 4. Calibrated
+#: streams of normal brightness sit far above it (the REDS streams' 99.5th
+#: percentile of TFP is 0.73-0.85); dark real recordings far below (the UHSR
+#: helicopter's is 0.12, a stream of 1 spike in 50 steps about 0.03-0.16).
+UNDER_EXPOSED_BELOW = 0.25
+
 Exposure = Union[str, float]
 
 
-def exposure_gain(image: np.ndarray, percentile: float = 99.5,
-                  max_gain: float = 64.0) -> float:
-    """The gain that maps the ``percentile``-th value of ``image`` to 1.
+class Exposed(NamedTuple):
+    """What :func:`apply_exposure` returns."""
 
-    Args:
-        image: ``(H, W)`` non-negative intensities, 1 = white.
-        percentile: in ``(0, 100]``; below 100 so that hot pixels do not set
-            the exposure.
-        max_gain: the gain is limited to ``[1 / max_gain, max_gain]``. An
-            image that is black at ``percentile`` but not everywhere gets
-            ``max_gain``; one that is black everywhere gets 1.
+    #: ``(H, W)`` float32 image in ``[0, 1]``
+    image: np.ndarray
+    #: the gain applied
+    gain: float
+    #: one sentence saying what was done and why
+    reason: str
 
-    Returns:
-        The gain, a positive float.
-    """
+
+def _bright_end(image: np.ndarray, percentile: float) -> float:
     values = np.asarray(image, dtype=np.float64)
     if values.size == 0 or not np.isfinite(values).all():
         raise ValueError(f'exposure needs a non-empty, finite image; got '
                          f'shape {values.shape} with '
                          f'{np.size(values) - np.isfinite(values).sum()} '
                          f'non-finite values')
-    if not 0 < percentile <= 100 or max_gain < 1:
-        raise ValueError(f'percentile must be in (0, 100] and max_gain >= 1;'
-                         f' got {percentile}, {max_gain}')
-    bright = float(np.percentile(values, percentile))
+    if not 0 < percentile <= 100:
+        raise ValueError(f'percentile must be in (0, 100]; got {percentile}')
+    return float(np.percentile(values, percentile))
+
+
+def auto_exposure(image: np.ndarray, percentile: float = 99.5,
+                  max_gain: float = 64.0,
+                  under_exposed_below: float = UNDER_EXPOSED_BELOW
+                  ) -> Tuple[float, str]:
+    """The gain ``'auto'`` exposure gives ``image``, and why.
+
+    Args:
+        image: ``(H, W)`` non-negative intensities, 1 = white.
+        percentile: in ``(0, 100]``; below 100 so that hot pixels do not set
+            the exposure.
+        max_gain: an under-exposed image gets at most this gain (>= 1); one
+            that is black at ``percentile`` but not everywhere gets it.
+        under_exposed_below: in ``(0, 1]``; an image whose bright end is at
+            or above this fraction of white is left as it is (gain 1).
+
+    Returns:
+        ``(gain, reason)``: a gain >= 1, and one sentence saying why.
+    """
+    if max_gain < 1 or not 0 < under_exposed_below <= 1:
+        raise ValueError(f'max_gain must be >= 1 and under_exposed_below in '
+                         f'(0, 1]; got {max_gain}, {under_exposed_below}')
+    bright = _bright_end(image, percentile)
+    where = f'bright end ({percentile:g}th percentile) {bright:.3g} of white'
+    if bright >= under_exposed_below:
+        return 1.0, (f'{where} >= {under_exposed_below:g}: normal brightness,'
+                     f' left as it is')
     if bright <= 0:
-        return 1.0 if values.max() <= 0 else float(max_gain)
-    return float(np.clip(1.0 / bright, 1.0 / max_gain, max_gain))
+        if np.max(image) <= 0:
+            return 1.0, f'{where}: black everywhere, left as it is'
+        return float(max_gain), (f'{where}: under-exposed (< '
+                                 f'{under_exposed_below:g}), the largest '
+                                 f'gain {max_gain:g} applied')
+    gain = min(1.0 / bright, float(max_gain))
+    return gain, (f'{where} < {under_exposed_below:g}: under-exposed, gain '
+                  f'{gain:.3g} brings it to white')
 
 
-def apply_exposure(image: np.ndarray,
-                   exposure: Exposure = 'auto') -> Tuple[np.ndarray, float]:
+def exposure_gain(image: np.ndarray, **kwargs) -> float:
+    """The gain of :func:`auto_exposure` (same arguments), without the
+    reason."""
+    return auto_exposure(image, **kwargs)[0]
+
+
+def apply_exposure(image: np.ndarray, exposure: Exposure = 'auto') -> Exposed:
     """``image`` times a gain, clipped to ``[0, 1]``.
 
     Args:
         image: ``(H, W)`` non-negative intensities, 1 = white.
-        exposure: ``'auto'`` (:func:`exposure_gain`), ``'none'`` (gain 1) or
-            a positive gain.
+        exposure: ``'auto'`` (:func:`auto_exposure`: only a clearly
+            under-exposed image is brightened), ``'none'`` (gain 1) or a
+            positive gain.
 
     Returns:
-        ``(H, W)`` float32 image in ``[0, 1]`` and the gain applied.
+        :class:`Exposed`: the ``(H, W)`` float32 image in ``[0, 1]``, the
+        gain applied and the reason.
     """
     if isinstance(exposure, str):
         if exposure not in EXPOSURE_CHOICES:
             raise ValueError(f'exposure must be one of {EXPOSURE_CHOICES} '
                              f'or a positive gain, got {exposure!r}')
-        gain = exposure_gain(image) if exposure == 'auto' else 1.0
+        if exposure == 'auto':
+            gain, reason = auto_exposure(image)
+        else:
+            gain, reason = 1.0, 'exposure none: left as it is'
     else:
         gain = float(exposure)
         if not np.isfinite(gain) or gain <= 0:
             raise ValueError(f'exposure gain must be positive and finite, '
                              f'got {exposure!r}')
+        reason = f'fixed gain {gain:g}'
     scaled = np.clip(np.asarray(image, dtype=np.float32) * gain, 0, 1)
-    return scaled, gain
+    return Exposed(scaled, gain, reason)
 
 
 def parse_exposure(text: str) -> Exposure:

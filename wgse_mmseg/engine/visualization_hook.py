@@ -24,10 +24,11 @@ def spike_clip_image(path: str, num_steps: Optional[int] = None,
                      width: Optional[int] = None) -> np.ndarray:
     """``(H, W, 3)`` uint8 grey TFP image of the clip at ``path``, read as
     the test pipeline reads it (``num_steps`` frames centred on the stream,
-    ``None`` for all) and exposure-normalised."""
+    ``None`` for all), with ``'auto'`` exposure (only a dark clip is
+    brightened)."""
     spikes = LoadSpikeFromFile(num_steps, height, width)(
         dict(img_path=path))['img']
-    grey, _ = apply_exposure(tfp(spikes.transpose(2, 0, 1)))
+    grey = apply_exposure(tfp(spikes.transpose(2, 0, 1))).image
     return np.repeat(to_uint8(grey)[..., None], 3, axis=2)
 
 
