@@ -14,6 +14,11 @@ EPOCHS=${EPOCHS:-5}
 DATA=${DATA:-data/synthetic_spike_cityscapes}
 WORK=${WORK:-work_dirs/quickstart_$(basename "$CONFIG" .py)}
 PY=.venv/bin/python
+# a one-epoch warm-up, then the decay: two epochs at least
+if ! [[ "$EPOCHS" =~ ^[0-9]+$ ]] || [ "$EPOCHS" -lt 2 ]; then
+    echo "quickstart.sh: EPOCHS must be an integer >= 2 (one warm-up epoch, then the decay), got '$EPOCHS'" >&2
+    exit 2
+fi
 
 bash tools/setup_env.sh
 "$PY" tools/dataset_converters/make_synthetic_dataset.py "$DATA" --num-steps 41

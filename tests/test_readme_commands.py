@@ -1,0 +1,246 @@
+"""Every command the README gives works as written, in the README's install
+mode (``tools/setup_env.sh``'s editable install in ``.venv``).
+
+Each command of the README's ``bash`` blocks (continuation lines joined,
+comments and ``[optional]`` parts left out) must have an entry in
+:data:`HOW`, keyed by its exact text, saying how it is checked:
+
+* ``RUN``: run here, literally, by :func:`test_readme_command_runs`;
+* a test's node id: that test runs the same tool on the same config with
+  only size-reducing options added (tiny data, fewer epochs);
+* ``CI``: ``.ci/run`` runs it on every submission;
+* :class:`NotHere` with the reason (GPUs, a cluster, a 30-minute compile)
+  and the test that runs its CPU counterpart.
+
+A command added or changed in the README without an entry here, an entry
+whose command is gone, a repository path a command names that does not
+exist, or a node id that names no test fails. The README's Python examples
+run as written.
+"""
+import ast
+import os
+import os.path as osp
+import re
+import shlex
+import subprocess
+import sys
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+
+ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+README = osp.join(ROOT, 'README.md')
+BIN = osp.dirname(sys.executable)
+SHARED = osp.normpath(osp.join(ROOT, '..', 'shared'))
+
+RUN = 'run here'
+CI = '.ci/run runs tools/run_tests.sh, which runs tools/setup_env.sh first'
+
+
+class NotHere(NamedTuple):
+    """A command that cannot run on a CI machine, why, and the test that runs
+    its CPU counterpart."""
+    why: str
+    counterpart: str
+
+
+TRAIN_TESTS = 'tests/tools/test_mim_end_to_end.py::' \
+    'test_mim_in_the_readme_install_mode'
+DIST_TEST = 'tests/tools/test_distributed_training.py::' \
+    'test_dist_train_and_dist_test_scripts_on_cpu'
+
+#: every README command, exactly as :func:`readme_commands` gives it
+HOW = {
+    'bash tools/quickstart.sh': RUN,
+    'bash tools/run_tests.sh': CI,
+    'bash tools/setup_env.sh': CI,
+    'MMCV=full bash tools/setup_env.sh': NotHere(
+        'compiles mmcv 2.1.0 for about 30 minutes and replaces mmcv-lite in '
+        'the environment the other tests use', 'tests/compat/test_compat.py::'
+        'test_full_mmcv_is_left_alone'),
+    'source .venv/bin/activate': RUN,
+    'CONFIG=configs/pspnet_wgse.py': RUN,
+    'python tools/train.py $CONFIG': TRAIN_TESTS,
+    'python tools/train.py $CONFIG --resume': TRAIN_TESTS,
+    'python tools/test.py $CONFIG work_dirs/pspnet_wgse/epoch_100.pth':
+        TRAIN_TESTS,
+    'python tools/demo.py clip_spike.spk $CONFIG CKPT --out-file seg.png':
+        'tests/tools/test_demo_and_example.py::test_demo_writes_overlay',
+    'bash tools/dist_train.sh configs/pspnet_wgse.py 8 --cfg-options '
+    'data_root=/data/spikes': NotHere('8 GPUs', DIST_TEST),
+    'bash tools/dist_test.sh configs/pspnet_wgse.py '
+    'work_dirs/pspnet_wgse/epoch_100.pth 8': NotHere('8 GPUs', DIST_TEST),
+    'NNODES=2 NODE_RANK=0 MASTER_ADDR=host0 bash tools/dist_train.sh '
+    'configs/pspnet_wgse.py 8': NotHere('two hosts with 8 GPUs', DIST_TEST),
+    'bash tools/slurm_train.sh PARTITION JOB_NAME configs/pspnet_wgse.py 16':
+        NotHere('a Slurm cluster', DIST_TEST),
+    'mim train wgse_mmseg configs/pspnet_wgse.py --gpus 8 --launcher pytorch':
+        NotHere('8 GPUs', TRAIN_TESTS),
+    'python tools/train.py configs/pspnet_wgse.py --cfg-options num_steps=41 '
+    'data_root=/data/spikes crop_size=128,256':
+        TRAIN_TESTS,
+    'python tools/dataset_converters/spike_cityscapes.py data/cityscapes '
+    'data/spike_cityscapes --nproc 2': 'tests/datasets/test_cityscapes_'
+    'conversion.py::test_cli_in_parallel_then_resume',
+    'python tools/analysis_tools/benchmark.py configs/pspnet_wgse.py '
+    'configs/pspnet_raw.py configs/segformer_b0_wgse.py '
+    'configs/segformer_b0_raw.py --crop 64 128 --repeat 3 --cfg-options '
+    'num_steps=41': 'tests/apis/test_benchmarking.py::'
+    'test_cli_prints_the_table_and_writes_json',
+    'python tools/analysis_tools/run_experiments.py '
+    'configs/experiments/grid_cpu.py --data-root '
+    'data/synthetic_spike_cityscapes --work-dir work_dirs/grid_cpu '
+    '--report-dir docs': 'tests/tools/test_run_experiments.py::'
+    'test_tiny_grid_end_to_end_and_resume',
+    'python tools/analysis_tools/benchmark.py configs/pspnet_wgse.py '
+    'configs/pspnet_raw.py configs/segformer_b0_wgse.py '
+    'configs/segformer_b0_raw.py --crop 64 128 --repeat 3 --cfg-options '
+    'num_steps=41 --out docs/configs_benchmark_cpu.json':
+        'tests/apis/test_benchmarking.py::'
+        'test_cli_prints_the_table_and_writes_json',
+    'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
+    '203_part2_key_id151.dat --height 250 --width 400 --frames 100,150,200 '
+    '--out recon/': RUN,
+    'python tools/misc/reconstruct.py clip.npy --out recon/ --method tfp':
+        RUN,
+    'python -m wgse_mmseg.apis.reconstruction_benchmark '
+    '../shared/data/reds_sample': RUN,
+}
+
+#: what a command run here must print (a regular expression)
+PRINTS = {
+    'bash tools/quickstart.sh': r'mIoU: [\d.]+',
+    'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
+    '203_part2_key_id151.dat --height 250 --width 400 --frames 100,150,200 '
+    '--out recon/': r'recon/203_part2_key_id151_200\.png\texposure_gain=1\t'
+                    r'.*left as it is',
+    'python tools/misc/reconstruct.py clip.npy --out recon/ --method tfp':
+        r'recon/clip_20\.png',
+    'python -m wgse_mmseg.apis.reconstruction_benchmark '
+    '../shared/data/reds_sample': r'\| WGSE \| \d\d\.\d\d \|',
+}
+
+#: environment a command run here gets: the quickstart's documented
+#: variables, for its shortest schedule into a temporary directory
+ENVIRONMENT = {
+    'bash tools/quickstart.sh': lambda tmp: dict(
+        EPOCHS='2', DATA=str(tmp / 'data'), WORK=str(tmp / 'work')),
+}
+
+#: what a command run here reads, made for it in its working directory
+INPUTS = {
+    'clip.npy': lambda path: np.save(path, (np.random.default_rng(0).random(
+        (41, 16, 24)) < 0.3).astype(np.uint8)),
+}
+
+
+def _blocks(language):
+    text = open(README, encoding='utf-8').read()
+    return re.findall(rf'^```{language}\n(.*?)^```', text, re.S | re.M)
+
+
+def readme_commands():
+    """The README's shell commands: continuation lines joined, comments and
+    ``[optional]`` parts left out, whitespace collapsed."""
+    commands = []
+    for block in _blocks('bash'):
+        for line in block.replace('\\\n', ' ').splitlines():
+            line = re.sub(r'\s#.*$', '', line)  # comments
+            line = re.sub(r'\[[^\]]*\]', '', line)  # [optional] parts
+            line = ' '.join(line.split())
+            if line:
+                commands.append(line)
+    return commands
+
+
+def test_every_readme_command_is_checked():
+    commands = readme_commands()
+    unchecked = [c for c in commands if c not in HOW]
+    stale = [c for c in HOW if c not in commands]
+    assert not unchecked, ('README commands without an entry in HOW (add '
+                           'one):\n' + '\n'.join(unchecked))
+    assert not stale, ('HOW entries the README no longer gives:\n' +
+                       '\n'.join(stale))
+
+
+@pytest.mark.parametrize('command', readme_commands())
+def test_readme_command_names_what_exists(command):
+    """Every repository path a command names is there; every test it is
+    checked by exists."""
+    for word in shlex.split(command):
+        value = word.split('=', 1)[-1]
+        if re.match(r'(tools|configs)/', value):
+            assert osp.exists(osp.join(ROOT, value)), (command, value)
+        elif value.startswith('wgse_mmseg.'):
+            module = osp.join(ROOT, *value.split('.'))
+            assert osp.isfile(module + '.py'), (command, value)
+    how = HOW.get(command)
+    nodes = [how.counterpart] if isinstance(how, NotHere) else \
+        [how] if isinstance(how, str) and '::' in how else []
+    for node in nodes:
+        path, name = node.split('::')
+        tree = ast.parse(open(osp.join(ROOT, path), encoding='utf-8').read())
+        names = {n.name for n in ast.walk(tree)
+                 if isinstance(n, ast.FunctionDef)}
+        assert name in names, f'{command}: no test {node}'
+
+
+def _session(tmp_path):
+    """A working directory like the repository root for a command run
+    here: the repository's files linked in, ``../shared`` beside it, and
+    the outputs (``recon/``, ``work_dirs/``) written inside it."""
+    work = tmp_path / 'repo'
+    work.mkdir()
+    for name in os.listdir(ROOT):
+        if name not in ('.git', 'work_dirs', 'data', 'recon'):
+            (work / name).symlink_to(osp.join(ROOT, name))
+    if osp.isdir(SHARED):
+        (tmp_path / 'shared').symlink_to(SHARED)
+    return work
+
+
+RUN_HERE = [c for c in readme_commands() if HOW.get(c) == RUN]
+
+
+@pytest.mark.parametrize('command', RUN_HERE)
+def test_readme_command_runs(command, tmp_path):
+    if '../shared' in command and not osp.isdir(SHARED):
+        pytest.skip(f'{SHARED} is absent (fresh clone)')
+    # The quickstart sets up .venv in the checkout itself (an editable
+    # install of the checkout), so it runs there; its outputs go to tmp.
+    cwd = ROOT if command == 'bash tools/quickstart.sh' else \
+        _session(tmp_path)
+    for name, make in INPUTS.items():
+        if name in shlex.split(command):
+            make(osp.join(cwd, name))
+    env = dict(os.environ, PATH=BIN + os.pathsep + os.environ['PATH'],
+               **ENVIRONMENT.get(command, lambda tmp: {})(tmp_path))
+    env.pop('TRITON_INTERPRET', None)  # the user's own shell
+    check = ("; python -c 'import os, sys, wgse_mmseg; "
+             "print(os.path.realpath(sys.prefix))'")
+    result = subprocess.run(['bash', '-c', f'set -e; {command}{check}'],
+                            cwd=cwd, env=env, capture_output=True,
+                            text=True, timeout=900)
+    log = result.stdout + result.stderr
+    assert result.returncode == 0, f'{command}:\n{log[-4000:]}'
+    # the README's install mode: the .venv's python answers to `python`
+    assert result.stdout.splitlines()[-1] == osp.realpath(
+        osp.dirname(BIN)), log[-2000:]
+    if command in PRINTS:
+        assert re.search(PRINTS[command], log), f'{command}:\n{log[-3000:]}'
+
+
+@pytest.mark.parametrize('block', [b for b in _blocks('python')
+                                   if not b.startswith('_base_')])
+def test_readme_python_example_runs(block, tmp_path):
+    """The README's Python examples run as written, in a fresh process;
+    config excerpts (``_base_ = ...``) are checked by the config tests."""
+    env = dict(os.environ, PATH=BIN + os.pathsep + os.environ['PATH'])
+    env.pop('TRITON_INTERPRET', None)
+    result = subprocess.run([sys.executable, '-c', block], cwd=tmp_path,
+                            env=env, capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    for expected in re.findall(r'# (torch\.Size\(\[[\d, ]+\]\))', block):
+        assert expected in result.stdout, result.stdout
