@@ -66,7 +66,7 @@ def test_config_defaults_are_the_papers(name):
     assert cfg.model.decode_head.loss_decode.type == 'CrossEntropyLoss'
     assert cfg.param_scheduler[0].end == 10  # 10-epoch warm-up
     has_wgse = cfg.model.data_preprocessor.enhancer is not None
-    assert has_wgse == ('_wgse_' in name)
+    assert has_wgse == name.endswith('_wgse')
     assert cfg.model.get('pretrained') is None
     assert tuple(cfg.custom_imports.imports) == wgse_mmseg.MMSEG_LAYER
 
@@ -123,7 +123,7 @@ def test_forward_backward_on_a_spike_batch(name):
     total.backward()
     grads = [p.grad for p in model.parameters() if p.grad is not None]
     assert grads and all(torch.isfinite(g).all() for g in grads)
-    if '_wgse_' in name:
+    if name.endswith('_wgse'):
         enhancer = model.data_preprocessor.enhancer
         assert any(p.grad is not None and p.grad.abs().sum() > 0
                    for p in enhancer.parameters())
