@@ -148,8 +148,8 @@ def test_auto_on_cpu_runs_torch_where_the_kernels_do_not_apply(kwargs):
 AVAILABLE = [name for name, backend in band_network_backends.BACKENDS.items()
              if backend.unavailable() is None]
 # (B, T, H, W): odd T; T shorter than db8's 16-tap filter; pixel counts
-# that are not a multiple of the Triton tiles (64 forward, 32 backward)
-# and span several of them.
+# that are not a multiple of the Triton tiles (16 pixels in the first
+# launch entries) and span several of them.
 SHAPES = [(1, 41, 5, 7), (2, 3, 3, 5), (1, 9, 9, 11)]
 
 
@@ -186,6 +186,39 @@ def test_triton_widths_and_no_wavelet(hidden):
         spikes = _spikes(1, 13, 3, 3, seed=hidden)
         _assert_close(_run(model, spikes, True),
                       _reference(model, spikes, True), 1e-4, str(kwargs))
+
+
+@needs_triton
+@pytest.mark.parametrize('entry', range(len(
+    triton_band_networks.FORWARD_CONFIGS)))
+def test_every_triton_launch_config_computes_the_same(monkeypatch, entry):
+    """Each entry a GPU may choose (tile, warps) of both kernels, over
+    pixels spanning several of the largest tiles and a partial one, matches
+    float64 (full float32 products; the fp16/bf16 paths run the first
+    entries in the autocast test below)."""
+    forward = triton_band_networks.FORWARD_CONFIGS[entry]
+    backward = triton_band_networks.BACKWARD_CONFIGS[entry]
+    monkeypatch.setattr(triton_band_networks, 'FORWARD_CONFIGS', (forward, ))
+    monkeypatch.setattr(triton_band_networks, 'BACKWARD_CONFIGS',
+                        (backward, ))
+    monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
+    model = _model(backend='triton')
+    spikes = _spikes(1, 9, 8, 9, seed=entry)  # 72 pixels
+    _assert_close(_run(model, spikes, True), _reference(model, spikes, True),
+                  triton_band_networks.TOLERANCES['ieee'],
+                  f'{forward} {backward}')
+
+
+@needs_triton
+def test_triton_rejects_a_launch_config_not_in_its_lists():
+    coeffs = torch.zeros(4, 5)
+    model = _model(backend='triton')
+    weights = [[(conv.weight, conv.bias) for conv, _ in net.layers()]
+               for net in model.band_networks[:1]]
+    with pytest.raises(ValueError, match='forward_config must be one of'):
+        triton_band_networks.triton_band_networks(
+            coeffs, [5], weights, forward_config=(
+                triton_band_networks.LaunchConfig(128, 2)))
 
 
 @needs_triton

@@ -2,7 +2,8 @@
 
 Runs the paper's band network (``num_blocks=1``: conv ``1 -> H``, conv
 ``H -> H`` plus the input, conv ``H -> 1``, each followed by ReLU; kernel 3)
-for every pixel, a tile of :data:`FORWARD_BLOCK` pixels per program, the
+for every pixel, a tile of pixels per program (:data:`FORWARD_CONFIGS`,
+:data:`BACKWARD_CONFIGS`: tile and warps, tuned per GPU and shape), the
 weights read once per program and the ``H x H`` layer on tensor cores
 (``tl.dot``). The backward pass recomputes each tile's activations while it
 streams the gradient, so nothing of size ``pixels x H`` is ever kept: the
@@ -16,18 +17,29 @@ convolutions, on by default), else full float32. Everything else, and every
 accumulation, is float32. The tolerances against float32 that the tests
 hold are :data:`TOLERANCES`.
 
+Launch configurations: each kernel has a short list of ``(block,
+num_warps)`` entries. On a GPU the first call of a kernel variant (device,
+band length, width, precision, input gradient, pixel count rounded up to a
+power of two) times every entry once and keeps the fastest
+(:func:`tuned_configs` lists the choices); under the interpreter, and where
+a caller names one, a given entry runs. Every entry is compiled ahead of
+time for sm_80, sm_89 and sm_90 by
+:mod:`~wgse_mmseg.core.wgse.triton_resources` and tested in the
+interpreter.
+
 Triton's interpreter (``TRITON_INTERPRET=1`` in the environment before
 triton is first imported) runs the same kernels on CPU tensors; the tests
 use it, since CI has no GPU.
 """
 import os
-from typing import List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
 
 try:
     import triton
+    import triton.testing
 
     from . import _triton_band_kernels as kernels
     _IMPORT_ERROR = None
@@ -35,16 +47,28 @@ except ImportError as error:  # triton is not installed (CPU-only torch)
     triton = kernels = None
     _IMPORT_ERROR = str(error)
 
-__all__ = ['FORWARD_BLOCK', 'BACKWARD_BLOCK', 'HIDDEN_CHANNELS',
-           'TOLERANCES', 'dot_precision', 'interpreting', 'unavailable',
-           'unsupported_network', 'unsupported_tensor',
-           'triton_band_networks']
+__all__ = ['LaunchConfig', 'FORWARD_CONFIGS', 'BACKWARD_CONFIGS',
+           'HIDDEN_CHANNELS', 'TOLERANCES', 'dot_precision', 'interpreting',
+           'unavailable', 'unsupported_network', 'unsupported_tensor',
+           'tuned_configs', 'triton_band_networks']
 
-#: Pixels per program in the forward and backward kernels; ``tl.dot``
-#: needs at least 16 rows. The backward holds about four times the forward's
-#: tiles in registers, hence its smaller tile.
-FORWARD_BLOCK = 64
-BACKWARD_BLOCK = 32
+
+class LaunchConfig(NamedTuple):
+    """How a kernel is launched: ``block`` pixels per program (``tl.dot``
+    needs at least 16) and ``num_warps`` warps per program."""
+    block: int
+    num_warps: int
+
+
+#: The entries a GPU chooses from, the first being what runs untuned (the
+#: interpreter's). The first entries keep the registers low enough for
+#: several programs per SM (docs/wgse_speed.md, "Compiled for GPUs": on
+#: sm_90 the forward at 16 pixels and 4 warps uses 96 registers a thread at
+#: 32 channels, 5 programs per SM; the backward holds three ``H x H``
+#: parameter-gradient sums besides, about 220 registers, 2 programs). 64
+#: pixels at 8 warps fitted one program per SM and spilled at 64 channels.
+FORWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(32, 4))
+BACKWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(32, 4))
 #: Hidden widths the kernels take (``tl.dot`` needs powers of two >= 16).
 HIDDEN_CHANNELS = (16, 32, 64)
 #: Largest error against float64, relative to the largest magnitude of the
@@ -110,26 +134,68 @@ def _band_params(params: Sequence[Tensor], band: int) -> List[Tensor]:
     return [p.contiguous() for p in params[6 * band:6 * band + 6]]
 
 
+#: (device name, kernel, band length, width, precision, input gradient,
+#: pixels rounded up to a power of two) -> the entry timed fastest there
+_TUNED: Dict[tuple, LaunchConfig] = {}
+
+
+def tuned_configs() -> Dict[str, Dict[str, int]]:
+    """The entries chosen so far in this process, by a readable key
+    (``'NVIDIA H100 | band_backward | L=72 H=32 tf32 input_grad=False |
+    <=524288 px'``): ``{'block', 'num_warps'}``."""
+    return {f'{device} | {kernel} | L={length} H={hidden} {precision}'
+            f'{"" if grad is None else f" input_grad={grad}"} | <={px} px':
+            config._asdict()
+            for (device, kernel, length, hidden, precision, grad, px),
+            config in _TUNED.items()}
+
+
+def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
+            launch: Callable[[LaunchConfig], None]) -> LaunchConfig:
+    """The entry of ``configs`` for this call: the first under the
+    interpreter; on a GPU the fastest of one timing of each (after a
+    compiling run), remembered per ``key`` and device."""
+    if interpreting():
+        return configs[0]
+    pixels = key[-1]
+    full_key = (torch.cuda.get_device_name(device), *key[:-1],
+                1 << max(pixels - 1, 0).bit_length())
+    if full_key not in _TUNED:
+        times = [triton.testing.do_bench(lambda c=c: launch(c), warmup=1,
+                                         rep=5) for c in configs]
+        _TUNED[full_key] = configs[times.index(min(times))]
+    return _TUNED[full_key]
+
+
 class _TritonBandNetworks(torch.autograd.Function):
     """Autograd wrapper; see :func:`triton_band_networks`."""
 
     @staticmethod
     def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
-                precision: str, *params: Tensor) -> Tensor:
+                precision: str, configs: Tuple[Optional[LaunchConfig], ...],
+                *params: Tensor) -> Tensor:
         pixels, columns = coeffs.shape
         hidden = params[0].shape[0]
         out = torch.empty_like(coeffs)
         offset = 0
         for band, length in enumerate(lengths):
+            band_params = _band_params(params, band)
+
+            def launch(config, offset=offset, length=length,
+                       band_params=band_params):
+                kernels.band_forward[(triton.cdiv(pixels, config.block), )](
+                    coeffs, out, columns, offset, pixels, *band_params,
+                    LENGTH=length, HIDDEN=hidden, BLOCK=config.block,
+                    PRECISION=precision, num_warps=config.num_warps)
+
             if pixels:
-                grid = (triton.cdiv(pixels, FORWARD_BLOCK), )
-                kernels.band_forward[grid](
-                    coeffs, out, columns, offset, pixels,
-                    *_band_params(params, band), LENGTH=length,
-                    HIDDEN=hidden, BLOCK=FORWARD_BLOCK, PRECISION=precision,
-                    num_warps=4)
+                launch(configs[0] or _choose(
+                    FORWARD_CONFIGS, ('band_forward', length, hidden,
+                                      precision, None, pixels),
+                    coeffs.device, launch))
             offset += length
         ctx.lengths, ctx.precision = lengths, precision
+        ctx.backward_config = configs[1]
         ctx.save_for_backward(coeffs, *params)
         return out
 
@@ -141,29 +207,43 @@ class _TritonBandNetworks(torch.autograd.Function):
         input_grad = ctx.needs_input_grad[0]
         grad_out = grad_out.contiguous()
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
-        programs = triton.cdiv(pixels, BACKWARD_BLOCK)
         grads, offset = [], 0
         for band, length in enumerate(ctx.lengths):
             band_params = _band_params(params, band)
             sizes = [p.numel() for p in band_params]
-            partial = coeffs.new_empty(programs, sum(sizes))
-            if programs:
-                kernels.band_backward[(programs, )](
+
+            def launch(config, offset=offset, length=length,
+                       band_params=band_params, sizes=sizes):
+                # one row of parameter-gradient sums per program
+                partial = coeffs.new_empty(triton.cdiv(pixels, config.block),
+                                           sum(sizes))
+                kernels.band_backward[(partial.shape[0], )](
                     coeffs, grad_out, coeffs if grad_coeffs is None else
                     grad_coeffs, partial, columns, offset, pixels,
                     *band_params, LENGTH=length, HIDDEN=hidden,
-                    BLOCK=BACKWARD_BLOCK, PRECISION=ctx.precision,
-                    INPUT_GRAD=input_grad, num_warps=4)
-            total = partial.sum(0)
+                    BLOCK=config.block, PRECISION=ctx.precision,
+                    INPUT_GRAD=input_grad, num_warps=config.num_warps)
+                return partial
+
+            if pixels:
+                total = launch(ctx.backward_config or _choose(
+                    BACKWARD_CONFIGS, ('band_backward', length, hidden,
+                                       ctx.precision, input_grad, pixels),
+                    coeffs.device, launch)).sum(0)
+            else:
+                total = coeffs.new_zeros(sum(sizes))
             grads += [g.view_as(p) for g, p in
                       zip(total.split(sizes), band_params)]
             offset += length
-        return (grad_coeffs, None, None, *grads)
+        return (grad_coeffs, None, None, None, *grads)
 
 
 def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
                          weights: Sequence[Sequence[Tuple[Tensor, Tensor]]],
-                         precision: str = 'ieee') -> Tensor:
+                         precision: str = 'ieee',
+                         forward_config: Optional[LaunchConfig] = None,
+                         backward_config: Optional[LaunchConfig] = None
+                         ) -> Tensor:
     """Run one band network per band over every pixel's coefficients.
 
     Args:
@@ -175,6 +255,10 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
             ``(H, 1, 3)``, ``(H, H, 3)``, ``(1, H, 3)`` and ``(H,)``,
             ``(H,)``, ``(1,)``, float32.
         precision: of the ``H x H`` products (:func:`dot_precision`).
+        forward_config, backward_config: the launch of each kernel; by
+            default the tuned choice among :data:`FORWARD_CONFIGS` and
+            :data:`BACKWARD_CONFIGS` (their first entries under the
+            interpreter).
 
     Returns:
         ``(N, C)``: each band's network output in place of its input.
@@ -210,5 +294,13 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
            for p in params):
         raise ValueError('the Triton kernel needs float32 parameters on '
                          f'{coeffs.device}')
+    for name, config, allowed in (
+            ('forward_config', forward_config, FORWARD_CONFIGS),
+            ('backward_config', backward_config, BACKWARD_CONFIGS)):
+        if config is not None and config not in allowed:
+            raise ValueError(f'{name} must be one of {list(allowed)} (the '
+                             f'entries compiled and tested), got {config!r}')
     return _TritonBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
-                                     precision, *params)
+                                     precision,
+                                     (forward_config, backward_config),
+                                     *params)
