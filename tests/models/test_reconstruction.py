@@ -112,6 +112,17 @@ def test_model_refuses_other_window_length():
         _tiny_model()(torch.zeros(1, 7, 8, 8))
 
 
+@pytest.mark.parametrize('enhancer', [None, dict(type='TFP', window=3)])
+def test_model_refuses_non_finite_inputs_with_or_without_enhancer(enhancer):
+    """The enhancers' one answer to NaN and Inf holds for the model too,
+    also without an enhancer (the head alone would return NaN)."""
+    inputs = torch.zeros(1, 5, 4, 4)
+    inputs[0, 2, 1, 1] = float('nan')
+    with pytest.raises(ValueError, match='SpikeReconstructor: inputs holds 1 '
+                       'non-finite'):
+        _tiny_model(enhancer=enhancer)(inputs)
+
+
 def test_model_batches_packed_uint8_inputs():
     model = _tiny_model(enhancer=None)
     data = model.data_preprocessor(dict(
@@ -320,8 +331,16 @@ def test_tfi_uses_the_interval_around_the_centre():
 def test_baselines_reject_bad_input():
     with pytest.raises(ValueError, match='T, H, W'):
         tfp(np.zeros((3, 4)))
-    with pytest.raises(ValueError, match='white_rate'):
-        tfi(np.zeros((3, 4, 4)), white_rate=0)
+    for white_rate in (0, -1, float('nan'), float('inf'), '0.6', True):
+        for baseline in (tfp, tfi):
+            with pytest.raises(ValueError, match='white_rate'):
+                baseline(np.zeros((3, 4, 4)), white_rate=white_rate)
+    spikes = np.zeros((3, 4, 4))
+    spikes[1, 2, 3] = np.nan
+    for baseline, name in ((tfp, 'TFP'), (tfi, 'TFI')):
+        with pytest.raises(ValueError, match=f'{name}: spikes holds 1 '
+                           f'non-finite value'):
+            baseline(spikes)
 
 
 # --------------------------------------------------------------- metrics

@@ -23,6 +23,7 @@ from mmengine.model import BaseModel, ImgDataPreprocessor
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import MODELS
+from ..core.checks import check_finite
 from ..core.io import atomic_output
 from ..core.reconstruction_baselines import tfi, tfp
 from ..utils.checkpoint import CheckpointError, read_checkpoint
@@ -75,6 +76,9 @@ class SpikeReconstructor(BaseModel):
             without normalisation by default.
         init_cfg: mmengine initialisation config.
 
+    Inputs holding NaN or Inf are refused (``ValueError``), as by every
+    enhancer.
+
     ``forward(inputs, data_samples, mode)``: ``'tensor'`` returns the raw
     ``(B, 1, H, W)`` output; ``'loss'`` the L1 loss against the samples'
     ``gt_image`` ``(1, H, W)``; ``'predict'`` the data samples with
@@ -110,6 +114,7 @@ class SpikeReconstructor(BaseModel):
                 f'SpikeReconstructor is built for (B, T={self.num_steps}, H, '
                 f'W) spike windows, got {tuple(inputs.shape)}; set num_steps '
                 f'in the config to the window length')
+        check_finite('SpikeReconstructor', 'inputs', inputs)
         features = self.enhancer(inputs) if self.enhancer else inputs
         return self.head(features)
 
