@@ -61,10 +61,12 @@ def test_representation_inputs(module, spikes):
     _raises(r'expects spikes shaped \(B, T, H, W\)', lambda: module(spikes))
 
 
-@pytest.mark.parametrize('value', [float('nan'), float('inf'), -1.0, 5.0])
-def test_tfi_refuses_what_cannot_be_spikes(value):
-    _raises('TFI expects binary spikes',
-            lambda: TFI()(torch.full((1, 9, 2, 2), value)))
+@pytest.mark.parametrize('value, match', [
+    (float('nan'), 'TFI: spikes holds 36 non-finite value'),
+    (float('inf'), 'TFI: spikes holds 36 non-finite value'),
+    (-1.0, 'TFI expects binary spikes'), (5.0, 'TFI expects binary spikes')])
+def test_tfi_refuses_what_cannot_be_spikes(value, match):
+    _raises(match, lambda: TFI()(torch.full((1, 9, 2, 2), value)))
 
 
 @pytest.mark.parametrize('args, kwargs, match', [

@@ -3,6 +3,7 @@ import os.path as osp
 
 import cv2
 import numpy as np
+import pytest
 
 from wgse_mmseg.apis.inferencer import SpikeSegInferencer
 from wgse_mmseg.core.io import save_spikes
@@ -34,3 +35,17 @@ def test_inferencer_predicts_and_draws_spike_files(tmp_path):
     # and the label maps MMSeg's inferencer returns by default
     masks = inferencer(paths[1])['predictions']
     assert masks.shape == (32, 64) and masks.dtype.kind in 'iu'
+
+
+def test_inferencer_executes_no_config_text_from_a_checkpoint(tmp_path):
+    """Without a config, mmengine's inferencer would execute the config text
+    the checkpoint carries (``Config.fromstring`` of ``meta['cfg']``)."""
+    import torch
+    marker = tmp_path / 'pwned'
+    path = str(tmp_path / 'downloaded.pth')
+    torch.save(dict(state_dict={}, meta=dict(cfg=(
+        f"open(r'{marker}', 'w').write('ran')\n"
+        f"model = dict(type='SpikeEncoderDecoder')\n"))), path)
+    with pytest.raises(ValueError, match='downloaded.pth.*not executed'):
+        SpikeSegInferencer(None, weights=path, device='cpu')
+    assert not marker.exists()

@@ -14,6 +14,8 @@ pytestmark = pytest.mark.usefixtures('single_thread')
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 NAMES = ['TFP', 'TFI', 'SpatialMeanFilter', 'TemporalMeanFilter']
+CLASSES = dict(TFP=TFP, TFI=TFI, SpatialMeanFilter=SpatialMeanFilter,
+               TemporalMeanFilter=TemporalMeanFilter)
 
 
 def stream(*pixels, num_steps):
@@ -135,8 +137,22 @@ def test_tfi_rejects_non_binary_input():
     spikes[0, 2, 1, 1] = 0.5
     with pytest.raises(ValueError, match='binary.*0.5'):
         TFI()(spikes)
-    with pytest.raises(ValueError, match='binary.*nan'):
-        TFI()(torch.full((1, 5, 2, 2), float('nan')))
+
+
+@pytest.mark.parametrize('value', [float('nan'), float('inf'),
+                                   float('-inf')])
+@pytest.mark.parametrize('name', NAMES)
+def test_non_finite_input_is_the_same_error_as_wgse(name, value):
+    """NaN and Inf: a ValueError naming the module, the argument and the
+    count, as WGSE gives on every backend (TFP and the mean filters used to
+    spread a NaN along their cumulative sums; TFI called it non-binary)."""
+    spikes = torch.zeros(2, 7, 3, 3, dtype=torch.float64)
+    spikes[0, 0, 0, 0] = spikes[1, 6, 2, 2] = value
+    nan = 2 if value != value else 0
+    with pytest.raises(ValueError, match=(
+            rf'^{name}: spikes holds 2 non-finite value\(s\) of 126 '
+            rf'\({nan} NaN, {2 - nan} \+-Inf\)')):
+        CLASSES[name]()(spikes)
 
 
 @pytest.mark.parametrize('name', NAMES)

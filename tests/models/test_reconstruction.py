@@ -112,6 +112,17 @@ def test_model_refuses_other_window_length():
         _tiny_model()(torch.zeros(1, 7, 8, 8))
 
 
+@pytest.mark.parametrize('enhancer', [None, dict(type='TFP', window=3)])
+def test_model_refuses_non_finite_inputs_with_or_without_enhancer(enhancer):
+    """The enhancers' one answer to NaN and Inf holds for the model too,
+    also without an enhancer (the head alone would return NaN)."""
+    inputs = torch.zeros(1, 5, 4, 4)
+    inputs[0, 2, 1, 1] = float('nan')
+    with pytest.raises(ValueError, match='SpikeReconstructor: inputs holds 1 '
+                       'non-finite'):
+        _tiny_model(enhancer=enhancer)(inputs)
+
+
 def test_model_batches_packed_uint8_inputs():
     model = _tiny_model(enhancer=None)
     data = model.data_preprocessor(dict(
@@ -185,6 +196,88 @@ def test_a_checkpoint_builds_only_reconstruction_models(tmp_path, model):
         load_reconstructor(path)
 
 
+def _exported_model_config():
+    return dict(type='SpikeReconstructor', num_steps=5, channels=8,
+                mid_channels=4, data_preprocessor=dict(
+                    type='ImgDataPreprocessor'),
+                enhancer=dict(type='WGSE', wavelet='haar', level=1,
+                              hidden_channels=4))
+
+
+def _system(marker):
+    return dict(type='os.system', command=f'touch {marker}')
+
+
+# (how the payload is placed in the exported model config, the key path the
+# error must name after "meta['model']")
+PLACEMENTS = [
+    (lambda m, p: p, '.type'),
+    (lambda m, p: dict(m, data_preprocessor=p), '.data_preprocessor.type'),
+    (lambda m, p: dict(m, enhancer=p), '.enhancer.type'),
+    (lambda m, p: dict(m, enhancer=dict(m['enhancer'], wavelet=p)),
+     '.enhancer.wavelet.type'),
+    (lambda m, p: dict(m, init_cfg=[dict(layer=[p])]),
+     '.init_cfg[0].layer[0].type'),
+    (lambda m, p: dict(m, channels=dict(a=dict(b=[0, (p, )]))),
+     '.channels.a.b[1][0].type'),
+    (lambda m, p: dict(m, _scope_='this'), '._scope_'),
+    (lambda m, p: dict(m, data_preprocessor=dict(type='ImgDataPreprocessor',
+                                                 _scope_='this')),
+     '.data_preprocessor._scope_'),
+    (lambda m, p: dict(m, enhancer=dict(m['enhancer'], _scope_='this')),
+     '.enhancer._scope_'),
+    (lambda m, p: dict(m, enhancer=dict(m['enhancer'], level=dict(
+        _scope_='this'))), '.enhancer.level._scope_'),
+    (lambda m, p: dict(m, enhancer=dict(m['enhancer'], command='x')),
+     '.enhancer.command'),
+]
+
+
+@pytest.mark.parametrize('form', ['model', 'cfg'])
+@pytest.mark.parametrize('placement, key', PLACEMENTS,
+                         ids=[key for _, key in PLACEMENTS])
+@pytest.mark.parametrize('loader', ['load_reconstructor', 'export_weights'])
+def test_a_checkpoint_config_chooses_no_code_at_any_depth(
+        tmp_path, form, placement, key, loader):
+    """The issue's crafted checkpoints: a type naming ``os.system`` or a
+    ``_scope_`` naming a module (``this`` prints on import), as plain data in
+    ``meta['model']`` or as ``meta['cfg']`` text, nested at several depths.
+    Nothing runs or is imported; the error names the file and the key."""
+    marker = tmp_path / 'pwned'
+    model = placement(_exported_model_config(), _system(marker))
+    meta = dict(model=model) if form == 'model' else dict(
+        cfg=f'model = {model!r}\n')
+    path = str(tmp_path / 'downloaded.pth')
+    torch.save(dict(state_dict=_tiny_model().state_dict(), meta=meta), path)
+    sys.modules.pop('this', None)
+    where = "meta['model']" if form == 'model' else "meta['cfg'] model"
+    with pytest.raises(ConfigDataError) as info:
+        if loader == 'load_reconstructor':
+            load_reconstructor(path)
+        else:
+            export_weights(path, str(tmp_path / 'out.pth'))
+    assert str(info.value).startswith(f'{path}: {where}{key}: ')
+    assert not marker.exists()
+    assert 'this' not in sys.modules
+    assert not (tmp_path / 'out.pth').exists()
+
+
+def test_an_exported_config_loads_and_round_trips(tmp_path):
+    """The allow-list passes what export_weights writes: the exported config
+    is the checked plain copy, and it loads to the same weights."""
+    model = _tiny_model()
+    source = tmp_path / 'iter_1.pth'
+    torch.save(dict(state_dict=model.state_dict(), meta=dict(
+        cfg=f'model = {_exported_model_config()!r}\n')), source)
+    out = tmp_path / 'exported.pth'
+    export_weights(str(source), str(out))
+    written = torch.load(out, weights_only=True)['meta']['model']
+    assert written == _exported_model_config()
+    loaded = load_reconstructor(str(out))
+    for name, value in model.state_dict().items():
+        torch.testing.assert_close(loaded.state_dict()[name], value)
+
+
 def test_cpu_config_trains_a_few_iterations(tmp_path):
     from mmengine.runner import Runner
     cfg = load_config(osp.join(CONFIGS, 'wgse_resnet_cpu.py'),
@@ -238,8 +331,16 @@ def test_tfi_uses_the_interval_around_the_centre():
 def test_baselines_reject_bad_input():
     with pytest.raises(ValueError, match='T, H, W'):
         tfp(np.zeros((3, 4)))
-    with pytest.raises(ValueError, match='white_rate'):
-        tfi(np.zeros((3, 4, 4)), white_rate=0)
+    for white_rate in (0, -1, float('nan'), float('inf'), '0.6', True):
+        for baseline in (tfp, tfi):
+            with pytest.raises(ValueError, match='white_rate'):
+                baseline(np.zeros((3, 4, 4)), white_rate=white_rate)
+    spikes = np.zeros((3, 4, 4))
+    spikes[1, 2, 3] = np.nan
+    for baseline, name in ((tfp, 'TFP'), (tfi, 'TFI')):
+        with pytest.raises(ValueError, match=f'{name}: spikes holds 1 '
+                           f'non-finite value'):
+            baseline(spikes)
 
 
 # --------------------------------------------------------------- metrics

@@ -40,8 +40,18 @@ class SpikeSegInferencer(MMSegInferencer):
     ``.dat``, ``.spk``, ``.npy`` or ``.npz`` files, or folders of them).
 
     Args: as ``MMSegInferencer`` (``model``: a config path or ``Config``;
-    ``weights``: a checkpoint).
+    ``weights``: a checkpoint). ``model`` is required: mmengine would
+    otherwise execute the config text the checkpoint carries
+    (``Config.fromstring`` of ``meta['cfg']``), and a checkpoint is data.
     """
+
+    def _init_model(self, cfg, weights: Optional[str], device: str = 'cpu'):
+        if not cfg:  # model=None: the config would come from the weights
+            raise ValueError(
+                f'SpikeSegInferencer needs a config (model=...); the config '
+                f'text in the checkpoint {weights} is data and is not '
+                f'executed')
+        return super()._init_model(cfg, weights, device)
 
     def _init_pipeline(self, cfg) -> Compose:
         pipeline = [step for step in cfg.test_dataloader.dataset.pipeline

@@ -1,7 +1,10 @@
-"""The integer check every argument validation in the package shares."""
+"""The checks every argument validation in the package shares: integers, and
+tensors free of NaN and Inf."""
 from numbers import Integral
 
-__all__ = ['is_integer']
+import torch
+
+__all__ = ['is_integer', 'check_finite']
 
 
 def is_integer(value, minimum=None) -> bool:
@@ -9,3 +12,25 @@ def is_integer(value, minimum=None) -> bool:
     is not one) and, with ``minimum``, at least ``minimum``."""
     return isinstance(value, Integral) and not isinstance(value, bool) and \
         (minimum is None or bool(value >= minimum))
+
+
+def check_finite(owner: str, name: str, tensor: torch.Tensor) -> None:
+    """Raise ``ValueError`` if ``tensor`` holds NaN or +-Inf.
+
+    The one answer of the enhancers (WGSE on every backend, TFP, TFI, the
+    mean filters) to non-finite input, given before any backend runs: the
+    backends would otherwise disagree (NaN out of some, finite values out of
+    others). The message names ``owner``, the argument ``name`` and how many
+    values are not finite. Integer and bool tensors pass without a pass
+    over the data; a float tensor costs one reduction (one device sync on a
+    GPU).
+    """
+    if not tensor.is_floating_point() or bool(torch.isfinite(tensor).all()):
+        return
+    bad = tensor.numel() - int(torch.isfinite(tensor).sum())
+    nan = int(torch.isnan(tensor).sum())
+    raise ValueError(
+        f'{owner}: {name} holds {bad} non-finite value(s) of '
+        f'{tensor.numel()} ({nan} NaN, {bad - nan} +-Inf); spike streams '
+        f'hold 0 and 1, and no enhancer gives a meaningful result for NaN '
+        f'or Inf')

@@ -15,6 +15,9 @@ the image". The package's simulator produces the same scale with
   frame (``1 / ISI``, with its conventions where the window cuts the
   interval) / ``white_rate``.
 """
+import math
+from numbers import Real
+
 import numpy as np
 import torch
 
@@ -31,8 +34,10 @@ def _check(spikes, white_rate: float) -> torch.Tensor:
         raise ValueError(
             f'spikes must be a non-empty (T, H, W) array, got shape '
             f'{spikes.shape}')
-    if white_rate <= 0:
-        raise ValueError(f'white_rate must be > 0, got {white_rate}')
+    if isinstance(white_rate, bool) or not isinstance(white_rate, Real) or \
+            not 0 < white_rate < math.inf:
+        raise ValueError(f'white_rate must be a finite number > 0, got '
+                         f'{white_rate!r}')
     return torch.from_numpy(spikes.astype(np.float64))[None]
 
 

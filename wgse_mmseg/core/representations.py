@@ -37,6 +37,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from .checks import check_finite
+
 __all__ = ['TemporalMeanFilter', 'TFP', 'TFI', 'SpatialMeanFilter']
 
 
@@ -57,11 +59,13 @@ class _FixedRepresentation(nn.Module):
         raise NotImplementedError
 
     def forward(self, spikes: torch.Tensor) -> torch.Tensor:
-        """``spikes`` ``(B, T, H, W)`` -> float ``(B, T, H, W)``."""
+        """``spikes`` ``(B, T, H, W)`` -> float ``(B, T, H, W)``; NaN or Inf
+        in ``spikes`` raises ``ValueError``, as in WGSE."""
         name = type(self).__name__
         if spikes.dim() != 4 or spikes.shape[1] < 1:
             raise ValueError(f'{name} expects spikes shaped (B, T, H, W) with '
                              f'T >= 1, got {tuple(spikes.shape)}')
+        check_finite(name, 'spikes', spikes)
         dtype = torch.float64 if spikes.dtype == torch.float64 else \
             torch.float32
         with torch.autocast(spikes.device.type, enabled=False):

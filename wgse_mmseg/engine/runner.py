@@ -1,7 +1,8 @@
 """The shipped configs' runner: mmengine's ``Runner`` that first gives the
 config's ``num_steps`` to every field built from it
-(:func:`wgse_mmseg.utils.num_steps.apply_num_steps`), and writes each
-checkpoint whole or not at all.
+(:func:`wgse_mmseg.utils.num_steps.apply_num_steps`), writes each
+checkpoint whole or not at all, and never executes config text a checkpoint
+carries.
 
 The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 ``tools/train.py``, which builds ``RUNNERS.build(cfg)`` when a config has a
@@ -17,6 +18,7 @@ from mmengine.logging import print_log
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
+from ..utils.checkpoint import CheckpointError
 from ..utils.num_steps import apply_num_steps
 
 __all__ = ['SpikeRunner']
@@ -25,8 +27,9 @@ __all__ = ['SpikeRunner']
 @RUNNERS.register_module()
 class SpikeRunner(Runner):
     """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` applies
-    ``cfg.num_steps`` first and whose :meth:`save_checkpoint` is atomic on
-    local disks; otherwise the same."""
+    ``cfg.num_steps`` first, whose :meth:`save_checkpoint` is atomic on
+    local disks and whose :meth:`load_checkpoint` refuses config text that
+    mmengine would execute; otherwise the same."""
 
     @classmethod
     def from_cfg(cls, cfg) -> 'SpikeRunner':
@@ -37,6 +40,23 @@ class SpikeRunner(Runner):
                       f'{sorted(set(changed.values()))[0]}, from a base '
                       f'config)', logger='current')
         return super().from_cfg(cfg)
+
+    def load_checkpoint(self, filename: str, *args, **kwargs) -> dict:
+        """mmengine's, but a checkpoint with a ``meta['config']`` entry is
+        refused (:class:`CheckpointError` naming the file): mmengine's
+        :meth:`resume` executes that text (``Config.fromstring``) to compare
+        GPU counts, so a checkpoint from elsewhere would run code. mmengine
+        itself writes the config under ``meta['cfg']``, which nothing
+        executes."""
+        checkpoint = super().load_checkpoint(filename, *args, **kwargs)
+        meta = checkpoint.get('meta')
+        if isinstance(meta, dict) and 'config' in meta:
+            raise CheckpointError(
+                f"{filename}: meta['config'] holds config text, which "
+                f"mmengine's resume would execute; a checkpoint is data and "
+                f"this entry is refused (mmengine writes its config under "
+                f"meta['cfg'])")
+        return checkpoint
 
     @master_only
     def save_checkpoint(self, out_dir: str, filename: str, *args, **kwargs):

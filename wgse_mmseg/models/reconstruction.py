@@ -13,24 +13,27 @@ linear output cannot die at initialisation, and predictions are clipped to
 ``WGSE(num_blocks=2)`` (long WGSE).
 """
 import os.path as osp
-from typing import Callable, Dict, List, Optional, Union
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
-from mmengine.model import BaseModel
+from mmengine.model import BaseModel, ImgDataPreprocessor
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import MODELS
+from ..core.checks import check_finite
 from ..core.io import atomic_output
 from ..core.reconstruction_baselines import tfi, tfp
 from ..utils.checkpoint import CheckpointError, read_checkpoint
 from ..utils.config_data import ConfigDataError, read_config_data
+from ..utils.safe_build import build_from_file_config, check_file_config
+from .enhancers import ENHANCERS
 
 __all__ = ['SpikeReconstructor', 'ResidualBlock', 'DEFAULT_WEIGHTS',
            'load_reconstructor', 'export_weights', 'reconstruction_method',
-           'METHODS']
+           'METHODS', 'RECONSTRUCTION_BUILDS']
 
 #: Weights shipped with the package (see docs/reconstruction.md).
 DEFAULT_WEIGHTS = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),
@@ -73,6 +76,9 @@ class SpikeReconstructor(BaseModel):
             without normalisation by default.
         init_cfg: mmengine initialisation config.
 
+    Inputs holding NaN or Inf are refused (``ValueError``), as by every
+    enhancer.
+
     ``forward(inputs, data_samples, mode)``: ``'tensor'`` returns the raw
     ``(B, 1, H, W)`` output; ``'loss'`` the L1 loss against the samples'
     ``gt_image`` ``(1, H, W)``; ``'predict'`` the data samples with
@@ -108,6 +114,7 @@ class SpikeReconstructor(BaseModel):
                 f'SpikeReconstructor is built for (B, T={self.num_steps}, H, '
                 f'W) spike windows, got {tuple(inputs.shape)}; set num_steps '
                 f'in the config to the window length')
+        check_finite('SpikeReconstructor', 'inputs', inputs)
         features = self.enhancer(inputs) if self.enhancer else inputs
         return self.head(features)
 
@@ -144,42 +151,32 @@ class SpikeReconstructor(BaseModel):
         return self._forward(inputs)[0, 0].clamp(0, 1).cpu().numpy()
 
 
-#: what a checkpoint's model config may build: the reconstruction model,
-#: with one of the registered enhancers (or none) in front
-RECONSTRUCTION_MODEL = 'SpikeReconstructor'
-ENHANCER_TYPES = ('WGSE', 'TFP', 'TFI', 'SpatialMeanFilter',
-                  'TemporalMeanFilter')
+#: what a checkpoint's model config may build (checked at every depth by
+#: :mod:`wgse_mmseg.utils.safe_build`): the reconstruction model, with one of
+#: the registered enhancers (or none) in front and mmengine's
+#: ``ImgDataPreprocessor`` (its default) batching the inputs
+RECONSTRUCTION_BUILDS = {
+    SpikeReconstructor: dict(
+        enhancer={enhancer: {} for enhancer in ENHANCERS},
+        data_preprocessor={ImgDataPreprocessor: {}}),
+}
 
 
-def _model_config(checkpoint: dict, path: str) -> dict:
-    """The checkpoint's model config, read as data and checked to build a
-    reconstruction model only."""
+def _model_config(checkpoint: dict, path: str) -> Tuple[Any, str]:
+    """The checkpoint's model config, as read (unchecked), and where in the
+    file it lies (for errors)."""
     meta = checkpoint.get('meta') or {}
     if not isinstance(meta, dict):
         raise ConfigDataError(f'{path}: meta is a {type(meta).__name__}, '
                               f'not a dict')
     if 'model' in meta:  # exported by export_weights
-        model = meta['model']
-    elif 'cfg' in meta:  # an mmengine Runner checkpoint
-        model = read_config_data(meta['cfg'],
-                                 f'{path} (meta["cfg"])').get('model')
-    else:
-        raise ValueError(
-            f'{path}: holds no model config (neither meta["model"] of '
-            f'export_weights nor meta["cfg"] of an mmengine checkpoint)')
-    if not isinstance(model, dict) or \
-            model.get('type') != RECONSTRUCTION_MODEL:
-        found = model.get('type') if isinstance(model, dict) else model
-        raise ConfigDataError(
-            f'{path}: the model config must build {RECONSTRUCTION_MODEL}, '
-            f'found {found!r}')
-    enhancer = model.get('enhancer')
-    if enhancer is not None and (not isinstance(enhancer, dict) or
-                                 enhancer.get('type') not in ENHANCER_TYPES):
-        raise ConfigDataError(
-            f'{path}: the enhancer must be None or one of {ENHANCER_TYPES}, '
-            f'found {enhancer!r}')
-    return dict(model)
+        return meta['model'], "meta['model']"
+    if 'cfg' in meta:  # an mmengine Runner checkpoint
+        return read_config_data(meta['cfg'], f'{path} (meta["cfg"])').get(
+            'model'), "meta['cfg'] model"
+    raise ValueError(
+        f'{path}: holds no model config (neither meta["model"] of '
+        f'export_weights nor meta["cfg"] of an mmengine checkpoint)')
 
 
 def _read_weights(path: str) -> dict:
@@ -204,7 +201,9 @@ def load_reconstructor(checkpoint: Optional[str] = None,
     """
     path = checkpoint or DEFAULT_WEIGHTS
     state = _read_weights(path)
-    model = MODELS.build(_model_config(state, path))
+    config, key = _model_config(state, path)
+    model = build_from_file_config(MODELS, config, RECONSTRUCTION_BUILDS,
+                                   path, key)
     try:
         model.load_state_dict(state['state_dict'], strict=True)
     except RuntimeError as err:
@@ -221,7 +220,9 @@ def export_weights(checkpoint: str, out: str) -> None:
     ``tools/misc/reconstruct.py`` read; about 4 bytes per parameter.
     """
     state = _read_weights(checkpoint)
-    model_cfg = _model_config(state, checkpoint)
+    config, key = _model_config(state, checkpoint)
+    model_cfg = check_file_config(config, RECONSTRUCTION_BUILDS, checkpoint,
+                                  key)
     exported = dict(state_dict=state['state_dict'],
                     meta=dict(model=model_cfg,
                               source=osp.basename(checkpoint)))

@@ -441,6 +441,54 @@ def test_stability_under_autocast(model_pair, dtype, tol):
     assert all(torch.isfinite(p.grad).all() for p in model.parameters())
 
 
+NON_FINITE = {'nan': float('nan'), 'inf': float('inf'),
+              '-inf': float('-inf')}
+
+
+@pytest.mark.parametrize('dtype', [torch.float32, torch.float64])
+@pytest.mark.parametrize('value', NON_FINITE)
+@pytest.mark.parametrize('backend', BACKENDS + ['auto'])
+def test_stability_non_finite_input_is_one_error_on_every_backend(
+        backend, value, dtype):
+    """NaN and Inf give the same ValueError on every backend, before any
+    backend runs (the compiled kernel used to return finite values for a
+    NaN input, the torch and Triton backends NaN)."""
+    model = _seeded(backend=backend).to(dtype)
+    x = _streams(41).to(dtype)
+    # the first, a middle and the last step of three streams
+    x[1, 0, 0, 0] = x[3, 20, 1, 2] = x[4, 40, 1, 1] = NON_FINITE[value]
+    x.requires_grad_(backend != 'compiled')
+    with pytest.raises(ValueError) as info:
+        model(x)
+    nan = 3 if value == 'nan' else 0
+    assert str(info.value).startswith(
+        f'WGSE: spikes holds 3 non-finite value(s) of {x.numel()} '
+        f'({nan} NaN, {3 - nan} +-Inf)')
+    assert model.backend_in_use is None
+
+
+def test_stability_the_check_leaves_valid_results_bit_identical(
+        model_pair, monkeypatch):
+    """Outputs and gradients of valid input are those of the same model
+    without the finiteness check, bit for bit."""
+    from wgse_mmseg.core.wgse import wgse as wgse_module
+    model, _ = model_pair
+    results = []
+    for checked in (True, False):
+        if not checked:
+            monkeypatch.setattr(wgse_module, 'check_finite',
+                                lambda *args: None)
+        x = _streams(41).requires_grad_(model.backend != 'compiled')
+        model.zero_grad()
+        y = model(x)
+        y.square().sum().backward()
+        results.append([y.detach(), x.grad] +
+                       [p.grad.clone() for p in model.parameters()])
+    for with_check, without in zip(*results):
+        assert (with_check is None and without is None) or \
+            torch.equal(with_check, without)
+
+
 # ----------------------------------------------------------------- errors
 def test_three_dimensional_input_raises():
     with pytest.raises(ValueError, match=r'\(B, T, H, W\)'):

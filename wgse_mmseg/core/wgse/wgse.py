@@ -27,7 +27,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .band_network_backends import get_backend, resolve_backend
-from ..checks import is_integer
+from ..checks import check_finite, is_integer
 from ..wavelets import (analysis_matrix, band_lengths, check_mode, get_wavelet,
                         synthesis_matrix)
 
@@ -267,11 +267,16 @@ class WGSE(nn.Module):
         return self._transforms[key]
 
     def forward(self, spikes: torch.Tensor) -> torch.Tensor:
-        """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats."""
+        """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats.
+
+        NaN or Inf in ``spikes`` raises ``ValueError`` before any backend
+        runs (:func:`~wgse_mmseg.core.checks.check_finite`), the same on
+        every backend."""
         if spikes.dim() != 4:
             raise ValueError(
                 f'WGSE expects spikes shaped (B, T, H, W), got '
                 f'{tuple(spikes.shape)}')
+        check_finite('WGSE', 'spikes', spikes)
         batch, num_steps, height, width = spikes.shape
         dtype = torch.float64 if spikes.dtype == torch.float64 else torch.float32
         weights = self.band_networks[0].output_convs[-1].weight.dtype

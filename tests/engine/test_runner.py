@@ -1,0 +1,50 @@
+"""SpikeRunner loads checkpoints as data: config text in one is never
+executed."""
+import os.path as osp
+
+import pytest
+import torch
+
+import wgse_mmseg
+from wgse_mmseg.utils.checkpoint import CheckpointError
+from wgse_mmseg.utils.config import build_runner, load_config
+
+wgse_mmseg.register_all_modules()
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+
+
+@pytest.fixture
+def runner(tmp_path):
+    cfg = load_config(osp.join(ROOT, 'configs', 'reconstruction',
+                               'wgse_resnet_cpu.py'),
+                      {'model.channels': 4, 'model.mid_channels': 4})
+    cfg.work_dir = str(tmp_path / 'work')
+    runner = build_runner(cfg)
+    assert type(runner).__name__ == 'SpikeRunner'
+    return runner
+
+
+def test_resume_executes_no_config_text_from_a_checkpoint(runner, tmp_path):
+    """mmengine's ``Runner.resume`` executes ``meta['config']`` with
+    ``Config.fromstring``; SpikeRunner refuses the checkpoint first, naming
+    the file and the key, and nothing is written."""
+    marker = tmp_path / 'pwned'
+    path = str(tmp_path / 'downloaded.pth')
+    torch.save(dict(state_dict=runner.model.state_dict(), meta=dict(
+        epoch=0, iter=1,
+        config=f"open(r'{marker}', 'w').write('ran')\ngpu_ids = [0]\n")),
+        path)
+    with pytest.raises(CheckpointError,
+                       match=r"downloaded.pth: meta\['config'\]"):
+        runner.resume(path)
+    assert not marker.exists()
+
+
+def test_a_checkpoint_with_its_config_as_data_still_loads(runner, tmp_path):
+    """What mmengine writes (``meta['cfg']`` text) is not refused."""
+    path = str(tmp_path / 'iter_1.pth')
+    torch.save(dict(state_dict=runner.model.state_dict(),
+                    meta=dict(cfg=runner.cfg.pretty_text, iter=1)), path)
+    checkpoint = runner.load_checkpoint(path, strict=True)
+    assert checkpoint['meta']['iter'] == 1
