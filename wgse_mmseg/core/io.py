@@ -27,13 +27,15 @@ temporary file beside the target, renamed into place when complete.
 """
 import contextlib
 import functools
+import hashlib
+import io
 import math
 import os
 import os.path as osp
 import struct
 import tempfile
 import zipfile
-from typing import BinaryIO, Iterator, Optional, Tuple
+from typing import BinaryIO, Iterator, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -42,7 +44,8 @@ from .checks import is_integer
 from .limits import READ_LIMIT_BYTES, cut, excerpt, load_json_file
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'centered_window', 'atomic_output', 'write_png', 'to_uint8',
+           'centered_window', 'atomic_output', 'WrittenFile', 'write_bytes',
+           'write_png', 'to_uint8',
            'SPIKE_EXTENSIONS']
 
 SPIKE_EXTENSIONS = ('.dat', '.spk', '.npy', '.npz')
@@ -80,14 +83,29 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
         raise
 
 
-def write_png(path: str, image: np.ndarray) -> None:
+class WrittenFile(NamedTuple):
+    """What a writer put in a file: its size in bytes and the SHA-256 (hex)
+    of those bytes, computed from memory, not read back from disk."""
+    size: int
+    sha256: str
+
+
+def write_bytes(path: str, data: bytes) -> WrittenFile:
+    """Write ``data`` to ``path``, appearing complete or not at all
+    (:func:`atomic_output`); returns its size and SHA-256."""
+    with atomic_output(path) as f:
+        f.write(data)
+    return WrittenFile(len(data), hashlib.sha256(data).hexdigest())
+
+
+def write_png(path: str, image: np.ndarray) -> WrittenFile:
     """Write an 8-bit ``(H, W)`` (grey, labels) or ``(H, W, 3)`` (BGR, OpenCV's
-    order) image as a PNG; the file appears complete or not at all."""
+    order) image as a PNG; the file appears complete or not at all.
+    Returns what was written (:class:`WrittenFile`)."""
     ok, encoded = cv2.imencode('.png', image)
     if not ok:
         raise OSError(f'{path}: PNG encoding failed')
-    with atomic_output(path) as f:
-        f.write(encoded.tobytes())
+    return write_bytes(path, encoded.tobytes())
 
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
@@ -418,10 +436,11 @@ def load_spikes(path: str, height: Optional[int] = None,
     return np.ascontiguousarray(spikes)
 
 
-def save_spikes(path: str, spikes: np.ndarray) -> None:
+def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
     """Write a ``(T, H, W)`` 0/1 array to ``path`` (format from extension).
 
-    The file appears complete or not at all.
+    The file appears complete or not at all. Returns what was written
+    (:class:`WrittenFile`: size and SHA-256 of the bytes, from memory).
     """
     ext = _extension(path)
     spikes = np.asarray(spikes)
@@ -436,13 +455,16 @@ def save_spikes(path: str, spikes: np.ndarray) -> None:
         raise SpikeFileError(
             f'{path}: .dat needs height*width divisible by 8, got '
             f'{height}x{width}')
-    with atomic_output(path) as f:
-        if ext == '.dat':
-            f.write(_pack(spikes[:, ::-1]).tobytes())
-        elif ext == '.spk':
-            f.write(_HEADER.pack(_MAGIC, _VERSION, steps, height, width))
-            f.write(_pack(spikes).tobytes())
-        elif ext == '.npy':
-            np.save(f, spikes)
+    if ext == '.dat':
+        data = _pack(spikes[:, ::-1]).tobytes()
+    elif ext == '.spk':
+        data = _HEADER.pack(_MAGIC, _VERSION, steps, height, width) + \
+            _pack(spikes).tobytes()
+    else:
+        buffer = io.BytesIO()
+        if ext == '.npy':
+            np.save(buffer, spikes)
         else:
-            np.savez_compressed(f, spikes=spikes)
+            np.savez_compressed(buffer, spikes=spikes)
+        data = buffer.getvalue()
+    return write_bytes(path, data)
