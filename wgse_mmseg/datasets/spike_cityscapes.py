@@ -36,7 +36,7 @@ class SpikeCityscapesDataset(CityscapesDataset):
     Only samples whose marker matches are served; the others (a run killed
     mid-sample, a re-run with other settings killed after writing one of
     the files) are skipped, and how many and why is logged and kept in
-    :attr:`skipped`.
+    ``self.skipped`` (reason -> count).
 
     Args:
         verify: ``'size'`` (default, at start-up: the marker exists, parses,
