@@ -497,3 +497,258 @@ def test_damaged_files_read_correctly_or_fail_naming_the_file(damaged):
         assert spikes.dtype == np.uint8 and spikes.shape == shape
         assert spikes.ndim == 3 and spikes.size > 0
         assert set(np.unique(spikes)) <= {0, 1}
+
+
+# ------------------------------------------------- hostile sizes and values
+def _write_npz_bomb(path, shape, frames_written=None):
+    """An ``.npz`` whose ``spikes.npy`` member declares a ``uint8`` array
+    of ``shape`` and holds zeros: each MiB of zeros deflates to ~1 kB, so a
+    GiB takes ~1 MB on disk. The member is built from one compressed piece
+    (a frame, at most a MiB) repeated (each piece ends with a full flush, so pieces are independent),
+    not by compressing a GiB. ``frames_written`` (default ``shape[0]``)
+    frames of data follow the header; the zip declares the size the header
+    says, so fewer or more frames make a member that lies."""
+    import io
+    import struct
+    import zlib
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, dict(descr='|u1', fortran_order=False, shape=shape))
+    header = header.getvalue()
+    frame = shape[1] * shape[2]
+    steps = shape[0] if frames_written is None else frames_written
+    piece = bytes(min(frame, 1 << 20))
+    assert frame % len(piece) == 0
+
+    def deflated(data):
+        compressor = zlib.compressobj(9, zlib.DEFLATED, -15)
+        return compressor.compress(data) + compressor.flush(zlib.Z_FULL_FLUSH)
+
+    pieces = steps * frame // len(piece)
+    data = deflated(header) + deflated(piece) * pieces + zlib.compressobj(
+        9, zlib.DEFLATED, -15).flush()
+    crc = zlib.crc32(header)
+    for _ in range(pieces):
+        crc = zlib.crc32(piece, crc)
+    size = len(header) + shape[0] * frame  # what the zip declares
+    name = b'spikes.npy'
+    local = struct.pack('<4sHHHHHIIIHH', b'PK\x03\x04', 20, 0, 8, 0, 0x21,
+                        crc, len(data), size, len(name), 0) + name
+    central = struct.pack('<4sHHHHHHIIIHHHHHII', b'PK\x01\x02', 20, 20, 0,
+                          8, 0, 0x21, crc, len(data), size, len(name), 0, 0,
+                          0, 0, 0, 0) + name
+    end = struct.pack('<4sHHHHIIH', b'PK\x05\x06', 0, 0, 1, 1, len(central),
+                      len(local) + len(data), 0)
+    with open(path, 'wb') as f:
+        f.write(local + data + central + end)
+
+
+@pytest.fixture
+def inflated(monkeypatch):
+    """Counts the bytes zip members inflate (ZipExtFile.read, which its
+    seek also uses)."""
+    import zipfile
+    counted = [0]
+    read = zipfile.ZipExtFile.read
+
+    def counting(self, n=-1):
+        data = read(self, n)
+        counted[0] += len(data)
+        return data
+
+    monkeypatch.setattr(zipfile.ZipExtFile, 'read', counting)
+    return counted
+
+
+def test_npz_bomb_is_read_lazily_within_bounds(tmp_path):
+    """1 MB on disk, 1 GiB inflated: three reads of a 9-frame window stay
+    far from inflating it (< 5 s, < 100 MB extra)."""
+    import time
+    import tracemalloc
+    path = str(tmp_path / 'bomb.npz')
+    _write_npz_bomb(path, (1024, 1024, 1024))
+    assert osp.getsize(path) < 2e6
+    tracemalloc.start()
+    began = time.perf_counter()
+    for _ in range(3):
+        assert spike_shape(path) == (1024, 1024, 1024)
+        window = load_spikes(path, start=0, length=9)
+        assert window.shape == (9, 1024, 1024) and not window.any()
+    seconds = time.perf_counter() - began
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert seconds < 5 and peak < 100e6, (seconds, peak)
+
+
+def test_npz_member_inflates_once_up_to_the_window(tmp_path, inflated):
+    path = str(tmp_path / 'clip.npz')
+    _write_npz_bomb(path, (64, 256, 256))  # 4 MiB inflated
+    frame = 256 * 256
+    window = load_spikes(path, start=30, length=9)
+    assert window.shape == (9, 256, 256) and not window.any()
+    first = inflated[0]
+    assert 39 * frame <= first <= 39 * frame + 1024  # the npy header
+    load_spikes(path, start=30, length=9)
+    load_spikes(path, start=30, length=9)
+    assert inflated[0] - first < 1024  # the headers of spike_shape only
+    # a rewritten file is read anew, not served from the last read
+    spikes = _random_spikes((64, 4, 6), seed=1)
+    save_spikes(path, spikes)
+    np.testing.assert_array_equal(load_spikes(path, start=30, length=9),
+                                  spikes[30:39])
+
+
+def test_npz_member_over_the_limit_is_refused_before_inflating(
+        tmp_path, inflated, monkeypatch):
+    path = str(tmp_path / 'bomb.npz')
+    _write_npz_bomb(path, (64, 256, 256))
+    monkeypatch.setattr(spike_io, 'READ_LIMIT_BYTES', 1 << 20)
+    for read in (spike_shape, load_spikes):
+        with pytest.raises(SpikeFileError,
+                           match=_path_in_message(path) + '.*declares '
+                           f'{64 * 256 * 256 + 128} inflated bytes'):
+            read(path)
+    assert inflated[0] == 0
+
+
+@pytest.mark.parametrize('frames_written', [8, 64])
+def test_npz_member_inflating_past_its_declared_size_is_stopped(
+        tmp_path, inflated, frames_written):
+    """A member holding 64 frames of data but declaring 1 (or declaring 64
+    and holding 8): it inflates no more than it declared, and a read that
+    meets the lie fails naming the file."""
+    path = str(tmp_path / 'liar.npz')
+    shape = (16 if frames_written == 64 else 64, 256, 256)
+    _write_npz_bomb(path, shape, frames_written)
+    declared = 128 + shape[0] * 256 * 256
+    try:
+        spikes = load_spikes(path)
+    except SpikeFileError as error:
+        assert path in str(error)
+    else:  # cannot happen: the CRC or the length disagrees at the end
+        pytest.fail(f'read {spikes.shape} from a lying member')
+    assert inflated[0] <= declared
+
+
+def test_npy_header_declaring_more_than_the_file_is_refused(tmp_path):
+    import io
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, dict(descr='<f8', fortran_order=False,
+                     shape=(10**6, 10**6, 10**6)))
+    path = str(tmp_path / 'huge.npy')
+    with open(path, 'wb') as f:
+        f.write(header.getvalue() + bytes(64))
+    for read in (spike_shape, load_spikes):
+        with pytest.raises(SpikeFileError,
+                           match=_path_in_message(path) + '.*header says'):
+            read(path)
+
+
+def test_spk_header_with_an_empty_dimension_is_refused(tmp_path):
+    path = str(tmp_path / 'flat.spk')
+    with open(path, 'wb') as f:
+        f.write(struct.pack('<8sIIII8x', b'WGSESPK1', 1, 5, 0, 8))
+    with pytest.raises(SpikeFileError, match='each must be >= 1'):
+        load_spikes(path)
+
+
+@pytest.mark.parametrize('ext', ['.dat', '.spk', '.npy'])  # .npz: above
+def test_windows_over_the_read_limit_are_refused(tmp_path, ext, monkeypatch):
+    path = str(tmp_path / ('clip' + ext))
+    spikes = _random_spikes((10, 4, 6), seed=3)
+    save_spikes(path, spikes)
+    kwargs = dict(height=4, width=6) if ext == '.dat' else {}
+    monkeypatch.setattr(spike_io, 'READ_LIMIT_BYTES', 4 * 24)
+    np.testing.assert_array_equal(
+        load_spikes(path, start=6, length=4, **kwargs), spikes[6:])
+    with pytest.raises(SpikeFileError, match='read limit'):
+        load_spikes(path, start=5, length=5, **kwargs)
+
+
+@pytest.mark.parametrize('name, value', [
+    ('start', 1.5), ('start', -1), ('start', True), ('start', '0'),
+    ('start', None), ('length', 0), ('length', 2.5), ('length', '2'),
+    ('height', 4.0), ('width', 0), ('width', 'x' * 10000)])
+@pytest.mark.parametrize('ext', ['.dat', '.npz'])
+def test_bad_read_arguments_are_named(tmp_path, name, value, ext):
+    path = str(tmp_path / ('clip' + ext))
+    save_spikes(path, _random_spikes((4, 4, 6), seed=4))
+    kwargs = dict(height=4, width=6, start=1, length=2)
+    kwargs[name] = value
+    with pytest.raises(SpikeFileError, match=f'{name} must be an integer') \
+            as info:
+        load_spikes(path, **kwargs)
+    assert path in str(info.value) and len(str(info.value)) < 600
+
+
+@pytest.mark.parametrize('content, match', [
+    ('{"height": "4", "width": 6}', 'integers >= 1'),
+    ('{"height": 4.0, "width": 6}', 'integers >= 1'),
+    ('{"height": Infinity, "width": 6}', 'integers >= 1'),
+    ('{"height": true, "width": 6}', 'integers >= 1'),
+    ('[4, 6]', 'integers >= 1'),
+    ('[' * 100000 + ']' * 100000, 'nested too deeply'),
+    ('{"height": 4, "width": 6, "pad": "' + 'x' * (1 << 20) + '"}',
+     'larger than'),
+    (b'\xff\xfe', 'UTF-8'),
+])
+def test_hostile_side_files(tmp_path, content, match):
+    path = _write_dat(tmp_path)
+    with open(path + '.json', 'wb') as f:
+        f.write(content if isinstance(content, bytes) else content.encode())
+    with pytest.raises(SpikeFileError, match=match) as info:
+        load_spikes(path)
+    assert path in str(info.value) and len(str(info.value)) < 600
+
+
+@st.composite
+def _arrays(draw):
+    """A 0/1 ``(T, H, W)`` array of some dtype, in C or Fortran order."""
+    shape = (draw(st.integers(1, 8)), draw(st.integers(1, 5)),
+             draw(st.integers(1, 5)))
+    dtype = draw(st.sampled_from(['bool', 'uint8', '>i2', 'float32']))
+    array = _random_spikes(shape, draw(st.integers(0, 2**16))).astype(dtype)
+    return np.asfortranarray(array) if draw(st.booleans()) else array
+
+
+@pytest.mark.parametrize('ext', ['.npy', '.npz'])
+@given(array=_arrays(), start=st.integers(0, 9),
+       length=st.one_of(st.none(), st.integers(1, 9)))
+def test_array_windows_equal_slicing(ext, array, start, length):
+    """Any dtype and memory order NumPy writes: the window is the slice, as
+    uint8, or the window does not fit and the error names the file."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = osp.join(tmp, 'a' + ext)
+        (np.save if ext == '.npy' else np.savez)(path, array)
+        stop = len(array) if length is None else start + length
+        if start >= len(array) or stop > len(array):
+            with pytest.raises(SpikeFileError, match=_path_in_message(path)):
+                load_spikes(path, start=start, length=length)
+            return
+        window = load_spikes(path, start=start, length=length)
+        assert window.dtype == np.uint8
+        np.testing.assert_array_equal(window, array[start:stop])
+
+
+_ANY_VALUE = st.one_of(
+    st.none(), st.booleans(), st.integers(-2**70, 2**70),
+    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=20),
+    st.lists(st.integers(), max_size=3))
+
+
+@pytest.mark.parametrize('ext', ['.dat', '.spk', '.npz'])
+@given(start=_ANY_VALUE, length=_ANY_VALUE)
+def test_any_window_arguments_read_or_name_the_problem(ext, start, length):
+    with tempfile.TemporaryDirectory() as tmp:
+        path = osp.join(tmp, 'a' + ext)
+        spikes = _random_spikes((6, 4, 6), seed=5)
+        save_spikes(path, spikes)
+        kwargs = dict(height=4, width=6) if ext == '.dat' else {}
+        try:
+            window = load_spikes(path, start=start, length=length, **kwargs)
+        except SpikeFileError as error:
+            assert path in str(error)
+            return
+        np.testing.assert_array_equal(
+            window, spikes[start:None if length is None else start + length])

@@ -612,6 +612,64 @@ def test_bad_scene_files_name_the_file(tmp_path, text, suffix, message):
     assert str(path) in str(info.value)
 
 
+def _billion_laughs():
+    """A YAML scene of ~500 bytes whose aliases expand to 10**9 strings
+    (the parameters of a known effect, so that an error message would
+    format them)."""
+    lines = ['shot_noise:', ' - &a0 [lol,lol,lol,lol,lol,lol,lol,lol,lol,lol]']
+    lines += [f' - &a{i} [' + ','.join([f'*a{i - 1}'] * 10) + ']'
+              for i in range(1, 9)]
+    return '\n'.join(lines) + '\n'
+
+
+def test_yaml_aliases_are_refused_within_bounds(tmp_path):
+    """The billion laughs: refused at its first alias, fast and small,
+    with an error naming the file and quoting a bounded excerpt."""
+    import time
+    import tracemalloc
+    text = _billion_laughs()
+    assert len(text) < 600
+    path = tmp_path / 'laughs.yaml'
+    path.write_text(text)
+    tracemalloc.start()
+    began = time.perf_counter()
+    with pytest.raises(ValueError, match='alias') as info:
+        simulate_spikes(_image(), 5, effects=path)
+    seconds = time.perf_counter() - began
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert seconds < 5 and peak < 100e6
+    assert str(path) in str(info.value) and len(str(info.value)) < 1000
+    # a single anchor without an alias is plain YAML
+    path.write_text('shot_noise: &noise {electrons: 1000}\n')
+    assert simulate_spikes(_image(), 5, effects=path)[1] == simulate_spikes(
+        _image(), 5, effects={'shot_noise': {'electrons': 1000}})[1]
+
+
+@pytest.mark.parametrize('text, suffix', [
+    ('shot_noise: {electrons: "' + 'x' * 100000 + '"}', '.yaml'),
+    ('{"shot_noise": {"' + 'k' * 100000 + '": 1}}', '.json'),
+    ('{"' + 'sparkle' * 20000 + '": {}}', '.json'),
+    ('[' * 100000 + ']' * 100000, '.json'),
+    ('[' * 100000 + ']' * 100000, '.yaml'),
+    ('&' + 'a' * 100000 + ' x: *' + 'a' * 100000, '.yaml'),
+])
+def test_scene_errors_quote_bounded_excerpts(tmp_path, text, suffix):
+    path = tmp_path / ('scene' + suffix)
+    path.write_text(text)
+    with pytest.raises(ValueError) as info:
+        simulate_spikes(_image(), 5, effects=path)
+    assert str(path) in str(info.value) and len(str(info.value)) < 1000
+
+
+def test_scene_files_over_the_limit_are_refused_unread(tmp_path):
+    from wgse_mmseg.core.limits import TEXT_FILE_LIMIT_BYTES
+    path = tmp_path / 'big.yaml'
+    path.write_text('# ' + 'x' * TEXT_FILE_LIMIT_BYTES + '\nshot_noise: {}\n')
+    with pytest.raises(ValueError, match='larger than'):
+        simulate_spikes(_image(), 5, effects=path)
+
+
 # ------------------------------------------------------------------- errors
 @pytest.mark.parametrize('kwargs, message', [
     (dict(threshold=-1.0), 'threshold'),

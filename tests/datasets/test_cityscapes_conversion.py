@@ -357,11 +357,90 @@ def _sample_bytes(out, stem):
     return [open(osp.join(out, p), 'rb').read() for p in paths]
 
 
+def _served(out, split, verify='size'):
+    """Stems the dataset on ``out``'s ``split`` serves, and its skipped
+    counts (reason -> count)."""
+    try:
+        dataset = SpikeCityscapesDataset(
+            data_root=out, data_prefix=dict(img_path=f'spike/{split}',
+                                            seg_map_path=f'gtFine/{split}'),
+            pipeline=[], verify=verify)
+    except FileNotFoundError as error:  # no sample served
+        assert 'holds no sample' in str(error)
+        return [], None
+    stems = [osp.basename(dataset.get_data_info(i)['img_path'])[
+        :-len('_spike.spk')] for i in range(len(dataset))]
+    return stems, dataset.skipped
+
+
+def test_dataset_serves_only_samples_whose_marker_matches(
+        tmp_path, cityscapes, calls):
+    from mmengine.logging import MMLogger
+    root, _ = cityscapes
+    out = str(tmp_path / 'out')
+    convert_cityscapes(root, out, SETTINGS, progress=False)
+    assert _served(out, 'train') == (
+        ['aachen_000000_000123', 'aachen_000001_000019'], {})
+    # a label replaced by other bytes of the same size: only the full check
+    # sees it
+    label = osp.join(out, 'gtFine', 'train', 'aachen',
+                     'aachen_000001_000019_gtFine_labelTrainIds.png')
+    with open(label, 'r+b') as f:
+        data = f.read()
+        f.seek(0)
+        f.write(bytes(255 - b for b in data[:8]) + data[8:])
+    assert _served(out, 'train')[0] == ['aachen_000000_000123',
+                                        'aachen_000001_000019']
+    assert _served(out, 'train', 'full') == (['aachen_000000_000123'],
+                                             {'digest differs': 1})
+    # a truncated spike file, a missing marker: skipped, counted, logged
+    spike = osp.join(out, 'spike', 'train', 'aachen',
+                     'aachen_000000_000123_spike.spk')
+    with open(spike, 'r+b') as f:
+        f.truncate(40)
+    os.remove(osp.join(out, 'spike', 'val', 'bonn',
+                       'bonn_000000_000019_spike.json'))
+    logged = []
+    logger = MMLogger.get_current_instance()
+    handler = logger.handlers[0]
+    emit = handler.emit
+    handler.emit = lambda record: logged.append(record.getMessage())
+    try:
+        assert _served(out, 'train') == (['aachen_000001_000019'],
+                                         {'size differs': 1})
+    finally:
+        handler.emit = emit
+    assert any(f'{out}/spike/train: serving 1 of 2 samples; skipped 1' in m
+               and '1 size differs' in m for m in logged), logged
+    with pytest.raises(FileNotFoundError,
+                       match=f'{out}/spike/val holds no sample.*1 no marker'):
+        SpikeCityscapesDataset(
+            data_root=out, data_prefix=dict(img_path='spike/val',
+                                            seg_map_path='gtFine/val'),
+            pipeline=[])
+    assert _served(out, 'val', 'none') == (['bonn_000000_000019'], {})
+    with pytest.raises(ValueError, match='verify must be one of'):
+        SpikeCityscapesDataset(data_root=out, pipeline=[], verify='fast')
+
+
+def test_an_empty_dataset_folder_is_named(tmp_path):
+    for folder in ('spike/train', 'gtFine/train'):
+        os.makedirs(tmp_path / folder)
+    with pytest.raises(FileNotFoundError,
+                       match=f'{tmp_path}/spike/train holds no sample'):
+        SpikeCityscapesDataset(
+            data_root=str(tmp_path),
+            data_prefix=dict(img_path='spike/train',
+                             seg_map_path='gtFine/train'), pipeline=[])
+
+
 def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
     """24 runs killed at random file-system steps, alternating between two
     settings over a finished conversion: after every kill, each sample with
     a marker is byte-identical to a clean conversion with the marker's
-    settings (no partial, no stale sample); a last run finishes it."""
+    settings (no partial, no stale sample), the dataset on the folder serves
+    exactly those and counts the others as skipped; a last run finishes
+    it."""
     import shutil
     root, _ = cityscapes
     refs = {}
@@ -379,7 +458,7 @@ def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
     rng = np.random.default_rng(0)
     env = dict(os.environ, OMP_NUM_THREADS='1')
     env.pop('TRITON_INTERPRET', None)
-    killed = 0
+    killed = skips = 0
     for run in range(24):
         base_seed = run % 2
         step = int(rng.integers(1, 13))  # 3 samples x 4 steps at most
@@ -391,11 +470,21 @@ def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
             capture_output=True, text=True, env=env, timeout=600)
         assert proc.returncode in (0, -9), proc.stderr[-3000:]
         killed += proc.returncode == -9
-        for stem, seed in _samples_state(out).items():
+        state = _samples_state(out)
+        for stem, seed in state.items():
             if seed is not None:
                 assert _sample_bytes(out, stem) == _sample_bytes(
                     refs[seed_of[seed]], stem), (run, stem)
-    assert killed >= 20
+        for split in ('train', 'val'):
+            stems = [stem for stem in SAMPLES if SAMPLES[stem][0] == split]
+            marked = [stem for stem in stems if state[stem] is not None]
+            served, skipped = _served(out, split)
+            assert served == marked, (run, split)
+            unmarked = len(stems) - len(marked)
+            if served:
+                assert sum((skipped or {}).values()) == unmarked, run
+        skips += sum(seed is None for seed in state.values())
+    assert killed >= 20 and skips > 0
     counts = convert_cityscapes(root, out, ConversionSettings(
         height=32, width=64, num_steps=9, seed=1), progress=False)
     assert sum(counts.values()) == len(SAMPLES)

@@ -18,23 +18,34 @@ Formats, chosen by the file extension:
     array).
 
 Every reader returns a ``(T, H, W)`` ``uint8`` array of 0/1, reads only the
-requested window of frames (memory-mapped), and names the file and the
-expected sizes when the file does not fit. Writers write atomically: a
+requested window of frames (memory-mapped; an ``.npz`` member inflated
+once, only up to the window's end), and names the file and the expected
+sizes when the file does not fit. The sizes a file declares (header, side
+file, zip member, ``.npy`` header) are checked against the file and against
+:mod:`wgse_mmseg.core.limits` before anything is allocated. Writers write atomically: a
 temporary file beside the target, renamed into place when complete.
 """
 import contextlib
-import json
+import functools
+import hashlib
+import io
+import math
 import os
 import os.path as osp
 import struct
 import tempfile
-from typing import BinaryIO, Iterator, Optional, Tuple
+import zipfile
+from typing import BinaryIO, Iterator, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
 
+from .checks import is_integer
+from .limits import READ_LIMIT_BYTES, cut, excerpt, load_json_file
+
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'centered_window', 'atomic_output', 'write_png', 'to_uint8',
+           'centered_window', 'atomic_output', 'WrittenFile', 'write_bytes',
+           'write_png', 'to_uint8',
            'SPIKE_EXTENSIONS']
 
 SPIKE_EXTENSIONS = ('.dat', '.spk', '.npy', '.npz')
@@ -72,14 +83,29 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
         raise
 
 
-def write_png(path: str, image: np.ndarray) -> None:
+class WrittenFile(NamedTuple):
+    """What a writer put in a file: its size in bytes and the SHA-256 (hex)
+    of those bytes, computed from memory, not read back from disk."""
+    size: int
+    sha256: str
+
+
+def write_bytes(path: str, data: bytes) -> WrittenFile:
+    """Write ``data`` to ``path``, appearing complete or not at all
+    (:func:`atomic_output`); returns its size and SHA-256."""
+    with atomic_output(path) as f:
+        f.write(data)
+    return WrittenFile(len(data), hashlib.sha256(data).hexdigest())
+
+
+def write_png(path: str, image: np.ndarray) -> WrittenFile:
     """Write an 8-bit ``(H, W)`` (grey, labels) or ``(H, W, 3)`` (BGR, OpenCV's
-    order) image as a PNG; the file appears complete or not at all."""
+    order) image as a PNG; the file appears complete or not at all.
+    Returns what was written (:class:`WrittenFile`)."""
     ok, encoded = cv2.imencode('.png', image)
     if not ok:
         raise OSError(f'{path}: PNG encoding failed')
-    with atomic_output(path) as f:
-        f.write(encoded.tobytes())
+    return write_bytes(path, encoded.tobytes())
 
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
@@ -116,14 +142,18 @@ def _dat_geometry(path: str, height: Optional[int],
                 f'needed (arguments, or a side file {side} with '
                 f'{{"height": H, "width": W}})')
         try:
-            with open(side) as f:
-                meta = json.load(f)
-            height = int(meta['height']) if height is None else height
-            width = int(meta['width']) if width is None else width
-        except (ValueError, KeyError, TypeError) as err:
-            raise SpikeFileError(
-                f'{path}: side file {side} must hold {{"height": H, '
-                f'"width": W}} ({err!r})') from err
+            meta = load_json_file(side, 'side file')
+        except (OSError, ValueError) as err:
+            raise SpikeFileError(f'{path}: {err}') from err
+        for name, value in (('height', height), ('width', width)):
+            if value is None and not (isinstance(meta, dict) and
+                                      is_integer(meta.get(name), 1)):
+                raise SpikeFileError(
+                    f'{path}: side file {side} must hold {{"height": H, '
+                    f'"width": W}} with integers >= 1, got '
+                    f'{excerpt(meta)}')
+        height = meta['height'] if height is None else height
+        width = meta['width'] if width is None else width
     if height < 1 or width < 1 or (height * width) % 8:
         raise SpikeFileError(
             f'{path}: .dat frames of {height}x{width} are not a whole number '
@@ -151,6 +181,10 @@ def _spk_geometry(path: str) -> Tuple[int, int, int]:
         raise SpikeFileError(
             f'{path}: not a version-{_VERSION} .spk file (header starts '
             f'{magic!r}, version {version})')
+    if 0 in (steps, height, width):
+        raise SpikeFileError(
+            f'{path}: header says T={steps}, H={height}, W={width}; each '
+            f'must be >= 1')
     expected = _HEADER.size + steps * _frame_bytes(height, width)
     if size != expected:
         raise SpikeFileError(
@@ -180,13 +214,22 @@ def centered_window(path: str, total: int, center: int, length: int) -> int:
     return start
 
 
-def _window(path: str, total: int, start: int,
-            length: Optional[int]) -> Tuple[int, int]:
+def _window(path: str, total: int, start: int, length: Optional[int],
+            frame_size: int) -> Tuple[int, int]:
+    """``(start, length)`` of a window of a ``total``-frame stream, checked
+    to fit and, at ``frame_size`` bytes a frame once read, to stay within
+    :data:`~wgse_mmseg.core.limits.READ_LIMIT_BYTES`."""
     length = total - start if length is None else length
     if start < 0 or length < 1 or start + length > total:
         raise SpikeFileError(
             f'{path}: frames [{start}, {start + length}) asked for, but the '
             f'stream has {total} frames')
+    if length * frame_size > READ_LIMIT_BYTES:
+        raise SpikeFileError(
+            f'{path}: frames [{start}, {start + length}) of {frame_size} '
+            f'bytes each are {length * frame_size} bytes, more than the '
+            f'{READ_LIMIT_BYTES}-byte read limit (wgse_mmseg.core.limits.'
+            f'READ_LIMIT_BYTES); read a shorter window (start, length)')
     return start, length
 
 
@@ -201,45 +244,159 @@ def _pack(spikes: np.ndarray) -> np.ndarray:
     return np.packbits(spikes.reshape(steps, -1), axis=1, bitorder='little')
 
 
+def _check_request(path: str, **arguments) -> None:
+    """Each of ``height``, ``width``, ``length`` (``None`` or an integer
+    >= 1) and ``start`` (an integer >= 0) given."""
+    for name, value in arguments.items():
+        low = 0 if name == 'start' else 1
+        if (value is not None or name == 'start') and \
+                not is_integer(value, low):
+            none = '' if name == 'start' else ' or None'
+            raise SpikeFileError(
+                f'{path}: {name} must be an integer >= {low}{none}, got '
+                f'{excerpt(value)}')
+
+
+def _npy_layout(path: str, f: BinaryIO,
+                size: int) -> Tuple[Tuple[int, int, int], np.dtype, bool]:
+    """Shape, dtype and Fortran order of the ``.npy`` data ``f`` holds
+    (read from its start, left at the first data byte), checked against
+    ``size``, the bytes the data has (the file's, or the zip member's
+    declared inflated size)."""
+    version = np.lib.format.read_magic(f)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(f)
+    elif version == (2, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(f)
+    else:
+        raise SpikeFileError(
+            f'{path}: .npy format version {version[0]}.{version[1]}; '
+            f'expected 1.0 or 2.0')
+    if dtype.hasobject or dtype.kind not in 'biuf':
+        raise SpikeFileError(
+            f'{path}: an array of {dtype}; expected booleans or numbers')
+    if len(shape) != 3 or 0 in shape:
+        raise SpikeFileError(
+            f'{path}: expected a non-empty (T, H, W) array, got shape '
+            f'{shape}')
+    needed = f.tell() + math.prod(shape) * dtype.itemsize
+    if needed != size:
+        raise SpikeFileError(
+            f'{path}: the header says shape {shape} of {dtype}, {needed} '
+            f'bytes, but the data has {size}; it is truncated or corrupted')
+    return shape, dtype, fortran
+
+
+def _npz_member(path: str, archive: zipfile.ZipFile) -> zipfile.ZipInfo:
+    """The member holding the spikes (``spikes.npy``, or the only member),
+    its declared inflated size checked against the read limit."""
+    names = archive.namelist()
+    name = 'spikes.npy' if 'spikes.npy' in names else (
+        names[0] if len(names) == 1 and names[0].endswith('.npy') else None)
+    if name is None:
+        raise SpikeFileError(
+            f'{path}: .npz holds {excerpt([n[:-4] for n in names])}; '
+            f'expected a key "spikes" or a single array')
+    info = archive.getinfo(name)
+    if info.file_size > READ_LIMIT_BYTES:
+        raise SpikeFileError(
+            f'{path}: member {excerpt(name)} declares {info.file_size} '
+            f'inflated bytes, more than the {READ_LIMIT_BYTES}-byte read '
+            f'limit (wgse_mmseg.core.limits.READ_LIMIT_BYTES)')
+    return info
+
+
+@contextlib.contextmanager
+def _array_file(path: str) -> Iterator[
+        Tuple[BinaryIO, Tuple[int, int, int], np.dtype, bool]]:
+    """The ``.npy`` data of an ``.npy`` file or ``.npz`` member, open at
+    its first data byte, with its checked layout (:func:`_npy_layout`).
+
+    An ``.npz`` member inflates only as far as it is read, never past its
+    declared size. Every failure is a :class:`SpikeFileError` naming the
+    file; nothing is executed (no pickles).
+    """
+    try:
+        with contextlib.ExitStack() as stack:
+            if path.lower().endswith('.npy'):
+                f = stack.enter_context(open(path, 'rb'))
+                size = osp.getsize(path)
+            else:
+                archive = stack.enter_context(zipfile.ZipFile(path))
+                info = _npz_member(path, archive)
+                f = stack.enter_context(archive.open(info))
+                size = info.file_size
+            layout = _npy_layout(path, f, size)
+            yield (f, ) + layout
+    except SpikeFileError:
+        raise
+    except Exception as err:  # noqa: BLE001 zipfile, zlib and NumPy's
+        # header parser raise many types for bad bytes (ValueError,
+        # EOFError, zipfile.BadZipFile, zlib.error, SyntaxError, ...)
+        raise SpikeFileError(f'{path}: cannot read the array: '
+                             f'{type(err).__name__}: {cut(str(err))}') \
+            from err
+
+
+def _read_array_window(path: str, start: int,
+                       length: Optional[int]) -> np.ndarray:
+    """Frames ``[start, start + length)`` of an ``.npy``/``.npz`` array,
+    in its own dtype (``.npy``: memory-mapped; ``.npz``:
+    :func:`_inflated_window`)."""
+    if path.lower().endswith('.npz'):
+        stat = os.stat(path)
+        return _inflated_window(
+            path, (stat.st_ino, stat.st_size, stat.st_mtime_ns), start,
+            length)
+    with _array_file(path) as (f, shape, dtype, fortran):
+        start, length = _window(path, shape[0], start, length,
+                                math.prod(shape[1:]) * dtype.itemsize)
+        array = np.memmap(path, dtype=dtype, mode='r', offset=f.tell(),
+                          shape=shape, order='F' if fortran else 'C')
+        return np.asarray(array[start:start + length])
+
+
+@functools.lru_cache(maxsize=1)
+def _inflated_window(path: str, identity: Tuple[int, int, int], start: int,
+                     length: Optional[int]) -> np.ndarray:
+    """Frames ``[start, start + length)`` of an ``.npz`` member, read-only.
+
+    The member inflates once, in chunks, up to the window's end (all of it
+    when stored in Fortran order), keeping only the window; the last
+    window read is kept, so reading it again (the shape, then the frames,
+    of one sample) inflates nothing. ``identity`` (inode, size, mtime) makes
+    a changed file a new key.
+    """
+    with _array_file(path) as (f, shape, dtype, fortran):
+        steps, height, width = shape
+        frame = height * width * dtype.itemsize
+        start, length = _window(path, steps, start, length, frame)
+        if fortran:
+            array = np.frombuffer(f.read(steps * frame), dtype).reshape(
+                shape, order='F')[start:start + length].copy()
+        else:
+            f.seek(f.tell() + start * frame)  # inflates and drops, in chunks
+            data = f.read(length * frame)
+            if len(data) != length * frame:
+                raise SpikeFileError(f'{path}: the array data is truncated')
+            array = np.frombuffer(data, dtype).reshape(length, height, width)
+    array.setflags(write=False)
+    return array
+
+
 def spike_shape(path: str, height: Optional[int] = None,
                 width: Optional[int] = None) -> Tuple[int, int, int]:
     """``(T, H, W)`` of a spike file without reading its frames."""
     ext = _extension(path)
+    _check_request(path, height=height, width=width)
     if not osp.exists(path):
         raise SpikeFileError(f'{path}: no such spike file')
     if ext == '.dat':
         return _dat_geometry(path, height, width)
     if ext == '.spk':
         return _spk_geometry(path)
-    return _array(path).shape
-
-
-def _array(path: str) -> np.ndarray:
-    try:
-        if path.lower().endswith('.npy'):
-            array = np.load(path, mmap_mode='r')
-        else:
-            with np.load(path) as archive:
-                keys = list(archive.keys())
-                key = 'spikes' if 'spikes' in keys else (
-                    keys[0] if len(keys) == 1 else None)
-                if key is None:
-                    raise SpikeFileError(
-                        f'{path}: .npz holds {keys}; expected a key '
-                        f'"spikes" or a single array')
-                array = archive[key]
-    except SpikeFileError:
-        raise
-    except Exception as err:  # noqa: BLE001 NumPy's parsers raise many types
-        # for bad bytes (ValueError, EOFError, zipfile.BadZipFile, zlib.error,
-        # tokenize.TokenError, SyntaxError, ...); nothing is executed
-        # (allow_pickle stays False)
-        raise SpikeFileError(f'{path}: cannot read the array: '
-                             f'{type(err).__name__}: {err}') from err
-    if array.ndim != 3:
-        raise SpikeFileError(
-            f'{path}: expected a (T, H, W) array, got shape {array.shape}')
-    return array
+    with _array_file(path) as (_, shape, _, _):
+        return shape
 
 
 def load_spikes(path: str, height: Optional[int] = None,
@@ -255,15 +412,21 @@ def load_spikes(path: str, height: Optional[int] = None,
 
     Returns:
         ``(T, H, W)`` ``uint8`` array of 0/1, upright.
+
+    Raises:
+        SpikeFileError: naming the file, for bad arguments, a file that
+            does not fit its declared sizes, or a window over
+            :data:`~wgse_mmseg.core.limits.READ_LIMIT_BYTES`.
     """
+    _check_request(path, start=start, length=length)
     steps, h, w = spike_shape(path, height, width)
-    start, length = _window(path, steps, start, length)
     ext = _extension(path)
     if ext in ('.npy', '.npz'):
-        window = np.asarray(_array(path)[start:start + length])
+        window = _read_array_window(path, start, length)
         _check_binary(path, window)
         return window.astype(np.uint8)
     frame = _frame_bytes(h, w)
+    start, length = _window(path, steps, start, length, h * w)
     offset = 0 if ext == '.dat' else _HEADER.size
     raw = np.memmap(path, dtype=np.uint8, mode='r',
                     offset=offset + start * frame, shape=(length * frame, ))
@@ -273,10 +436,11 @@ def load_spikes(path: str, height: Optional[int] = None,
     return np.ascontiguousarray(spikes)
 
 
-def save_spikes(path: str, spikes: np.ndarray) -> None:
+def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
     """Write a ``(T, H, W)`` 0/1 array to ``path`` (format from extension).
 
-    The file appears complete or not at all.
+    The file appears complete or not at all. Returns what was written
+    (:class:`WrittenFile`: size and SHA-256 of the bytes, from memory).
     """
     ext = _extension(path)
     spikes = np.asarray(spikes)
@@ -291,13 +455,16 @@ def save_spikes(path: str, spikes: np.ndarray) -> None:
         raise SpikeFileError(
             f'{path}: .dat needs height*width divisible by 8, got '
             f'{height}x{width}')
-    with atomic_output(path) as f:
-        if ext == '.dat':
-            f.write(_pack(spikes[:, ::-1]).tobytes())
-        elif ext == '.spk':
-            f.write(_HEADER.pack(_MAGIC, _VERSION, steps, height, width))
-            f.write(_pack(spikes).tobytes())
-        elif ext == '.npy':
-            np.save(f, spikes)
+    if ext == '.dat':
+        data = _pack(spikes[:, ::-1]).tobytes()
+    elif ext == '.spk':
+        data = _HEADER.pack(_MAGIC, _VERSION, steps, height, width) + \
+            _pack(spikes).tobytes()
+    else:
+        buffer = io.BytesIO()
+        if ext == '.npy':
+            np.save(buffer, spikes)
         else:
-            np.savez_compressed(f, spikes=spikes)
+            np.savez_compressed(buffer, spikes=spikes)
+        data = buffer.getvalue()
+    return write_bytes(path, data)

@@ -30,9 +30,10 @@ scene's static model is used: the annotated frame alone, optionally moved
 by a ``camera_motion`` effect.
 
 Complete or absent. A sample's json is its marker: the settings that made it
-(the recipe) and the SHA-256 of its spike file and label. A sample is done
-only when its marker exists, holds the current recipe and matches both
-files; a run removes the marker before it writes a sample's files and
+(the recipe) and the size and SHA-256 of the spike file and label its run
+wrote. A sample is done only when its marker exists, holds the current
+recipe and matches both files (and SpikeCityscapesDataset serves only
+samples whose marker matches); a run removes the marker before it writes a sample's files and
 writes it last, each file atomically, so a run killed at any point leaves
 that sample without a marker, and the next run (with any settings) redoes
 it. Each sample's seed is derived from its name, so reruns give identical
@@ -405,8 +406,8 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
 
     Everything is computed before anything is written; then the marker is
     removed, the label and the spikes are written, and the marker (recipe,
-    SHA-256 of both files, the simulator's metadata) last, each file
-    atomically (:mod:`wgse_mmseg.core.markers`). Returns ``'skipped'`` when
+    size and SHA-256 of the bytes written to both files, the simulator's
+    metadata) last, each file atomically (:mod:`wgse_mmseg.core.markers`). Returns ``'skipped'`` when
     the sample is already done, else its model, ``'sequence'`` or
     ``'static'``.
     """
@@ -420,9 +421,9 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
         frames, settings.num_steps, threshold=settings.threshold,
         effects=recipe['effects'], seed=recipe['seed'])
     invalidate(paths['meta'])
-    write_png(paths['label'], label)
-    save_spikes(paths['spike'], spikes)
-    write_marker(paths['meta'], recipe, _marked_files(paths),
+    written = dict(label=write_png(paths['label'], label),
+                   spike=save_spikes(paths['spike'], spikes))
+    write_marker(paths['meta'], recipe, written,
                  dict(simulation=simulation), default=_jsonable)
     return recipe['model']
 

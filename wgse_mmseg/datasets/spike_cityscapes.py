@@ -1,11 +1,18 @@
 """Spike-Cityscapes: Cityscapes scenes as spike streams."""
+import logging
 import os.path as osp
-from typing import List
+from collections import Counter
+from typing import Dict, List
 
+from mmengine.logging import print_log
 from mmseg.datasets import CityscapesDataset
 from mmseg.registry import DATASETS
 
+from ..core.markers import sample_problem
+
 __all__ = ['SpikeCityscapesDataset']
+
+VERIFY_MODES = ('size', 'full', 'none')
 
 
 @DATASETS.register_module()
@@ -15,23 +22,47 @@ class SpikeCityscapesDataset(CityscapesDataset):
     Layout under ``data_root`` (README, "Spike-Cityscapes")::
 
         spike/{train,val}/<city>/<city>_<seq>_<frame>_spike.spk
+        spike/{train,val}/<city>/<city>_<seq>_<frame>_spike.json  marker
         gtFine/{train,val}/<city>/<city>_<seq>_<frame>_gtFine_labelTrainIds.png
 
     The spike file of an annotated frame ``<name>_leftImg8bit.png`` is
     ``<name>_spike<ext>``; ``img_suffix`` selects the format (``.spk``,
     ``.dat``, ``.npy`` or ``.npz``). Labels are Cityscapes train ids
     (0..18, 255 ignored).
+
+    Complete or absent: the converter and the synthetic dataset write, last,
+    a marker ``<name>_spike.json`` recording the size and SHA-256 of the
+    spike file and label their run wrote (:mod:`wgse_mmseg.core.markers`).
+    Only samples whose marker matches are served; the others (a run killed
+    mid-sample, a re-run with other settings killed after writing one of
+    the files) are skipped, and how many and why is logged and kept in
+    ``self.skipped`` (reason -> count).
+
+    Args:
+        verify: ``'size'`` (default, at start-up: the marker exists, parses,
+            and names both files with their sizes), ``'full'`` (also the
+            SHA-256 of every file: reads the whole dataset once), or
+            ``'none'`` (no marker needed: folders written by other tools).
     """
 
     def __init__(self,
                  img_suffix: str = '_spike.spk',
                  seg_map_suffix: str = '_gtFine_labelTrainIds.png',
+                 verify: str = 'size',
                  **kwargs) -> None:
+        if verify not in VERIFY_MODES:
+            raise ValueError(
+                f'SpikeCityscapesDataset: verify must be one of '
+                f'{VERIFY_MODES}, got {verify!r}')
+        self.verify = verify
+        self.skipped: Dict[str, int] = {}
         super().__init__(
             img_suffix=img_suffix, seg_map_suffix=seg_map_suffix, **kwargs)
 
     def load_data_list(self) -> List[dict]:
-        """MMSeg's listing, after a check that names a missing folder."""
+        """MMSeg's listing of the samples whose marker matches (all of them
+        with ``verify='none'``), after a check that names a missing folder;
+        an empty listing is an error naming the folder."""
         for key, folder in self.data_prefix.items():
             if folder and not osp.isdir(folder):
                 raise FileNotFoundError(
@@ -40,4 +71,37 @@ class SpikeCityscapesDataset(CityscapesDataset):
                     f'data_root to a Spike-Cityscapes root (README, '
                     f'"Spike-Cityscapes layout") or make one with '
                     f'tools/dataset_converters/spike_cityscapes.py')
-        return super().load_data_list()
+        listed = super().load_data_list()
+        served, problems = [], Counter()
+        for info in listed:
+            problem = None if self.verify == 'none' else sample_problem(
+                osp.splitext(info['img_path'])[0] + '.json',
+                dict(spike=info['img_path'], label=info['seg_map_path']),
+                full=self.verify == 'full')
+            if problem is None:
+                served.append(info)
+            else:
+                problems[problem] += 1
+        self.skipped = dict(problems)
+        folder = self.data_prefix.get('img_path', '')
+        if problems:
+            print_log(
+                f'SpikeCityscapesDataset: {folder}: serving {len(served)} '
+                f'of {len(listed)} samples; skipped {sum(problems.values())}'
+                f' without a matching marker ({self._reasons()}), e.g. left '
+                f'by an interrupted conversion; run the converter again to '
+                f'complete them', logger='current', level=logging.WARNING)
+        if not served:
+            raise FileNotFoundError(
+                f'SpikeCityscapesDataset: {folder} holds no sample: no '
+                f'<name>{self.img_suffix} beside a <name>'
+                f'{self.seg_map_suffix} in '
+                f'{self.data_prefix.get("seg_map_path", "")}'
+                + (f', or none with a matching marker ({self._reasons()}; '
+                   f"verify='none' serves folders not written by the "
+                   f'converter)' if problems else ''))
+        return served
+
+    def _reasons(self) -> str:
+        return ', '.join(f'{count} {reason}'
+                         for reason, count in sorted(self.skipped.items()))

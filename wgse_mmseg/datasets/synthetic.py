@@ -131,8 +131,9 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
 
     Files: ``spike/{train,val}/synth/synth_<scene>_000019_spike.spk``,
     ``gtFine/{train,val}/synth/synth_<scene>_000019_gtFine_labelTrainIds.png``
-    and the sample's marker ``..._spike.json`` (the settings and the files'
-    SHA-256, written last: :mod:`wgse_mmseg.core.markers`). A sample whose
+    and the sample's marker ``..._spike.json`` (the settings and the size
+    and SHA-256 of the bytes written, written last:
+    :mod:`wgse_mmseg.core.markers`). A sample whose
     marker matches these settings and its files is kept, so an interrupted
     run resumes; any other is made again. Returns the number of samples
     written now.
@@ -172,8 +173,8 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
         spikes, _ = simulate_spikes(frames, num_steps, threshold=threshold,
                                     seed=seed * 100003 + scene)
         invalidate(marker)
-        write_png(label_path, label)
-        save_spikes(spike_path, spikes)
-        write_marker(marker, recipe, files)
+        records = dict(label=write_png(label_path, label),
+                       spike=save_spikes(spike_path, spikes))
+        write_marker(marker, recipe, records)
         written += 1
     return written

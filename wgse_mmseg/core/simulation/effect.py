@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from ..checks import is_integer
+from ..limits import excerpt
 
 __all__ = [
     'SimulationContext', 'Effect', 'LightEffect', 'SensorEffect',
@@ -46,7 +47,7 @@ def check_seed(name: str, value: Any, allow_none: bool = False) -> Any:
     if not is_integer(value, 0) or value >= 2**63:
         raise ValueError(
             f'{name} must be an integer in 0 .. 2**63 - 1'
-            f'{" or null" if allow_none else ""}, got {value!r}')
+            f'{" or null" if allow_none else ""}, got {excerpt(value)}')
     return int(value)
 
 
@@ -102,14 +103,15 @@ def check_number(effect: str, name: str, value: Any,
     if isinstance(value, bool) or not isinstance(value, Real) \
             or not math.isfinite(value):
         raise ValueError(
-            f'{effect}.{name} must be a finite number, got {value!r}')
+            f'{effect}.{name} must be a finite number, got '
+            f'{excerpt(value)}')
     below = low is not None and (value <= low if low_open else value < low)
     if below or (high is not None and value > high):
         interval = (f'{"(" if low_open else "["}'
                     f'{"-inf" if low is None else low}, '
                     f'{"inf" if high is None else high}]')
         raise ValueError(f'{effect}.{name} must lie in {interval}, got '
-                         f'{value!r}')
+                         f'{excerpt(value)}')
     return float(value)
 
 
@@ -118,7 +120,8 @@ def check_choice(effect: str, name: str, value: Any,
     """One of ``choices``."""
     if value not in choices:
         raise ValueError(
-            f'{effect}.{name} must be one of {list(choices)}, got {value!r}')
+            f'{effect}.{name} must be one of {list(choices)}, got '
+            f'{excerpt(value)}')
     return value
 
 
@@ -127,7 +130,8 @@ def check_pair(effect: str, name: str, value: Any) -> list:
     if isinstance(value, (str, bytes)) or not isinstance(
             value, Sequence) or len(value) != 2:
         raise ValueError(
-            f'{effect}.{name} must be a pair of numbers, got {value!r}')
+            f'{effect}.{name} must be a pair of numbers, got '
+            f'{excerpt(value)}')
     return [check_number(effect, name, v) for v in value]
 
 
@@ -149,12 +153,12 @@ class Effect:
         if not isinstance(params, Mapping):
             raise ValueError(
                 f'{self.name}: parameters must be a mapping (or null for '
-                f'the defaults), got {params!r}')
-        unknown = sorted(set(params) - set(self.defaults))
+                f'the defaults), got {excerpt(params)}')
+        unknown = sorted(map(str, set(params) - set(self.defaults)))
         if unknown:
             raise ValueError(
-                f'{self.name}: unknown parameter(s) {unknown}; known: '
-                f'{sorted(self.defaults)}')
+                f'{self.name}: unknown parameter(s) {excerpt(unknown)}; '
+                f'known: {sorted(self.defaults)}')
         self.params = self.check({**self.defaults, **params})
 
     def check(self, params: Dict[str, Any]) -> Dict[str, Any]:

@@ -17,6 +17,7 @@ from typing import Any, List, Mapping, Optional, Union
 
 import yaml
 
+from ..limits import EXCERPT_CHARS, cut, excerpt, load_json_file, read_text_file
 from .effect import EFFECTS, Effect
 
 __all__ = ['read_scene_file', 'parse_effects']
@@ -24,18 +25,44 @@ __all__ = ['read_scene_file', 'parse_effects']
 _KIND_RANK = dict(light=0, sensor=1, charge=2)
 
 
+class _SceneLoader(yaml.SafeLoader):
+    """YAML's safe loader without aliases (``*name``): a few hundred bytes
+    of nested aliases expand into billions of nodes."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None,
+                f'found the alias *{cut(event.anchor)}; a scene file may not '
+                f'use aliases', event.start_mark)
+        return super().compose_node(parent, index)
+
+
 def read_scene_file(path: Union[str, os.PathLike]) -> dict:
-    """The effect mapping a ``.json``, ``.yaml`` or ``.yml`` file holds."""
+    """The effect mapping a ``.json``, ``.yaml`` or ``.yml`` file holds.
+
+    The file may hold at most :data:`~wgse_mmseg.core.limits.
+    TEXT_FILE_LIMIT_BYTES`; YAML aliases are refused.
+    """
     path = os.fspath(path)
     ext = osp.splitext(path)[1].lower()
     if ext not in ('.json', '.yaml', '.yml'):
         raise ValueError(
             f'{path}: a scene file must be .json, .yaml or .yml')
     try:
-        with open(path) as f:
-            scene = json.load(f) if ext == '.json' else yaml.safe_load(f)
+        if ext == '.json':
+            scene = load_json_file(path, 'scene file')
+        else:
+            scene = yaml.load(read_text_file(path, 'scene file'),
+                              Loader=_SceneLoader)
+    except RecursionError as err:
+        raise ValueError(f'{path}: cannot read the scene: nested too '
+                         f'deeply') from err
     except (OSError, ValueError, yaml.YAMLError) as err:
-        raise ValueError(f'{path}: cannot read the scene: {err}') from err
+        reason = str(err).removeprefix(f'{path}: ')
+        raise ValueError(f'{path}: cannot read the scene: '
+                         f'{cut(reason, 2 * EXCERPT_CHARS)}') from err
     if scene is None:  # an empty YAML file
         return {}
     if not isinstance(scene, dict):
@@ -76,7 +103,8 @@ def parse_effects(
     unknown = sorted(map(str, set(effects) - set(EFFECTS)))
     if unknown:
         raise ValueError(
-            f'{source}unknown effect(s) {unknown}; known: {sorted(EFFECTS)}')
+            f'{source}unknown effect(s) {excerpt(unknown)}; known: '
+            f'{sorted(EFFECTS)}')
     try:
         parsed = [EFFECTS[name](params) for name, params in effects.items()]
     except ValueError as err:
