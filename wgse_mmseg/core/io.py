@@ -33,6 +33,9 @@ from typing import BinaryIO, Iterator, Optional, Tuple
 import cv2
 import numpy as np
 
+from .arguments import Integer, Path, declare
+from .limits import MAX_IMAGE_SIDE
+
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
            'centered_window', 'atomic_output', 'write_png', 'to_uint8',
            'SPIKE_EXTENSIONS']
@@ -201,9 +204,15 @@ def _pack(spikes: np.ndarray) -> np.ndarray:
     return np.packbits(spikes.reshape(steps, -1), axis=1, bitorder='little')
 
 
+#: the frame size a caller gives for a ``.dat`` file
+_SIDE = Integer(1, MAX_IMAGE_SIDE, optional=True)
+
+
+@declare(path=Path(), height=_SIDE, width=_SIDE)
 def spike_shape(path: str, height: Optional[int] = None,
                 width: Optional[int] = None) -> Tuple[int, int, int]:
     """``(T, H, W)`` of a spike file without reading its frames."""
+    path = os.fspath(path)
     ext = _extension(path)
     if not osp.exists(path):
         raise SpikeFileError(f'{path}: no such spike file')
@@ -242,6 +251,8 @@ def _array(path: str) -> np.ndarray:
     return array
 
 
+@declare(path=Path(), height=_SIDE, width=_SIDE, start=Integer(0),
+         length=Integer(1, optional=True))
 def load_spikes(path: str, height: Optional[int] = None,
                 width: Optional[int] = None, start: int = 0,
                 length: Optional[int] = None) -> np.ndarray:
@@ -256,6 +267,7 @@ def load_spikes(path: str, height: Optional[int] = None,
     Returns:
         ``(T, H, W)`` ``uint8`` array of 0/1, upright.
     """
+    path = os.fspath(path)
     steps, h, w = spike_shape(path, height, width)
     start, length = _window(path, steps, start, length)
     ext = _extension(path)
@@ -273,11 +285,13 @@ def load_spikes(path: str, height: Optional[int] = None,
     return np.ascontiguousarray(spikes)
 
 
+@declare(path=Path())
 def save_spikes(path: str, spikes: np.ndarray) -> None:
     """Write a ``(T, H, W)`` 0/1 array to ``path`` (format from extension).
 
     The file appears complete or not at all.
     """
+    path = os.fspath(path)
     ext = _extension(path)
     spikes = np.asarray(spikes)
     if spikes.ndim != 3 or 0 in spikes.shape:
