@@ -33,7 +33,7 @@ from .limits import (MAX_CLASSES, MAX_IMAGE_SIDE, MAX_NUM_STEPS,
 __all__ = [
     'ArgumentError', 'Argument', 'Integer', 'Number', 'Flag', 'Text',
     'Choice', 'Path', 'Sequence', 'OneOf', 'Declaration', 'DECLARATIONS',
-    'declare', 'excerpt', 'check_parameter_count', 'NUM_STEPS', 'SIDE',
+    'declare', 'declare_fields', 'excerpt', 'check_parameter_count', 'NUM_STEPS', 'SIDE',
     'FRAME_SIZE', 'SEED', 'NUM_CLASSES', 'PROBABILITY'
 ]
 
@@ -383,6 +383,17 @@ def declare(**arguments: Argument) -> Callable[[Callable], Callable]:
         checked.declaration = declaration
         DECLARATIONS[f'{function.__module__}.{entry}'] = declaration
         return checked
+
+    return wrap
+
+
+def declare_fields(**arguments: Argument) -> Callable[[type], type]:
+    """:func:`declare` for the constructor of a dataclass (put it above
+    ``@dataclass``)."""
+
+    def wrap(cls: type) -> type:
+        cls.__init__ = declare(**arguments)(cls.__init__)
+        return cls
 
     return wrap
 

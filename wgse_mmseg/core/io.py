@@ -188,8 +188,9 @@ def _window(path: str, total: int, start: int,
     length = total - start if length is None else length
     if start < 0 or length < 1 or start + length > total:
         raise SpikeFileError(
-            f'{path}: frames [{start}, {start + length}) asked for, but the '
-            f'stream has {total} frames')
+            f'{path}: frames [{start}, {start + length}) asked for '
+            f'(start={start}, length={length}), but the stream has {total} '
+            f'frames')
     return start, length
 
 
