@@ -301,7 +301,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
         **kwargs: ``pipeline``, ``test_mode``, ... of ``BaseDataset``.
     """
 
-    @declare(image_dir=Path(exists='directory', optional=True),
+    @declare(image_dir=Path(optional=True),
              num_samples=Integer(1, MAX_SAMPLES), crop_size=FRAME_SIZE,
              num_steps=NUM_STEPS, seed=SEED,
              white_rate=Number(0, strict_minimum=True),
