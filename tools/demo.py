@@ -34,6 +34,7 @@ from mmengine.dataset import Compose  # noqa: E402
 from mmengine.registry import init_default_scope  # noqa: E402
 from mmengine.runner.checkpoint import load_state_dict  # noqa: E402
 from mmseg.apis import init_model  # noqa: E402
+from wgse_mmseg.core.arguments import PROBABILITY, SIDE  # noqa: E402
 from wgse_mmseg.core.exposure import (Exposed,  # noqa: E402
                                       apply_exposure, parse_exposure)
 from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
@@ -55,11 +56,12 @@ def parse_args():
         '--device', default='cuda:0' if torch.cuda.is_available() else 'cpu',
         help='device used for inference (default: cuda:0 if available)')
     parser.add_argument(
-        '--opacity', type=float, default=0.5,
+        '--opacity', type=PROBABILITY, default=0.5,
         help='opacity of the painted segmentation map, in [0, 1]')
-    parser.add_argument('--height', type=int,
+    parser.add_argument('--height', type=SIDE,
                         help='frame height of a .dat file')
-    parser.add_argument('--width', type=int, help='frame width of a .dat file')
+    parser.add_argument('--width', type=SIDE,
+                        help='frame width of a .dat file')
     parser.add_argument(
         '--cfg-options', nargs='+', action=DictAction,
         help='override config settings, key=value; num_steps, data_root and '
@@ -74,8 +76,6 @@ def parse_args():
         args.exposure = parse_exposure(args.exposure)
     except ValueError as err:
         parser.error(str(err))
-    if not 0 <= args.opacity <= 1:
-        parser.error(f'--opacity must be in [0, 1], got {args.opacity}')
     if (args.height is None) != (args.width is None):
         parser.error('--height and --width go together')
     if args.out_file is None:

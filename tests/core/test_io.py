@@ -236,13 +236,25 @@ def test_spk_bad_version(tmp_path):
 
 @pytest.mark.parametrize('ext', ['.dat', '.spk', '.npy', '.npz'])
 @pytest.mark.parametrize('start, length', [
-    (8, 5), (10, None), (10, 1), (-1, 2), (0, 0), (0, 11)])
+    (8, 5), (10, None), (10, 1), (0, 11)])
 def test_window_past_end(tmp_path, ext, start, length):
     path = str(tmp_path / ('e' + ext))
     save_spikes(path, _random_spikes((10, 4, 6), seed=9))
     kwargs = dict(height=4, width=6) if ext == '.dat' else {}
     with pytest.raises(SpikeFileError, match=_path_in_message(path)):
         load_spikes(path, start=start, length=length, **kwargs)
+
+
+@pytest.mark.parametrize('start, length, match', [
+    (-1, 2, 'load_spikes: start must be an integer >= 0'),
+    (1.5, 2, 'load_spikes: start must be an integer >= 0'),
+    (0, 0, 'load_spikes: length must be an integer >= 1'),
+    (0, 2.0, 'load_spikes: length must be an integer >= 1')])
+def test_window_arguments_are_named(tmp_path, start, length, match):
+    path = str(tmp_path / 'e.npy')
+    save_spikes(path, _random_spikes((10, 4, 6), seed=9))
+    with pytest.raises(ValueError, match=match):
+        load_spikes(path, start=start, length=length)
 
 
 def test_npy_values_outside_binary(tmp_path):

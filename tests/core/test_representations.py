@@ -197,7 +197,7 @@ def test_wrong_shapes_are_named(name):
     (SpatialMeanFilter, dict(kernel_size=2.0)),
 ])
 def test_even_or_invalid_windows_are_rejected(module, kwargs):
-    with pytest.raises(ValueError, match='odd positive integer'):
+    with pytest.raises(ValueError, match='must be an odd integer >= 1'):
         module(**kwargs)
 
 

@@ -73,9 +73,9 @@ def test_fields_that_disagree_are_listed(tmp_path):
     assert 'model.backbone.in_channels = 129' in message
     assert 'train_dataloader.dataset.pipeline[0].num_steps = 129' in message
     assert '--cfg-options num_steps=41' in message
-    with pytest.raises(NumStepsError, match='positive integer'):
+    with pytest.raises(NumStepsError, match='must be an integer >= 1'):
         apply_num_steps(Config(dict(num_steps='41')))
-    with pytest.raises(NumStepsError, match='positive integer'):
+    with pytest.raises(NumStepsError, match='must be an integer >= 1'):
         apply_num_steps(Config(dict(num_steps=0)))
 
 

@@ -28,6 +28,8 @@ import argparse
 import numpy as np
 import torch
 
+from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence
+from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
 from wgse_mmseg.apis.simulator_benchmark import (header, load_rows,
                                                  simulator_rows)
 from wgse_mmseg.datasets.synthetic import render_street_scene
@@ -35,25 +37,20 @@ from wgse_mmseg.datasets.synthetic import render_street_scene
 
 def parse_args():
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--height', type=int, default=256)
-    parser.add_argument('--width', type=int, default=512)
-    parser.add_argument('--steps', type=int, default=129)
-    parser.add_argument('--frames', type=int, default=3,
-                        help='video frames over the stream')
-    parser.add_argument('--repeat', type=int, default=5)
+    parser.add_argument('--height', type=SIDE, default=256)
+    parser.add_argument('--width', type=SIDE, default=512)
+    parser.add_argument('--steps', type=NUM_STEPS, default=129)
+    parser.add_argument('--frames', type=Integer(2, MAX_NUM_STEPS),
+                        default=3, help='video frames over the stream')
+    parser.add_argument('--repeat', type=Integer(1, MAX_REPEAT), default=5)
     parser.add_argument('--device', default='cpu')
-    parser.add_argument('--threads', type=int, default=1,
+    parser.add_argument('--threads', type=Integer(0, MAX_WORKERS), default=1,
                         help='torch intra-op threads (0: torch default)')
-    parser.add_argument('--load-shape', default='129,512,1024',
-                        type=lambda s: tuple(int(v) for v in s.split(',')),
+    parser.add_argument('--load-shape', default=(129, 512, 1024),
+                        type=Sequence(SIDE, names=('T', 'H', 'W')),
                         help='T,H,W of the load-time sample')
     parser.add_argument('--skip-load', action='store_true')
-    args = parser.parse_args()
-    if min(args.height, args.width, args.steps, args.repeat) < 1 or \
-            args.frames < 2 or len(args.load_shape) != 3:
-        parser.error('sizes and --repeat must be >= 1, --frames >= 2, '
-                     '--load-shape T,H,W')
-    return args
+    return parser.parse_args()
 
 
 def main():

@@ -31,6 +31,8 @@ import sys
 
 import torch
 
+from wgse_mmseg.core.arguments import Integer
+from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_mmseg.core.wgse.benchmark import (DEFAULT_SHAPES, IMPLEMENTATIONS,
                                             available_backends, parse_shape,
                                             run_benchmark)
@@ -49,15 +51,13 @@ def main(argv=None) -> int:
                         default=[parse_shape(s) for s in DEFAULT_SHAPES],
                         help='BxTxHxW batches (default: %s)' %
                         ' '.join(DEFAULT_SHAPES))
-    parser.add_argument('--repeat', type=int, default=3)
+    parser.add_argument('--repeat', type=Integer(1, MAX_REPEAT), default=3)
     parser.add_argument('--impls', nargs='+', choices=list(IMPLEMENTATIONS),
                         help='rows to run (default: the reference and every '
                         'backend that can run on --device here)')
     parser.add_argument('--device', choices=['cpu', 'cuda'], default='cpu')
     parser.add_argument('--out', help='also write the results as JSON')
     args = parser.parse_args(argv)
-    if args.repeat < 1:
-        parser.error('--repeat must be >= 1')
     if args.device == 'cuda' and not torch.cuda.is_available():
         parser.error('--device cuda: torch sees no CUDA device here')
     backends = available_backends(args.device)

@@ -9,6 +9,8 @@ docs/spike_cityscapes.md and wgse_mmseg/datasets/cityscapes_conversion.py.
 import argparse
 import time
 
+from wgse_mmseg.core.arguments import Integer
+from wgse_mmseg.core.limits import MAX_SAMPLES, MAX_WORKERS
 from wgse_mmseg.datasets.cityscapes_conversion import (ConversionSettings,
                                                        convert_cityscapes,
                                                        load_scene)
@@ -37,9 +39,9 @@ def parse_args():
                         'inline JSON, e.g. \'{"shot_noise": {}}\'')
     parser.add_argument('--seed', type=int, default=0,
                         help='base seed; each sample also hashes its name')
-    parser.add_argument('--nproc', type=int, default=1,
+    parser.add_argument('--nproc', type=Integer(1, MAX_WORKERS), default=1,
                         help='worker processes')
-    parser.add_argument('--limit', type=int, default=None,
+    parser.add_argument('--limit', type=Integer(1, MAX_SAMPLES), default=None,
                         help='at most N samples per split (for trials)')
     return parser.parse_args()
 

@@ -29,6 +29,7 @@ import os.path as osp
 import sys
 
 
+from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence
 from wgse_mmseg.core.exposure import apply_exposure, parse_exposure
 from wgse_mmseg.evaluation import entropy_2d
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
@@ -47,14 +48,15 @@ def parse_args(argv=None):
     parser.add_argument(
         '--checkpoint',
         help='model checkpoint for --method wgse (default: shipped weights)')
-    parser.add_argument('--height', type=int,
+    parser.add_argument('--height', type=SIDE,
                         help='frame height of a .dat file')
-    parser.add_argument('--width', type=int, help='frame width of a .dat file')
+    parser.add_argument('--width', type=SIDE,
+                        help='frame width of a .dat file')
     parser.add_argument(
-        '--frames',
+        '--frames', type=Sequence(Integer()),
         help='comma-separated centre frames (default: the middle frame)')
     parser.add_argument(
-        '--num-steps', type=int, default=41,
+        '--num-steps', type=NUM_STEPS, default=41,
         help='window length for tfp/tfi (wgse uses its model\'s; default 41)')
     parser.add_argument(
         '--exposure', default='auto',
@@ -68,20 +70,8 @@ def parse_args(argv=None):
         parser.error(str(err))
     if (args.height is None) != (args.width is None):
         parser.error('--height and --width go together')
-    for name in ('height', 'width'):
-        value = getattr(args, name)
-        if value is not None and value < 1:
-            parser.error(f'--{name} must be >= 1, got {value}')
     if args.checkpoint and args.method != 'wgse':
         parser.error('--checkpoint is for --method wgse')
-    if args.num_steps < 1:
-        parser.error(f'--num-steps must be >= 1, got {args.num_steps}')
-    try:
-        args.frames = (None if args.frames is None else
-                       [int(f) for f in args.frames.split(',') if f.strip()])
-    except ValueError:
-        parser.error(f'--frames must be comma-separated integers, got '
-                     f'{args.frames!r}')
     return args
 
 

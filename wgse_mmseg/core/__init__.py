@@ -5,7 +5,8 @@ installed (a GPU machine with torch alone, a notebook), and importing it
 changes nothing outside it.
 
 * :mod:`.constants`: the readout rate and the REDS intensity scale;
-  :mod:`.checks`: the integer check of argument validation;
+  :mod:`.arguments`: the declared argument checks of the public entry
+  points; :mod:`.limits`: the stated size limits they apply;
 * :mod:`.io`: spike files (``.dat``, ``.spk``, ``.npy``, ``.npz``) and
   atomic writes;
 * :mod:`.wavelets`: the DWT as matrices, equal to PyWavelets';

@@ -1,17 +1,8 @@
-"""The checks every argument validation in the package shares: integers, and
-tensors free of NaN and Inf."""
-from numbers import Integral
-
+"""The check of tensor data every enhancer shares: free of NaN and Inf.
+(Arguments are checked by their declarations, :mod:`.arguments`.)"""
 import torch
 
-__all__ = ['is_integer', 'check_finite']
-
-
-def is_integer(value, minimum=None) -> bool:
-    """Whether ``value`` is an integer (``int`` or a NumPy integer; ``bool``
-    is not one) and, with ``minimum``, at least ``minimum``."""
-    return isinstance(value, Integral) and not isinstance(value, bool) and \
-        (minimum is None or bool(value >= minimum))
+__all__ = ['check_finite']
 
 
 def check_finite(owner: str, name: str, tensor: torch.Tensor) -> None:

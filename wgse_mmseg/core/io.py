@@ -40,8 +40,9 @@ from typing import BinaryIO, Iterator, NamedTuple, Optional, Tuple
 import cv2
 import numpy as np
 
-from .checks import is_integer
-from .limits import READ_LIMIT_BYTES, cut, excerpt, load_json_file
+from .arguments import Integer, Path, declare
+from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
+                     load_json_file)
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
            'centered_window', 'atomic_output', 'WrittenFile', 'write_bytes',
@@ -147,10 +148,10 @@ def _dat_geometry(path: str, height: Optional[int],
             raise SpikeFileError(f'{path}: {err}') from err
         for name, value in (('height', height), ('width', width)):
             if value is None and not (isinstance(meta, dict) and
-                                      is_integer(meta.get(name), 1)):
+                                      _SIDE.accepts(meta.get(name))):
                 raise SpikeFileError(
                     f'{path}: side file {side} must hold {{"height": H, '
-                    f'"width": W}} with integers >= 1, got '
+                    f'"width": W}} with {_SIDE.describe()}, got '
                     f'{excerpt(meta)}')
         height = meta['height'] if height is None else height
         width = meta['width'] if width is None else width
@@ -222,8 +223,9 @@ def _window(path: str, total: int, start: int, length: Optional[int],
     length = total - start if length is None else length
     if start < 0 or length < 1 or start + length > total:
         raise SpikeFileError(
-            f'{path}: frames [{start}, {start + length}) asked for, but the '
-            f'stream has {total} frames')
+            f'{path}: frames [{start}, {start + length}) asked for '
+            f'(start={start}, length={length}), but the stream has {total} '
+            f'frames')
     if length * frame_size > READ_LIMIT_BYTES:
         raise SpikeFileError(
             f'{path}: frames [{start}, {start + length}) of {frame_size} '
@@ -242,19 +244,6 @@ def _unpack(raw: np.ndarray, length: int, height: int,
 def _pack(spikes: np.ndarray) -> np.ndarray:
     steps = spikes.shape[0]
     return np.packbits(spikes.reshape(steps, -1), axis=1, bitorder='little')
-
-
-def _check_request(path: str, **arguments) -> None:
-    """Each of ``height``, ``width``, ``length`` (``None`` or an integer
-    >= 1) and ``start`` (an integer >= 0) given."""
-    for name, value in arguments.items():
-        low = 0 if name == 'start' else 1
-        if (value is not None or name == 'start') and \
-                not is_integer(value, low):
-            none = '' if name == 'start' else ' or None'
-            raise SpikeFileError(
-                f'{path}: {name} must be an integer >= {low}{none}, got '
-                f'{excerpt(value)}')
 
 
 def _npy_layout(path: str, f: BinaryIO,
@@ -384,11 +373,16 @@ def _inflated_window(path: str, identity: Tuple[int, int, int], start: int,
     return array
 
 
+#: the frame size a caller gives for a ``.dat`` file
+_SIDE = Integer(1, MAX_IMAGE_SIDE, optional=True)
+
+
+@declare(path=Path(), height=_SIDE, width=_SIDE)
 def spike_shape(path: str, height: Optional[int] = None,
                 width: Optional[int] = None) -> Tuple[int, int, int]:
     """``(T, H, W)`` of a spike file without reading its frames."""
+    path = os.fspath(path)
     ext = _extension(path)
-    _check_request(path, height=height, width=width)
     if not osp.exists(path):
         raise SpikeFileError(f'{path}: no such spike file')
     if ext == '.dat':
@@ -399,6 +393,8 @@ def spike_shape(path: str, height: Optional[int] = None,
         return shape
 
 
+@declare(path=Path(), height=_SIDE, width=_SIDE, start=Integer(0),
+         length=Integer(1, optional=True))
 def load_spikes(path: str, height: Optional[int] = None,
                 width: Optional[int] = None, start: int = 0,
                 length: Optional[int] = None) -> np.ndarray:
@@ -418,7 +414,7 @@ def load_spikes(path: str, height: Optional[int] = None,
             does not fit its declared sizes, or a window over
             :data:`~wgse_mmseg.core.limits.READ_LIMIT_BYTES`.
     """
-    _check_request(path, start=start, length=length)
+    path = os.fspath(path)
     steps, h, w = spike_shape(path, height, width)
     ext = _extension(path)
     if ext in ('.npy', '.npz'):
@@ -436,12 +432,14 @@ def load_spikes(path: str, height: Optional[int] = None,
     return np.ascontiguousarray(spikes)
 
 
+@declare(path=Path())
 def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
     """Write a ``(T, H, W)`` 0/1 array to ``path`` (format from extension).
 
     The file appears complete or not at all. Returns what was written
     (:class:`WrittenFile`: size and SHA-256 of the bytes, from memory).
     """
+    path = os.fspath(path)
     ext = _extension(path)
     spikes = np.asarray(spikes)
     if spikes.ndim != 3 or 0 in spikes.shape:

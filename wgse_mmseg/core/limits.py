@@ -1,9 +1,18 @@
-"""Stated limits on the work a file can make the package do.
+"""The stated limits on the work an argument, a config, a checkpoint or a
+file can make the package do, in one place, and the bounded readers of text
+files that use them.
 
-Whatever a file declares (a header's frame count, a zip member's inflated
-size, a YAML document's nesting), the readers check it against the file and
-against these limits before they allocate, and an error message quotes at
-most :data:`EXCERPT_CHARS` characters of an offending value:
+Sizes (``MAX_*``): every size a caller, a config or a checkpoint can ask for
+is checked against one of these before anything is allocated
+(:mod:`.arguments`), so that a number typed or crafted into a file cannot ask
+for terabytes or a loop that never ends. They are generous for real use: the
+largest configs of this repository use ``T = 129``, 512 channels and 3
+blocks; a spike camera frame is 250 x 400 (Spike-Cityscapes 1024 x 2048).
+
+Files: whatever a file declares (a header's frame count, a zip member's
+inflated size, a YAML document's nesting), the readers check it against the
+file and against these limits before they allocate, and an error message
+quotes at most :data:`EXCERPT_CHARS` characters of an offending value:
 
 ``READ_LIMIT_BYTES``
     the most one spike read may allocate: the requested window as read
@@ -16,11 +25,44 @@ most :data:`EXCERPT_CHARS` characters of an offending value:
 import json
 from typing import Any
 
-__all__ = ['READ_LIMIT_BYTES', 'TEXT_FILE_LIMIT_BYTES', 'EXCERPT_CHARS',
-           'cut', 'excerpt', 'read_text_file', 'load_json_file']
+#: ``T``: spike frames per window (``num_steps``) a model, transform,
+#: converter or the simulator works on (0.2 s of a 20 kHz camera)
+MAX_NUM_STEPS = 4096
+#: height, width, crop and padded size of a frame, in pixels
+MAX_IMAGE_SIDE = 16384
+#: width of a learned network (``hidden_channels``, ``channels``,
+#: ``mid_channels``)
+MAX_CHANNELS = 1024
+#: residual blocks of a learned network (``num_blocks``)
+MAX_NUM_BLOCKS = 16
+#: DWT levels of WGSE (``level``): 5 in the paper; past ``log2(T)`` levels
+#: the bands of a ``T <= MAX_NUM_STEPS`` stream stop shrinking
+MAX_LEVEL = 16
+#: side of a learned convolution kernel (``kernel_size``)
+MAX_KERNEL_SIZE = 31
+#: window of a parameter-free filter (TFP ``window``, mean filters'
+#: ``kernel_size``)
+MAX_WINDOW = 2 * MAX_NUM_STEPS - 1
+#: parameters of one learned module built from arguments, a config or a
+#: checkpoint (200 MB of float32; WGSE has about 0.1 million, the
+#: reconstruction head at its paper width about 3.5 million)
+MAX_PARAMETERS = 50_000_000
+#: samples or scenes one dataset or converter run may declare
+MAX_SAMPLES = 1_000_000
+#: classes of a segmentation label map (uint8 labels, 255 is ignored)
+MAX_CLASSES = 255
+#: seeds are 63-bit non-negative integers (NumPy and torch accept them)
+MAX_SEED = 2**63 - 1
+#: repetitions of a benchmark measurement
+MAX_REPEAT = 100_000
+#: worker processes of a tool
+MAX_WORKERS = 1024
 
+#: bytes one spike read may allocate (a window, an ``.npz`` member)
 READ_LIMIT_BYTES = 2**31
+#: bytes of a side file, marker or scene file
 TEXT_FILE_LIMIT_BYTES = 2**20
+#: characters of a value quoted in an error message
 EXCERPT_CHARS = 200
 
 
@@ -75,3 +117,7 @@ def load_json_file(path: str, what: str) -> Any:
         raise ValueError(f'{path}: a {what} nested too deeply') from err
     except ValueError as err:
         raise ValueError(f'{path}: a {what} must be JSON ({err})') from err
+
+__all__ = [name for name in dir() if name.startswith('MAX_')] + [
+    'READ_LIMIT_BYTES', 'TEXT_FILE_LIMIT_BYTES', 'EXCERPT_CHARS', 'cut', 'excerpt',
+    'read_text_file', 'load_json_file']

@@ -38,14 +38,13 @@ import torch.nn.functional as F
 from torch import nn
 
 from .checks import check_finite
+from .arguments import Integer, declare
+from .limits import MAX_WINDOW
 
 __all__ = ['TemporalMeanFilter', 'TFP', 'TFI', 'SpatialMeanFilter']
 
-
-def _check_odd(name: str, value: int) -> None:
-    if not isinstance(value, int) or value < 1 or value % 2 == 0:
-        raise ValueError(f'{name} must be an odd positive integer (a window '
-                         f'centred on each step or pixel), got {value!r}')
+#: a window centred on each step or pixel
+_WINDOW = Integer(1, MAX_WINDOW, odd=True)
 
 
 class _FixedRepresentation(nn.Module):
@@ -85,9 +84,9 @@ class TemporalMeanFilter(_FixedRepresentation):
             window is then cut to the whole stream near its centre).
     """
 
+    @declare(kernel_size=_WINDOW)
     def __init__(self, kernel_size: int = 3):
         super().__init__()
-        _check_odd('kernel_size', kernel_size)
         self.kernel_size = kernel_size
 
     def represent(self, spikes: torch.Tensor) -> torch.Tensor:
@@ -116,8 +115,8 @@ class TFP(TemporalMeanFilter):
             of steps).
     """
 
+    @declare(window=_WINDOW)
     def __init__(self, window: int = 33):
-        _check_odd('window', window)
         super().__init__(kernel_size=window)
 
 
@@ -131,9 +130,9 @@ class SpatialMeanFilter(_FixedRepresentation):
         kernel_size: odd side of the square window.
     """
 
+    @declare(kernel_size=_WINDOW)
     def __init__(self, kernel_size: int = 3):
         super().__init__()
-        _check_odd('kernel_size', kernel_size)
         self.kernel_size = kernel_size
 
     def represent(self, spikes: torch.Tensor) -> torch.Tensor:

@@ -42,7 +42,6 @@ files.
 import contextlib
 import hashlib
 import json
-import math
 import multiprocessing
 import os
 import os.path as osp
@@ -57,6 +56,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from ..core.arguments import (NUM_STEPS, SEED, SIDE, Integer, Number,
+                              declare_fields)
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
 from ..core.markers import invalidate, is_complete, write_marker
@@ -133,6 +134,10 @@ class CityscapesSample:
     sequence: Tuple[str, ...] = ()
 
 
+@declare_fields(height=SIDE, width=SIDE, num_steps=NUM_STEPS,
+                threshold=Number(0, strict_minimum=True),
+                frames_around=Integer(0, SNIPPET_LENGTH - 1 - ANNOTATED_INDEX),
+                seed=SEED)
 @dataclass(frozen=True)
 class ConversionSettings:
     """What a converted sample depends on besides its source files.
@@ -155,24 +160,6 @@ class ConversionSettings:
     frames_around: int = 1
     scene: Dict[str, Optional[dict]] = field(default_factory=dict)
     seed: int = 0
-
-    def __post_init__(self):
-        if self.height < 1 or self.width < 1 or self.num_steps < 1:
-            raise ValueError(
-                f'height, width and num_steps must be >= 1, got '
-                f'{self.height}, {self.width}, {self.num_steps}')
-        if not 0 <= self.frames_around <= SNIPPET_LENGTH - 1 - ANNOTATED_INDEX:
-            raise ValueError(
-                f'frames_around must lie in [0, '
-                f'{SNIPPET_LENGTH - 1 - ANNOTATED_INDEX}] (a snippet holds '
-                f'{SNIPPET_LENGTH} frames, the annotated one at index '
-                f'{ANNOTATED_INDEX}), got {self.frames_around}')
-        if not math.isfinite(self.threshold) or self.threshold <= 0:
-            raise ValueError(f'threshold must be a finite number > 0, got '
-                             f'{self.threshold}')
-        if not 0 <= self.seed < 2**63:
-            raise ValueError(f'seed must be an integer in 0 .. 2**63 - 1, '
-                             f'got {self.seed}')
 
 
 def _require_dir(path: str, what: str) -> None:

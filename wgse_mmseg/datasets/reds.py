@@ -32,7 +32,10 @@ from mmengine.dataset import BaseDataset
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
-from ..core.checks import is_integer
+from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SEED, SIDE, Integer,
+                              Number, Path, Sequence as Values, Text,
+                              declare)
+from ..core.limits import MAX_SAMPLES
 from ..core.constants import REDS_WHITE_RATE
 from ..core.simulation import simulate_spikes, trajectory_source_maps
 from .transforms import LoadSpikeFromFile
@@ -70,13 +73,14 @@ class LoadSpikeImagePair(BaseTransform):
             truth's size (other formats record theirs).
     """
 
+    @declare(num_steps=NUM_STEPS, height=SIDE.or_none(),
+             width=SIDE.or_none())
     def __init__(self, num_steps: int = 41, height: Optional[int] = None,
                  width: Optional[int] = None):
         super().__init__()
         if (height is None) != (width is None):
-            raise ValueError('height and width go together')
-        # the checks LoadSpikeFromFile makes, at construction
-        LoadSpikeFromFile(num_steps, height, width)
+            raise ValueError('LoadSpikeImagePair: height and width go '
+                             'together')
         self.num_steps = num_steps
         self.height = height
         self.width = width
@@ -152,6 +156,8 @@ class REDSSpikeDataset(BaseDataset):
             mmengine's ``BaseDataset``.
     """
 
+    @declare(spike_suffix=Text(empty=False), gt_suffix=Text(empty=False),
+             gt_frame=Integer(0, optional=True))
     def __init__(self, data_prefix: dict = dict(spike_path='spike',
                                                  gt_path='gt'),
                  spike_suffix: str = '.dat', gt_suffix: str = '.png',
@@ -259,39 +265,9 @@ def render_trajectory(image: np.ndarray, size: Tuple[int, int],
     return frames
 
 
-def _check_arguments(**args) -> None:
-    """Clear errors for :class:`SimulatedSpikeImageDataset`'s arguments."""
-
-    def interval(value, low):  # (a, b) with low < a <= b, finite
-        return (isinstance(value, (tuple, list)) and len(value) == 2 and
-                all(np.isfinite(v) and v > low for v in value) and
-                value[0] <= value[1])
-
-    checks = dict(
-        num_samples=(is_integer(args['num_samples'], 1), 'an integer >= 1'),
-        num_steps=(is_integer(args['num_steps'], 1), 'an integer >= 1'),
-        max_side=(is_integer(args['max_side'], 1), 'an integer >= 1'),
-        seed=(is_integer(args['seed'], 0) and args['seed'] < 2**63,
-              'an integer in 0 .. 2**63 - 1'),
-        crop_size=(isinstance(args['crop_size'], (tuple, list)) and
-                   len(args['crop_size']) == 2 and
-                   all(is_integer(v, 1) for v in args['crop_size']),
-                   '(h, w) with integers >= 1'),
-        white_rate=(np.isfinite(args['white_rate']) and
-                    args['white_rate'] > 0, 'a finite number > 0'),
-        scale_range=(interval(args['scale_range'], 0), '(low, high), 0 < '
-                     'low <= high'),
-        gain_range=(interval(args['gain_range'], 0), '(low, high), 0 < low '
-                    '<= high'),
-        gamma_range=(interval(args['gamma_range'], 0), '(low, high), 0 < '
-                     'low <= high'))
-    for name in ('max_speed', 'max_rotation', 'max_zoom'):
-        checks[name] = (np.isfinite(args[name]) and args[name] >= 0,
-                        'a finite number >= 0')
-    for name, (ok, expected) in checks.items():
-        if not ok:
-            raise ValueError(f'SimulatedSpikeImageDataset: {name} must be '
-                             f'{expected}, got {args[name]!r}')
+#: a ``(low, high)`` range of positive numbers
+_POSITIVE_RANGE = Values(Number(0, strict_minimum=True), names=('low', 'high'),
+                         ordered=True)
 
 
 @DATASETS.register_module()
@@ -325,6 +301,14 @@ class SimulatedSpikeImageDataset(BaseDataset):
         **kwargs: ``pipeline``, ``test_mode``, ... of ``BaseDataset``.
     """
 
+    @declare(image_dir=Path(optional=True),
+             num_samples=Integer(1, MAX_SAMPLES), crop_size=FRAME_SIZE,
+             num_steps=NUM_STEPS, seed=SEED,
+             white_rate=Number(0, strict_minimum=True),
+             max_speed=Number(0), max_rotation=Number(0),
+             max_zoom=Number(0), scale_range=_POSITIVE_RANGE,
+             gain_range=_POSITIVE_RANGE, gamma_range=_POSITIVE_RANGE,
+             max_side=SIDE)
     def __init__(self, image_dir: Optional[str] = None,
                  num_samples: int = 10000,
                  crop_size: Tuple[int, int] = (64, 64), num_steps: int = 41,
@@ -335,12 +319,6 @@ class SimulatedSpikeImageDataset(BaseDataset):
                  gain_range: Tuple[float, float] = (0.5, 1.0),
                  gamma_range: Tuple[float, float] = (0.7, 1.4),
                  max_side: int = 1024, **kwargs):
-        _check_arguments(num_samples=num_samples, crop_size=crop_size,
-                         num_steps=num_steps, seed=seed,
-                         white_rate=white_rate, max_speed=max_speed,
-                         max_rotation=max_rotation, max_zoom=max_zoom,
-                         scale_range=scale_range, gain_range=gain_range,
-                         gamma_range=gamma_range, max_side=max_side)
         self.image_dir = image_dir or default_image_dir()
         self.image_paths, self.images = _load_images(self.image_dir,
                                                      max_side)

@@ -14,7 +14,9 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from ..core.checks import is_integer
+from ..core.arguments import (NUM_STEPS, SIDE, Flag, Integer, Number, Path,
+                              declare)
+from ..core.limits import MAX_SAMPLES
 from ..core.constants import REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
 from ..core.markers import invalidate, is_complete, write_marker
@@ -121,6 +123,14 @@ def render_street_scene(rng: np.random.Generator, height: int, width: int,
     return np.clip(frames, 0, 1), label
 
 
+#: how many scenes of a split one run may make
+_COUNT = Integer(0, MAX_SAMPLES)
+
+
+@declare(out_dir=Path(), num_train=_COUNT, num_val=_COUNT, height=SIDE,
+         width=SIDE, num_steps=NUM_STEPS, num_frames=Integer(1, 1024),
+         threshold=Number(0, strict_minimum=True), seed=Integer(0, 2**31 - 1),
+         progress=Flag())
 def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                            num_val: int = 12, height: int = 128,
                            width: int = 256, num_steps: int = 41,
@@ -138,19 +148,6 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
     run resumes; any other is made again. Returns the number of samples
     written now.
     """
-    sizes = dict(num_train=num_train, num_val=num_val, height=height,
-                 width=width, num_steps=num_steps, num_frames=num_frames)
-    for name, value in sizes.items():
-        low = 0 if name in ('num_train', 'num_val') else 1
-        if not is_integer(value, low):
-            raise ValueError(f'{name} must be an integer >= {low}, got '
-                             f'{value!r}')
-    if not np.isfinite(threshold) or threshold <= 0:
-        raise ValueError(f'threshold must be a finite number > 0, got '
-                         f'{threshold!r}')
-    if not is_integer(seed, 0) or seed >= 2**31:
-        raise ValueError(f'seed must be an integer in 0 .. 2**31 - 1, got '
-                         f'{seed!r}')
     written = 0
     recipe = dict(height=height, width=width, num_steps=num_steps,
                   num_frames=num_frames, threshold=threshold, seed=seed)

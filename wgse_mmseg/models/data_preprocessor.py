@@ -5,7 +5,8 @@ import torch
 
 from mmseg.models.data_preprocessor import SegDataPreProcessor
 from mmseg.registry import MODELS
-from ..core.checks import is_integer
+from ..core.arguments import (FRAME_SIZE, NUM_CLASSES, NUM_STEPS, SIDE,
+                              Choice, Integer, declare)
 
 __all__ = ['SpikeSegDataPreProcessor']
 
@@ -50,6 +51,10 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
             colour conversion: spikes have neither.
     """
 
+    @declare(num_steps=NUM_STEPS.or_none(),
+             num_classes=NUM_CLASSES.or_none(), size=FRAME_SIZE.or_none(),
+             size_divisor=SIDE.or_none(), pad_val=Choice((0, 1, 0.0, 1.0)),
+             seg_pad_val=Integer(0, 255))
     def __init__(self,
                  num_steps: Optional[int] = None,
                  enhancer: Optional[dict] = None,
@@ -71,22 +76,6 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
             rgb_to_bgr=False,
             batch_augments=batch_augments,
             test_cfg=test_cfg)
-        for name, value in (('num_steps', num_steps),
-                            ('num_classes', num_classes),
-                            ('size_divisor', size_divisor)):
-            if value is not None and not is_integer(value, 1):
-                raise ValueError(f'{name} must be an integer >= 1, got '
-                                 f'{value!r}')
-        if size is not None and not (
-                len(size) == 2 and all(is_integer(v, 1) for v in size)):
-            raise ValueError(f'size must be (H, W) with integers >= 1, got '
-                             f'{size!r}')
-        if pad_val not in (0, 1):
-            raise ValueError(f'pad_val pads spike streams, so it must be 0 '
-                             f'(no spike) or 1; got {pad_val!r}')
-        if not is_integer(seg_pad_val, 0) or seg_pad_val > 255:
-            raise ValueError(f'seg_pad_val must be an integer label in '
-                             f'0..255 (the ignore index), got {seg_pad_val!r}')
         self.num_steps = num_steps
         self.num_classes = num_classes
         self.enhancer = MODELS.build(enhancer) if enhancer else None

@@ -24,7 +24,10 @@ from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import MODELS
 from ..core.checks import check_finite
+from ..core.arguments import (NUM_STEPS, Integer, check_parameter_count,
+                              declare)
 from ..core.io import atomic_output
+from ..core.limits import MAX_CHANNELS, MAX_NUM_BLOCKS
 from ..core.reconstruction_baselines import tfi, tfp
 from ..utils.checkpoint import CheckpointError, read_checkpoint
 from ..utils.config_data import ConfigDataError, read_config_data
@@ -47,9 +50,15 @@ def _conv3x3(in_channels: int, out_channels: int) -> nn.Conv2d:
     return nn.Conv2d(in_channels, out_channels, 3, padding=1)
 
 
+def _conv3x3_parameters(in_channels: int, out_channels: int) -> int:
+    """Weights and biases of :func:`_conv3x3`."""
+    return (9 * in_channels + 1) * out_channels
+
+
 class ResidualBlock(nn.Module):
     """``x + conv(relu(conv(x)))``, 3x3 convolutions, no normalisation."""
 
+    @declare(channels=Integer(1, MAX_CHANNELS))
     def __init__(self, channels: int):
         super().__init__()
         self.conv1 = _conv3x3(channels, channels)
@@ -85,6 +94,9 @@ class SpikeReconstructor(BaseModel):
     ``pred_image`` ``(1, H, W)`` clipped to [0, 1].
     """
 
+    @declare(num_steps=NUM_STEPS, channels=Integer(1, MAX_CHANNELS),
+             num_blocks=Integer(0, MAX_NUM_BLOCKS),
+             mid_channels=Integer(1, MAX_CHANNELS))
     def __init__(self, num_steps: int = 41,
                  enhancer: Optional[dict] = dict(type='WGSE'),
                  channels: int = 256, num_blocks: int = 3,
@@ -95,11 +107,13 @@ class SpikeReconstructor(BaseModel):
             data_preprocessor=data_preprocessor or dict(
                 type='ImgDataPreprocessor'),
             init_cfg=init_cfg)
-        if min(num_steps, channels, mid_channels) < 1 or num_blocks < 0:
-            raise ValueError(
-                f'num_steps, channels and mid_channels must be >= 1 and '
-                f'num_blocks >= 0; got {num_steps}, {channels}, '
-                f'{mid_channels}, {num_blocks}')
+        check_parameter_count(
+            'SpikeReconstructor',
+            _conv3x3_parameters(num_steps, channels) +
+            2 * num_blocks * _conv3x3_parameters(channels, channels) +
+            _conv3x3_parameters(channels, mid_channels) +
+            _conv3x3_parameters(mid_channels, 1),
+            'num_steps, channels, num_blocks and mid_channels')
         self.num_steps = num_steps
         self.enhancer = MODELS.build(enhancer) if enhancer else None
         self.head = nn.Sequential(

@@ -21,7 +21,7 @@ told.
 """
 from typing import Any, Dict, List, Tuple
 
-from ..core.checks import is_integer
+from ..core.arguments import NUM_STEPS, excerpt
 
 __all__ = ['NumStepsError', 'apply_num_steps', 'RUNTIME_KEYS']
 
@@ -77,10 +77,10 @@ def apply_num_steps(cfg) -> Dict[str, int]:
     target = cfg.get('num_steps')
     if target is None:
         return {}
-    if not is_integer(target, 1):
+    if not NUM_STEPS.accepts(target):
         raise NumStepsError(
-            f'num_steps must be a positive integer (T, spike frames per '
-            f'sample), got {target!r}')
+            f'num_steps (T, spike frames per sample) must be '
+            f'{NUM_STEPS.describe()}, got {excerpt(target)}')
     fields = _t_fields(cfg)
     values = {path: container[key] for path, container, key in fields}
     stale = {path: value for path, value in values.items()

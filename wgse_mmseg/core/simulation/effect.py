@@ -21,16 +21,14 @@ Each effect draws its random numbers from its own generator
 effect's name, so switching one effect on or off never changes another's
 draws.
 """
-import math
 import zlib
 from dataclasses import dataclass
-from numbers import Real
 from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Type
 
 import numpy as np
 import torch
 
-from ..checks import is_integer
+from ..arguments import SEED, Choice, Number, Sequence as Values
 from ..limits import excerpt
 
 __all__ = [
@@ -40,14 +38,16 @@ __all__ = [
 ]
 
 
+#: the entry point errors about effect parameters name
+_EFFECTS = 'effects'
+
+
 def check_seed(name: str, value: Any, allow_none: bool = False) -> Any:
-    """A seed in ``0 .. 2**63 - 1`` (or ``None`` where allowed)."""
+    """A seed in ``0 ..`` :data:`~wgse_mmseg.core.limits.MAX_SEED` (or
+    ``None`` where allowed), as an ``int``."""
     if value is None and allow_none:
         return None
-    if not is_integer(value, 0) or value >= 2**63:
-        raise ValueError(
-            f'{name} must be an integer in 0 .. 2**63 - 1'
-            f'{" or null" if allow_none else ""}, got {excerpt(value)}')
+    SEED.check(value, _EFFECTS, name)
     return int(value)
 
 
@@ -100,39 +100,23 @@ def check_number(effect: str, name: str, value: Any,
                  low_open: bool = False) -> float:
     """A finite real number in ``[low, high]`` (``(low, high]`` if
     ``low_open``), as a float."""
-    if isinstance(value, bool) or not isinstance(value, Real) \
-            or not math.isfinite(value):
-        raise ValueError(
-            f'{effect}.{name} must be a finite number, got '
-            f'{excerpt(value)}')
-    below = low is not None and (value <= low if low_open else value < low)
-    if below or (high is not None and value > high):
-        interval = (f'{"(" if low_open else "["}'
-                    f'{"-inf" if low is None else low}, '
-                    f'{"inf" if high is None else high}]')
-        raise ValueError(f'{effect}.{name} must lie in {interval}, got '
-                         f'{excerpt(value)}')
+    Number(low, high, strict_minimum=low_open).check(value, _EFFECTS,
+                                                     f'{effect}.{name}')
     return float(value)
 
 
 def check_choice(effect: str, name: str, value: Any,
                  choices: Sequence[str]) -> str:
     """One of ``choices``."""
-    if value not in choices:
-        raise ValueError(
-            f'{effect}.{name} must be one of {list(choices)}, got '
-            f'{excerpt(value)}')
+    Choice(choices).check(value, _EFFECTS, f'{effect}.{name}')
     return value
 
 
 def check_pair(effect: str, name: str, value: Any) -> list:
     """Two finite numbers, as a list (JSON's form of a pair)."""
-    if isinstance(value, (str, bytes)) or not isinstance(
-            value, Sequence) or len(value) != 2:
-        raise ValueError(
-            f'{effect}.{name} must be a pair of numbers, got '
-            f'{excerpt(value)}')
-    return [check_number(effect, name, v) for v in value]
+    Values(Number(), names=('a', 'b')).check(value, _EFFECTS,
+                                             f'{effect}.{name}')
+    return [float(v) for v in value]
 
 
 class Effect:

@@ -1,14 +1,12 @@
 """``simulate_spikes``: frames in, a spike stream and what made it out."""
-import math
-from numbers import Real
 from typing import Any, Dict, Tuple
 
 import numpy as np
 import torch
 
-from ..checks import is_integer
+from ..arguments import NUM_STEPS, SEED, Number, declare
 from ..constants import READOUT_HZ
-from .effect import SimulationContext, check_seed
+from .effect import SimulationContext
 from .fixed_point import MAX_BLOCK_STEPS, Integrator, quantise
 from .intensity import frames_to_intensity
 from .light import LinearLight
@@ -25,16 +23,6 @@ _BLOCK_BYTES = 16 << 20
 _LINEAR_BLOCK = 64
 
 
-def _positive(name: str, value: Any, allow_zero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real) or \
-            not math.isfinite(value) or value < 0 or \
-            (value == 0 and not allow_zero):
-        raise ValueError(
-            f'{name} must be a finite number {">=" if allow_zero else ">"} '
-            f'0, got {value!r}')
-    return float(value)
-
-
 def _output(context: SimulationContext) -> torch.Tensor:
     """``(T, P)`` uint8 spikes. On the CPU NumPy allocates it: NumPy asks
     the kernel for huge pages, and faulting in 4 KiB pages instead can cost
@@ -45,6 +33,9 @@ def _output(context: SimulationContext) -> torch.Tensor:
     return torch.empty(shape, dtype=torch.uint8, device=context.device)
 
 
+@declare(num_steps=NUM_STEPS,
+         threshold=Number(0, strict_minimum=True), gain=Number(0),
+         seed=SEED, readout_hz=Number(0, strict_minimum=True))
 def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
                     gain: float = 1.0, effects=None, seed: int = 0,
                     device='cpu',
@@ -83,13 +74,9 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
         ``'flow'`` or ``'camera_motion'``) and ``effects``: name -> every
         parameter used, for each effect that ran (``{}`` when none).
     """
-    if not is_integer(num_steps, 1):
-        raise ValueError(f'num_steps must be an integer >= 1, got '
-                         f'{num_steps!r}')
-    threshold = _positive('threshold', threshold)
-    gain = _positive('gain', gain, allow_zero=True)
-    readout_hz = _positive('readout_hz', readout_hz)
-    seed = check_seed('seed', seed)
+    threshold, gain, readout_hz = (float(threshold), float(gain),
+                                   float(readout_hz))
+    seed = int(seed)
     parsed = parse_effects(effects)
     device = torch.device(device)
     intensity = frames_to_intensity(frames, torch.float32, device)

@@ -22,13 +22,17 @@ the stream, a long window average like TFP's, instead of at random;
 """
 from typing import List, Optional, Tuple
 
+import pywt
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from .band_network_backends import get_backend, resolve_backend
-from ..checks import check_finite, is_integer
-from ..wavelets import (analysis_matrix, band_lengths, check_mode, get_wavelet,
+from .band_network_backends import CHOICES, get_backend, resolve_backend
+from ..arguments import (Choice, Flag, Integer, check_parameter_count,
+                         declare)
+from ..checks import check_finite
+from ..limits import MAX_CHANNELS, MAX_KERNEL_SIZE, MAX_LEVEL, MAX_NUM_BLOCKS
+from ..wavelets import (SUPPORTED_MODES, analysis_matrix, band_lengths,
                         synthesis_matrix)
 
 __all__ = ['WGSE', 'BandNetwork', 'INITS']
@@ -86,17 +90,13 @@ class BandNetwork(nn.Module):
     Input and output: ``(N, 1, L)`` for ``dim=1``, ``(B, 1, L, H, W)`` else.
     """
 
+    @declare(dim=Choice((1, 2, 3)),
+             kernel_size=Integer(1, MAX_KERNEL_SIZE, odd=True),
+             hidden_channels=Integer(1, MAX_CHANNELS),
+             num_blocks=Integer(1, MAX_NUM_BLOCKS))
     def __init__(self, dim: int = 1, kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1):
         super().__init__()
-        if not is_integer(kernel_size, 1) or kernel_size % 2 == 0:
-            raise ValueError(
-                f'kernel_size must be odd and positive, got {kernel_size!r}')
-        for name, value in (('hidden_channels', hidden_channels),
-                            ('num_blocks', num_blocks)):
-            if not is_integer(value, 1):
-                raise ValueError(f'{name} must be an integer >= 1, got '
-                                 f'{value!r}')
         self.dim = dim
         self.kernel_size = kernel_size
         self.hidden_channels = hidden_channels
@@ -111,6 +111,18 @@ class BandNetwork(nn.Module):
                   1 if i == num_blocks - 1 else hidden_channels, kernel_size)
             for i in range(num_blocks)
         ])
+
+    @staticmethod
+    def parameter_count(dim: int, kernel_size: int, hidden_channels: int,
+                        num_blocks: int) -> int:
+        """Parameters of a network of these arguments, without building
+        it."""
+        taps = kernel_size ** (1 if dim == 1 else 2 if dim == 2 else 3)
+        hidden = hidden_channels * hidden_channels * taps + hidden_channels
+        first = hidden_channels * taps + hidden_channels
+        return (first + hidden  # the first residual layer
+                + (num_blocks - 1) * 3 * hidden  # further layers, outputs
+                + hidden_channels * taps + 1)  # the last output convolution
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         x = self.residual_layers(x)
@@ -196,30 +208,30 @@ class WGSE(nn.Module):
     ``nn.Conv3d`` modules of ``dim`` 2 and 3 follow autocast.
     """
 
+    @declare(dim=Choice((1, 2, 3)),
+             wavelet=Choice(pywt.wavelist(kind='discrete'), optional=True,
+                            description='a discrete PyWavelets wavelet name '
+                            '(pywt.wavelist(kind="discrete"))'),
+             level=Integer(1, MAX_LEVEL), mode=Choice(SUPPORTED_MODES),
+             kernel_size=Integer(1, MAX_KERNEL_SIZE, odd=True),
+             hidden_channels=Integer(1, MAX_CHANNELS),
+             num_blocks=Integer(1, MAX_NUM_BLOCKS), backend=Choice(CHOICES),
+             init=Choice(INITS), output_norm=Flag())
     def __init__(self, dim: int = 1, wavelet: Optional[str] = 'db8',
                  level: int = 5, mode: str = 'zero', kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1,
                  backend: str = 'auto', init: str = 'default',
                  output_norm: bool = False):
         super().__init__()
-        if init not in INITS:
-            raise ValueError(f'init must be one of {INITS}, got {init!r}')
-        if not isinstance(output_norm, bool):
-            raise ValueError(f'output_norm must be True or False, got '
-                             f'{output_norm!r}')
-        if isinstance(dim, bool) or dim not in (1, 2, 3):
-            raise ValueError(f'dim must be 1, 2 or 3, got {dim!r}')
-        if wavelet is not None:
-            get_wavelet(wavelet)
-            check_mode(mode)
-            if not is_integer(level, 1):
-                raise ValueError(f'level must be an integer >= 1, got '
-                                 f'{level!r}')
+        num_bands = 1 if wavelet is None else level + 1
+        check_parameter_count(
+            'WGSE', num_bands * BandNetwork.parameter_count(
+                dim, kernel_size, hidden_channels, num_blocks),
+            'level, kernel_size, hidden_channels and num_blocks')
         self.dim = dim
         self.wavelet = wavelet
         self.level = level
         self.mode = mode
-        num_bands = 1 if wavelet is None else level + 1
         self.band_networks = nn.ModuleList([
             BandNetwork(dim, kernel_size, hidden_channels, num_blocks)
             for _ in range(num_bands)

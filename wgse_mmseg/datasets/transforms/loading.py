@@ -12,7 +12,7 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
-from ...core.checks import is_integer
+from ...core.arguments import NUM_STEPS, SIDE, Integer, declare
 from ...core.io import centered_window, load_spikes, spike_shape
 
 __all__ = ['LoadSpikeFromFile']
@@ -41,18 +41,12 @@ class LoadSpikeFromFile(BaseTransform):
     ``num_steps``.
     """
 
+    @declare(num_steps=NUM_STEPS.or_none(), height=SIDE.or_none(),
+             width=SIDE.or_none(), center=Integer(0, optional=True))
     def __init__(self, num_steps: Optional[int] = None,
                  height: Optional[int] = None, width: Optional[int] = None,
                  center: Optional[int] = None):
         super().__init__()
-        for name, value in (('num_steps', num_steps), ('height', height),
-                            ('width', width)):
-            if value is not None and not is_integer(value, 1):
-                raise ValueError(f'{name} must be an integer >= 1, got '
-                                 f'{value!r}')
-        if center is not None and not is_integer(center, 0):
-            raise ValueError(f'center must be a frame index >= 0, got '
-                             f'{center!r}')
         self.num_steps = num_steps
         self.height = height
         self.width = width

@@ -19,7 +19,7 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
-from ...core.checks import is_integer
+from ...core.arguments import NUM_STEPS, SEED, Choice, Number, declare
 from ...core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = ['SimulateSpikes']
@@ -62,20 +62,14 @@ class SimulateSpikes(BaseTransform):
     simulator's metadata: settings, seed and the effects that ran).
     """
 
+    @declare(num_steps=NUM_STEPS, threshold=Number(0, strict_minimum=True),
+             gain=Number(0), seed=SEED.or_none(),
+             channel_order=Choice(('bgr', 'rgb')))
     def __init__(self, num_steps: int, threshold: float = 1.0,
                  gain: float = 1.0, effects=None,
                  seed: Optional[int] = None, channel_order: str = 'bgr',
                  device: str = 'cpu'):
         super().__init__()
-        if not is_integer(num_steps, 1):
-            raise ValueError(f'num_steps must be an integer >= 1, got '
-                             f'{num_steps!r}')
-        if channel_order not in ('bgr', 'rgb'):
-            raise ValueError(f"channel_order must be 'bgr' or 'rgb', got "
-                             f'{channel_order!r}')
-        if seed is not None and not is_integer(seed, 0):
-            raise ValueError(f'seed must be None or an integer >= 0, got '
-                             f'{seed!r}')
         if isinstance(effects, (str, os.PathLike)):
             effects = read_scene_file(effects)  # once, not per sample
         parse_effects(effects)  # fail at build time, not in a worker

@@ -10,7 +10,8 @@ from mmcv.transforms import BaseTransform
 
 from mmseg.datasets.transforms import RandomCrop
 from mmseg.registry import TRANSFORMS
-from ...core.checks import is_integer
+from ...core.arguments import (FRAME_SIZE, PROBABILITY, SIDE, Choice,
+                               Number, OneOf, Sequence as Values, declare)
 
 __all__ = ['SpikeRandomCrop', 'SpikeRandomFlip']
 
@@ -46,21 +47,20 @@ class SpikeRandomCrop(RandomCrop):
         ignore_index: label not counted for ``cat_max_ratio``.
     """
 
+    @declare(crop_size=OneOf(FRAME_SIZE, SIDE),
+             cat_max_ratio=Number(0, 1, strict_minimum=True))
     def __init__(self, crop_size, cat_max_ratio: float = 1.,
                  ignore_index: int = 255):
-        sizes = (crop_size, crop_size) if isinstance(crop_size, int) else \
+        sizes = (crop_size, crop_size) if SIDE.accepts(crop_size) else \
             tuple(crop_size)
-        if len(sizes) != 2 or not all(is_integer(v, 1) for v in sizes):
-            raise ValueError(f'crop_size must be (h, w) with integers >= 1, '
-                             f'got {crop_size!r}')
-        if not 0 < cat_max_ratio <= 1:
-            raise ValueError(f'cat_max_ratio must be in (0, 1], got '
-                             f'{cat_max_ratio!r}')
         super().__init__(sizes, cat_max_ratio, ignore_index)
 
     def transform(self, results: dict) -> dict:
         _check_label_matches(results)
         return super().transform(results)
+
+
+_DIRECTION = Choice(('horizontal', 'vertical'))
 
 
 @TRANSFORMS.register_module()
@@ -77,23 +77,20 @@ class SpikeRandomFlip(BaseTransform):
     ``'horizontal'``, ``'vertical'`` or ``'diagonal'`` for both, as in mmcv).
     """
 
+    @declare(prob=OneOf(PROBABILITY, Values(PROBABILITY, max_length=2)),
+             direction=OneOf(_DIRECTION, Values(_DIRECTION, max_length=2)))
     def __init__(self, prob: Union[float, Sequence[float]] = 0.5,
                  direction: Union[str, Sequence[str]] = ('horizontal',
                                                          'vertical')):
         super().__init__()
         directions = [direction] if isinstance(direction, str) else list(
             direction)
-        if not directions or any(d not in ('horizontal', 'vertical')
-                                 for d in directions):
+        probs = [prob] * len(directions) if PROBABILITY.accepts(prob) else \
+            list(prob)
+        if len(probs) != len(directions):
             raise ValueError(
-                f"direction must be 'horizontal', 'vertical' or both, got "
-                f'{direction!r}')
-        probs = [prob] * len(directions) if np.isscalar(prob) else list(prob)
-        if len(probs) != len(directions) or any(not 0 <= p <= 1
-                                                for p in probs):
-            raise ValueError(
-                f'prob must be one probability or one per direction '
-                f'{directions}, each in [0, 1]; got {prob!r}')
+                f'SpikeRandomFlip: prob must be one probability or one per '
+                f'direction {directions}; got {prob!r}')
         self.probs = dict(zip(directions, probs))
 
     def transform(self, results: dict) -> dict:

@@ -1,0 +1,189 @@
+"""Every declared argument of every public entry point, fuzzed.
+
+For each argument that an entry point declares (:mod:`wgse_mmseg.core.arguments`),
+hypothesis draws wrong types, NaN, Inf, negative, zero, huge and fractional
+numbers, strings with quotes and backslashes and, for paths, a directory,
+an empty file, a text file and a missing file. The call must either give a
+project error (raised in this package) that names the entry point and the
+argument, or a file error naming the file, or succeed, within time and
+memory bounds.
+"""
+import importlib
+import inspect
+import math
+import resource
+import time
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import wgse_mmseg
+from wgse_mmseg.core.arguments import DECLARATIONS, ArgumentError, Path
+
+wgse_mmseg.register_all_modules()
+# the modules whose entry points are declared but not imported above
+for _module in ('wgse_mmseg.datasets.synthetic',
+                'wgse_mmseg.datasets.cityscapes_conversion',
+                'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction'):
+    importlib.import_module(_module)
+
+#: seconds and bytes of peak memory one call may add (generous: a refusal
+#: takes microseconds, and accepted values build small modules)
+TIME_BOUND_S = 20
+MEMORY_BOUND = 1 << 30
+
+# a tiny image folder, a spike file and an output folder for entry points
+# that need them
+FIXTURE_FILES = {}
+
+
+@pytest.fixture(scope='module', autouse=True)
+def _files(tmp_path_factory):
+    import cv2
+    from wgse_mmseg.core.io import save_spikes
+    root = tmp_path_factory.mktemp('fuzz')
+    (root / 'images').mkdir()
+    cv2.imwrite(str(root / 'images' / 'a.png'),
+                np.full((12, 16), 128, np.uint8))
+    save_spikes(str(root / 'clip.npy'), np.zeros((9, 4, 6), np.uint8))
+    (root / 'empty.npy').write_bytes(b'')
+    (root / 'text.spk').write_text('it\'s "quoted" \\ text')
+    FIXTURE_FILES.update(root=root, images=str(root / 'images'),
+                         clip=str(root / 'clip.npy'),
+                         empty=str(root / 'empty.npy'),
+                         text=str(root / 'text.spk'),
+                         missing=str(root / 'missing.npy'),
+                         directory=str(root))
+    yield
+
+
+def _required(entry):
+    """Valid values for arguments an entry point has no default for, and
+    for those whose defaults would make an accepted call slow."""
+    files = FIXTURE_FILES
+    frames = np.full((2, 4, 6), 0.5)
+    return {
+        'SimulateSpikes': dict(num_steps=9),
+        'simulate_spikes': dict(frames=frames, num_steps=9),
+        'load_spikes': dict(path=files['clip']),
+        'spike_shape': dict(path=files['clip']),
+        'save_spikes': dict(path=str(files['root'] / 'out.npy'),
+                            spikes=np.zeros((2, 2, 4), np.uint8)),
+        'make_synthetic_dataset': dict(
+            out_dir=str(files['root'] / 'synthetic'), num_train=1,
+            num_val=0, height=16, width=16, num_steps=3, num_frames=2,
+            progress=False),
+        'SpikeRandomCrop': dict(crop_size=(4, 4)),
+        'ResidualBlock': dict(channels=4),
+        'SimulatedSpikeImageDataset': dict(
+            image_dir=files['images'], num_samples=2, crop_size=(8, 8),
+            num_steps=5, max_side=32, pipeline=[], lazy_init=True),
+        'REDSSpikeDataset': dict(pipeline=[], lazy_init=True),
+        'SpikeCityscapesDataset': dict(pipeline=[], lazy_init=True),
+        'SpikeReconstructor': dict(num_steps=9, channels=8, num_blocks=1,
+                                   mid_channels=4),
+        'WGSE': dict(hidden_channels=4),
+        'BandNetwork': dict(hidden_channels=4),
+    }.get(entry, {})
+
+
+def _entries():
+    for key, declaration in sorted(DECLARATIONS.items()):
+        module = key[:-len(declaration.entry) - 1]
+        for name in declaration.arguments:
+            yield pytest.param(module, declaration, name,
+                               id=f'{declaration.entry}.{name}')
+
+
+ENTRIES = list(_entries())
+
+
+def test_the_public_entry_points_are_declared():
+    entries = {declaration.entry for declaration in DECLARATIONS.values()}
+    assert {
+        'WGSE', 'BandNetwork', 'TFP', 'TemporalMeanFilter',
+        'SpatialMeanFilter', 'SpikeSegDataPreProcessor', 'LoadSpikeFromFile',
+        'SpikeRandomCrop', 'SpikeRandomFlip', 'SimulateSpikes',
+        'LoadSpikeImagePair', 'SimulatedSpikeImageDataset',
+        'REDSSpikeDataset', 'SpikeReconstructor', 'ResidualBlock',
+        'load_spikes', 'spike_shape', 'save_spikes', 'simulate_spikes',
+        'make_synthetic_dataset', 'ConversionSettings'
+    } <= entries
+    for declaration in DECLARATIONS.values():
+        parameters = inspect.signature(declaration.function).parameters
+        required = {n for n, p in parameters.items()
+                    if p.default is p.empty and n != 'self' and
+                    p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)}
+        assert required <= set(_required(declaration.entry)), (
+            f'{declaration.entry}: give the test valid values of '
+            f'{sorted(required)}')
+
+
+def _bad_values(argument):
+    """What a careless or hostile caller passes."""
+    numbers = st.one_of(
+        st.sampled_from([math.nan, math.inf, -math.inf, 0, 0.0, -1, -0.5,
+                         2**31, 10**8, 10**18, 1e300, True, False]),
+        st.integers(max_value=-1), st.integers(min_value=2**40),
+        st.floats(min_value=0.01, max_value=1e6).filter(
+            lambda v: not v.is_integer()))
+    others = st.one_of(
+        st.sampled_from([None, [], {}, (), b'bytes', 1j, object(),
+                         [math.nan, 1], (1, 2, 3), ('a', 'b')]),
+        st.text(alphabet='\'"\\ab/.\0', max_size=8))
+    files = st.sampled_from(['directory', 'empty', 'text', 'missing']).map(
+        lambda kind: FIXTURE_FILES[kind])
+    if isinstance(argument, Path):  # mostly wrong file kinds for paths
+        return st.one_of(files, files, numbers, others)
+    return st.one_of(numbers, others, files)
+
+
+@pytest.mark.parametrize('module, declaration, name', ENTRIES)
+def test_bad_arguments(module, declaration, name, single_thread):
+    call = getattr(importlib.import_module(module), declaration.entry)
+    argument = declaration.arguments[name]
+
+    @settings(max_examples=6, deadline=None, database=None,
+              suppress_health_check=list(HealthCheck))
+    @given(value=_bad_values(argument))
+    def check(value):
+        kwargs = dict(_required(declaration.entry), **{name: value})
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        start = time.perf_counter()
+        try:
+            call(**kwargs)
+        except ArgumentError as err:
+            assert err.entry == declaration.entry, err
+            assert name in err.argument, err
+            assert 'wgse_mmseg/core/arguments.py' in \
+                _traceback_files(err)[-1]
+        except (ValueError, TypeError, OSError) as err:
+            # a file the reader refused, named; or a relation between
+            # arguments, named
+            message = str(err)
+            assert (isinstance(value, str) and value in message) or \
+                name in message, f'{type(err).__name__}: {message}'
+            raised_in = _traceback_files(err)[-1]
+            assert 'wgse_mmseg' in raised_in, (raised_in, message)
+        else:
+            assert argument.accepts(value) or (
+                value is None and argument.optional), (
+                f'{declaration.entry}({name}={value!r}) was accepted but '
+                f'the declaration refuses it')
+        assert time.perf_counter() - start < TIME_BOUND_S
+        grown = resource.getrusage(
+            resource.RUSAGE_SELF).ru_maxrss * 1024 - peak
+        assert grown < MEMORY_BOUND, f'{grown} bytes more at the peak'
+
+    check()
+
+
+def _traceback_files(err):
+    tb = err.__traceback__
+    files = []
+    while tb is not None:
+        files.append(tb.tb_frame.f_code.co_filename.replace('\\', '/'))
+        tb = tb.tb_next
+    return files

@@ -1,0 +1,412 @@
+"""Argument checks, declared once per public entry point.
+
+A public entry point (the constructor of a registered class, a reader, the
+simulator, a converter) declares each argument's kind, range and stated
+limit (:mod:`.limits`) with :func:`declare`::
+
+    @declare(level=Integer(1, MAX_LEVEL), mode=Choice(SUPPORTED_MODES))
+    def __init__(self, level=5, mode='zero'): ...
+
+Every call then checks the bound arguments before the body runs (so before
+anything is allocated) and raises :class:`ArgumentError`, naming the entry
+point, the argument, what was expected and a bounded excerpt of what came.
+The declarations are recorded in :data:`DECLARATIONS` so that tests can
+enumerate every declared argument.
+
+A tool's command line uses the same kinds as argparse ``type=`` functions
+(``parser.add_argument('--repeat', type=Integer(1, MAX_REPEAT))``): argparse
+then exits with ``argument --repeat: must be an integer >= 1 ...``.
+"""
+import argparse
+import copy
+import functools
+import inspect
+import math
+import os
+from dataclasses import dataclass
+from numbers import Integral, Real
+from typing import Any, Callable, Dict, Optional, Sequence as SequenceType
+
+from .limits import (MAX_CLASSES, MAX_IMAGE_SIDE, MAX_NUM_STEPS,
+                     MAX_PARAMETERS, MAX_SEED, excerpt)
+
+__all__ = [
+    'ArgumentError', 'Argument', 'Integer', 'Number', 'Flag', 'Text',
+    'Choice', 'Path', 'Sequence', 'OneOf', 'Declaration', 'DECLARATIONS',
+    'declare', 'declare_fields', 'check_parameter_count', 'NUM_STEPS', 'SIDE',
+    'FRAME_SIZE', 'SEED', 'NUM_CLASSES', 'PROBABILITY'
+]
+
+class ArgumentError(ValueError, TypeError):
+    """An argument is not what its entry point declares.
+
+    Both a ``ValueError`` and a ``TypeError``: a wrong value and a wrong type
+    are the same mistake to the caller. Attributes ``entry``, ``argument``
+    and ``expected`` hold the parts of the message.
+    """
+
+    def __init__(self, entry: str, argument: str, expected: str, value: Any):
+        self.entry = entry
+        self.argument = argument
+        self.expected = expected
+        super().__init__(f'{entry}: {argument} must be {expected}, got '
+                         f'{excerpt(value)}')
+
+
+class Argument:
+    """One declared argument: what it accepts and how that reads.
+
+    Subclasses implement :meth:`accepts` (Python values), :meth:`describe`
+    and, for command lines, :meth:`convert` (text to a Python value).
+    ``optional=True`` also accepts ``None``.
+    """
+
+    def __init__(self, optional: bool = False):
+        self.optional = optional
+
+    def accepts(self, value: Any) -> bool:
+        raise NotImplementedError
+
+    def or_none(self) -> 'Argument':
+        """This declaration, also accepting ``None``."""
+        other = copy.copy(self)
+        other.optional = True
+        return other
+
+    def describe(self) -> str:
+        raise NotImplementedError
+
+    def expected(self) -> str:
+        """:meth:`describe`, with ``or None`` where ``None`` is accepted."""
+        return self.describe() + (' or None' if self.optional else '')
+
+    def check(self, value: Any, entry: str, name: str) -> None:
+        """Raise :class:`ArgumentError` unless ``value`` is accepted."""
+        if value is None and self.optional:
+            return
+        if not self.accepts(value):
+            raise ArgumentError(entry, name, self.expected(), value)
+
+    def convert(self, text: str) -> Any:
+        return text
+
+    def __call__(self, text: str) -> Any:
+        """argparse's ``type=``: the checked value of a command-line word."""
+        try:
+            value = self.convert(text)
+        except (TypeError, ValueError, OverflowError):
+            value = None
+        if value is None or not self.accepts(value):
+            raise argparse.ArgumentTypeError(
+                f'must be {self.describe()}, got {excerpt(text)}')
+        return value
+
+    def __repr__(self):
+        return f'{type(self).__name__}({self.expected()})'
+
+
+def _bound(minimum, maximum, strict_minimum=False) -> str:
+    parts = []
+    if minimum is not None:
+        parts.append(f'{">" if strict_minimum else ">="} {minimum}')
+    if maximum is not None:
+        parts.append(f'<= {maximum}')
+    return ' and '.join(parts)
+
+
+class Integer(Argument):
+    """An ``int`` or NumPy integer (not ``bool``) in ``[minimum, maximum]``,
+    odd where ``odd=True``."""
+
+    def __init__(self, minimum: Optional[int] = None,
+                 maximum: Optional[int] = None, odd: bool = False,
+                 optional: bool = False):
+        super().__init__(optional)
+        self.minimum, self.maximum, self.odd = minimum, maximum, odd
+
+    def accepts(self, value):
+        return (isinstance(value, Integral) and not isinstance(value, bool)
+                and (self.minimum is None or value >= self.minimum)
+                and (self.maximum is None or value <= self.maximum)
+                and (not self.odd or value % 2 == 1))
+
+    def describe(self):
+        bound = _bound(self.minimum, self.maximum)
+        return f'{"an odd" if self.odd else "an"} integer' + (
+            f' {bound}' if bound else '')
+
+    def convert(self, text):
+        return int(text)
+
+
+class Number(Argument):
+    """A finite real number (not ``bool``) in ``[minimum, maximum]``, or
+    ``(minimum, maximum]`` where ``strict_minimum=True``."""
+
+    def __init__(self, minimum: Optional[float] = None,
+                 maximum: Optional[float] = None,
+                 strict_minimum: bool = False, optional: bool = False):
+        super().__init__(optional)
+        self.minimum, self.maximum = minimum, maximum
+        self.strict_minimum = strict_minimum
+
+    def accepts(self, value):
+        if isinstance(value, bool) or not isinstance(value, Real) or \
+                not math.isfinite(value):
+            return False
+        if self.minimum is not None and (
+                value < self.minimum or
+                (self.strict_minimum and value == self.minimum)):
+            return False
+        return self.maximum is None or value <= self.maximum
+
+    def describe(self):
+        bound = _bound(self.minimum, self.maximum, self.strict_minimum)
+        return 'a finite number' + (f' {bound}' if bound else '')
+
+    def convert(self, text):
+        return float(text)
+
+
+class Flag(Argument):
+    """``True`` or ``False``."""
+
+    def accepts(self, value):
+        return isinstance(value, bool)
+
+    def describe(self):
+        return 'True or False'
+
+
+class Text(Argument):
+    """A string, non-empty where ``empty=False``."""
+
+    def __init__(self, empty: bool = True, optional: bool = False):
+        super().__init__(optional)
+        self.empty = empty
+
+    def accepts(self, value):
+        return isinstance(value, str) and (self.empty or bool(value))
+
+    def describe(self):
+        return 'a string' if self.empty else 'a non-empty string'
+
+
+class Choice(Argument):
+    """One of ``choices``, compared with its type (``True`` is not ``1``);
+    ``description`` replaces the list in messages (for long lists)."""
+
+    def __init__(self, choices: SequenceType, optional: bool = False,
+                 description: Optional[str] = None):
+        super().__init__(optional)
+        self.choices = tuple(choices)
+        self.description = description
+
+    def accepts(self, value):
+        return any(type(value) is type(choice) and value == choice
+                   for choice in self.choices)
+
+    def describe(self):
+        return self.description or f'one of {list(self.choices)}'
+
+    def convert(self, text):
+        for choice in self.choices:
+            if str(choice) == text:
+                return choice
+        return None
+
+
+class Path(Argument):
+    """A file system path (``str`` or ``os.PathLike``, non-empty, no NUL).
+
+    ``exists``: ``'file'`` or ``'directory'`` also requires one to be there
+    (readers check their files themselves, naming the file).
+    """
+
+    def __init__(self, exists: Optional[str] = None,
+                 optional: bool = False):
+        super().__init__(optional)
+        assert exists in (None, 'file', 'directory')
+        self.exists = exists
+
+    def accepts(self, value):
+        if not isinstance(value, (str, os.PathLike)):
+            return False
+        text = os.fspath(value)
+        if not isinstance(text, str) or not text or '\0' in text:
+            return False
+        if self.exists == 'file':
+            return os.path.isfile(text)
+        return self.exists != 'directory' or os.path.isdir(text)
+
+    def describe(self):
+        return 'a path' + (f' to an existing {self.exists}'
+                           if self.exists else '')
+
+
+class Sequence(Argument):
+    """A list or tuple of values each accepted by ``item``.
+
+    Args:
+        item: the declaration of every value.
+        names: the values' names, fixing the length (``('h', 'w')``).
+        ordered: values must not decrease (a ``(low, high)`` range).
+        min_length, max_length: bounds on the length without ``names``.
+        separator: splits a command-line word into values.
+    """
+
+    def __init__(self, item: Argument, names: Optional[SequenceType] = None,
+                 ordered: bool = False, min_length: int = 1,
+                 max_length: Optional[int] = None, separator: str = ',',
+                 optional: bool = False):
+        super().__init__(optional)
+        self.item, self.ordered, self.separator = item, ordered, separator
+        self.names = tuple(names) if names else None
+        self.min_length = len(self.names) if self.names else min_length
+        self.max_length = len(self.names) if self.names else max_length
+
+    def accepts(self, value):
+        if not isinstance(value, (list, tuple)):
+            return False
+        if len(value) < self.min_length or (
+                self.max_length is not None and len(value) > self.max_length):
+            return False
+        if not all(self.item.accepts(v) for v in value):
+            return False
+        return not self.ordered or all(a <= b
+                                       for a, b in zip(value, value[1:]))
+
+    def describe(self):
+        if self.names:
+            head = f'({", ".join(self.names)})'
+            if self.ordered:
+                head += f' with {" <= ".join(self.names)}'
+        else:
+            count = (f'{self.min_length}+' if self.max_length is None else
+                     f'{self.min_length}..{self.max_length}')
+            head = f'a sequence of {count} values'
+            if self.ordered:
+                head += ' in non-decreasing order'
+        return f'{head}, each {self.item.describe()}'
+
+    def convert(self, text):
+        return tuple(self.item.convert(part)
+                     for part in text.split(self.separator))
+
+
+class OneOf(Argument):
+    """A value that one of ``alternatives`` accepts."""
+
+    def __init__(self, *alternatives: Argument, optional: bool = False):
+        super().__init__(optional)
+        self.alternatives = alternatives
+
+    def accepts(self, value):
+        return any(a.accepts(value) for a in self.alternatives)
+
+    def describe(self):
+        return ', or '.join(a.describe() for a in self.alternatives)
+
+    def convert(self, text):
+        for alternative in self.alternatives:
+            try:
+                value = alternative.convert(text)
+            except (TypeError, ValueError, OverflowError):
+                continue
+            if value is not None and alternative.accepts(value):
+                return value
+        return None
+
+
+@dataclass
+class Declaration:
+    """The declared arguments of one entry point.
+
+    Attributes:
+        entry: the name errors give (a class name for a constructor).
+        function: the checked function (a constructor's ``__init__``).
+        arguments: argument name -> :class:`Argument`.
+    """
+    entry: str
+    function: Callable
+    arguments: Dict[str, Argument]
+
+    def check(self, values: Dict[str, Any]) -> None:
+        """Check the declared ones of ``values`` (name -> value)."""
+        for name, argument in self.arguments.items():
+            if name in values:
+                argument.check(values[name], self.entry, name)
+
+
+#: entry-point name -> its :class:`Declaration`, for every :func:`declare`
+DECLARATIONS: Dict[str, Declaration] = {}
+
+
+def declare(**arguments: Argument) -> Callable[[Callable], Callable]:
+    """Declare ``arguments`` of a function or of a constructor
+    (``__init__``); the returned function checks them on every call before
+    its body runs (defaults included)."""
+
+    def wrap(function: Callable) -> Callable:
+        signature = inspect.signature(function)
+        unknown = set(arguments) - set(signature.parameters)
+        if unknown:
+            raise TypeError(f'{function.__qualname__} declares '
+                            f'{sorted(unknown)}, which it does not take')
+        qualname = function.__qualname__
+        entry = (qualname[:-len('.__init__')]
+                 if qualname.endswith('.__init__') else function.__name__)
+        declaration = Declaration(entry, function, dict(arguments))
+
+        @functools.wraps(function)
+        def checked(*args, **kwargs):
+            try:
+                bound = signature.bind(*args, **kwargs)
+            except TypeError as err:
+                raise TypeError(f'{entry}: {err}') from None
+            bound.apply_defaults()
+            declaration.check(bound.arguments)
+            return function(*args, **kwargs)
+
+        checked.declaration = declaration
+        DECLARATIONS[f'{function.__module__}.{entry}'] = declaration
+        return checked
+
+    return wrap
+
+
+def declare_fields(**arguments: Argument) -> Callable[[type], type]:
+    """:func:`declare` for the constructor of a dataclass (put it above
+    ``@dataclass``)."""
+
+    def wrap(cls: type) -> type:
+        cls.__init__ = declare(**arguments)(cls.__init__)
+        return cls
+
+    return wrap
+
+
+def check_parameter_count(entry: str, count: int, fields: str) -> None:
+    """Refuse a learned module of more than :data:`~.limits.MAX_PARAMETERS`
+    parameters before building it; ``fields`` names the arguments that set
+    the count (each within its own limit, their product may not be)."""
+    if count > MAX_PARAMETERS:
+        raise ArgumentError(
+            entry, fields, f'small enough for at most {MAX_PARAMETERS} '
+            f'parameters (MAX_PARAMETERS)', count)
+
+
+# The declarations many entry points share.
+
+#: ``T``, spike frames per window
+NUM_STEPS = Integer(1, MAX_NUM_STEPS)
+#: a frame's height or width
+SIDE = Integer(1, MAX_IMAGE_SIDE)
+#: ``(h, w)`` of a frame, a crop or a padded batch
+FRAME_SIZE = Sequence(SIDE, names=('h', 'w'))
+#: a seed of a random generator
+SEED = Integer(0, MAX_SEED)
+#: the number of classes of a label map
+NUM_CLASSES = Integer(1, MAX_CLASSES)
+#: a probability
+PROBABILITY = Number(0, 1)
