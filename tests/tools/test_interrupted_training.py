@@ -59,8 +59,11 @@ def test_a_corrupted_sample_with_workers_names_the_file(tiny_spike_dataset,
     shutil.copytree(tiny_spike_dataset, copy)
     spikes = sorted((copy / 'spike' / 'train').rglob('*.spk'))
     victim = spikes[len(spikes) // 2]
+    # The same size with a broken header: the dataset's start-up check of
+    # each sample's marker (sizes) passes it, so a worker meets it. (A
+    # truncated file is skipped at start-up: tests/datasets.)
     with open(victim, 'r+b') as f:
-        f.truncate(f.seek(0, 2) // 2)
+        f.write(b'\0' * 8)
     proc = _run([sys.executable, osp.join(ROOT, 'tools', 'train.py'), CONFIG,
                  '--work-dir', str(tmp_path / 'work')] +
                 tiny_run_options(copy, 'train_cfg.max_epochs=1', *EVERY_EPOCH,
