@@ -46,15 +46,12 @@ Every timing runs ``warmup`` untimed calls, then ``repeat`` timed ones
 (CUDA synchronised around each); the summary is the median and the median
 absolute deviation (MAD) of the repeats, and the raw samples are kept.
 """
-import concurrent.futures
-import multiprocessing
 import os
 import platform
 import resource
 import statistics
 import time
 from collections import Counter
-from importlib import metadata
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import torch
@@ -68,14 +65,15 @@ from mmengine.structures import PixelData
 from mmseg.registry import DATASETS, MODELS
 from mmseg.structures import SegDataSample
 from ..utils.config import load_config
-from ..core.machine import cpu_model
+from ..core.machine import cpu_model, package_version, run_isolated
+from ..core.markdown import markdown_table
 
 __all__ = [
     'summarize', 'time_calls', 'make_spike_batch', 'build_model',
     'inference_parameters', 'count_flops', 'measure_latency',
     'measure_throughput', 'measure_train_step', 'measure_enhancer_step',
-    'environment', 'benchmark_config', 'validation_cost', 'run_isolated',
-    'markdown_table', 'format_results'
+    'package_version', 'environment', 'benchmark_config', 'validation_cost',
+    'run_isolated', 'markdown_table', 'format_results'
 ]
 
 SPIKE_PROBABILITY = 0.3
@@ -363,18 +361,6 @@ def measure_enhancer_step(model: nn.Module, num_steps: int,
     return summarize([1e3 * s for s in seconds])
 
 
-def _package_version(name: str, *alternatives: str) -> str:
-    """Version of distribution ``name``, or of the first installed
-    alternative (named then, e.g. ``2.1.0 (mmcv-lite)``)."""
-    for candidate in (name, ) + alternatives:
-        try:
-            version = metadata.version(candidate)
-        except metadata.PackageNotFoundError:
-            continue
-        return version if candidate == name else f'{version} ({candidate})'
-    return 'not installed'
-
-
 def environment(device: str = 'cpu') -> Dict[str, Any]:
     """Device and software versions a benchmark ran with."""
     env = dict(
@@ -385,10 +371,10 @@ def environment(device: str = 'cpu') -> Dict[str, Any]:
         python=platform.python_version(),
         platform=platform.platform(),
         torch=torch.__version__,
-        mmcv=_package_version('mmcv', 'mmcv-lite'),
-        mmengine=_package_version('mmengine'),
-        mmsegmentation=_package_version('mmsegmentation'),
-        wgse_mmseg=_package_version('wgse_mmseg'),
+        mmcv=package_version('mmcv', 'mmcv-lite'),
+        mmengine=package_version('mmengine'),
+        mmsegmentation=package_version('mmsegmentation'),
+        wgse_mmseg=package_version('wgse_mmseg'),
     )
     if device.startswith('cuda'):
         env.update(gpu=torch.cuda.get_device_name(torch.device(device)),
@@ -469,43 +455,6 @@ def validation_cost(config: str, cfg_options: Optional[dict],
                 latency_ms=measure_latency(model, num_steps, (height, width),
                                            repeat, warmup),
                 environment=environment())
-
-
-def run_isolated(fn: Callable, *args, **kwargs):
-    """``fn(*args, **kwargs)`` in a fresh (spawned) process, so that memory
-    and allocator state of earlier work do not leak into measurements."""
-    context = multiprocessing.get_context('spawn')
-    with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
-        return pool.submit(fn, *args, **kwargs).result()
-
-
-def markdown_table(headers: Sequence[str],
-                   rows: Sequence[Sequence[Any]]) -> str:
-    """A GitHub-flavoured Markdown table, numbers right-aligned."""
-    cells = [[str(c) for c in row] for row in rows]
-    widths = [max([len(h)] + [len(r[i]) for r in cells])
-              for i, h in enumerate(headers)]
-    numeric = [bool(cells) and all(_is_number(r[i]) for r in cells)
-               for i in range(len(headers))]
-
-    def line(values):
-        return '| ' + ' | '.join(
-            v.rjust(w) if num else v.ljust(w)
-            for v, w, num in zip(values, widths, numeric)) + ' |'
-
-    rule = '|' + '|'.join(('-' * (w + 1) + ':') if num else '-' * (w + 2)
-                          for w, num in zip(widths, numeric)) + '|'
-    return '\n'.join([line(headers), rule] + [line(r) for r in cells])
-
-
-def _is_number(text: str) -> bool:
-    """``'12'``, ``'1.5 ± 0.1'``, ``'5.0%'`` and ``'-'`` (none) align as
-    numbers."""
-    try:
-        float(text.split(' ')[0].rstrip('%'))
-    except ValueError:
-        return text == '-'
-    return True
 
 
 def _giga(flops: Optional[int]) -> str:

@@ -1,7 +1,12 @@
-"""What machine a measurement ran on, for the benchmark tables."""
+"""What machine and software a measurement ran on, and a fresh process to
+run it in, for the benchmark tables."""
+import concurrent.futures
+import multiprocessing
 import platform
+from importlib import metadata
+from typing import Callable
 
-__all__ = ['cpu_model']
+__all__ = ['cpu_model', 'package_version', 'run_isolated']
 
 
 def cpu_model() -> str:
@@ -14,3 +19,23 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine()
+
+
+def package_version(name: str, *alternatives: str) -> str:
+    """Version of distribution ``name``, or of the first installed
+    alternative (named then, e.g. ``2.1.0 (mmcv-lite)``)."""
+    for candidate in (name, ) + alternatives:
+        try:
+            version = metadata.version(candidate)
+        except metadata.PackageNotFoundError:
+            continue
+        return version if candidate == name else f'{version} ({candidate})'
+    return 'not installed'
+
+
+def run_isolated(fn: Callable, *args, **kwargs):
+    """``fn(*args, **kwargs)`` in a fresh (spawned) process, so that memory
+    and allocator state of earlier work do not leak into measurements."""
+    context = multiprocessing.get_context('spawn')
+    with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
+        return pool.submit(fn, *args, **kwargs).result()

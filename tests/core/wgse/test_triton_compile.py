@@ -14,24 +14,69 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture(scope='module')
 def rows():
-    # a fresh process without TRITON_INTERPRET, compiles side by side
-    return triton_resources.compile_all(jobs=2)
+    # a fresh process without TRITON_INTERPRET, two compiles side by side
+    # (CI's two cores); every variant for sm_90, a covering set for the
+    # others (`python -m wgse_mmseg.core.wgse.triton_resources` compiles
+    # every variant for every target)
+    return triton_resources.compile_all(jobs=2, scope='ci')
 
 
-def test_every_launchable_variant_compiles_for_each_target(rows):
+def _key(arch, variant):
+    return (arch, *variant)
+
+
+def test_every_launchable_variant_compiles(rows):
     compiled = {(r['arch'], r['kernel'], r['hidden'], r['precision'],
                  r['input_grad'], r['block'], r['num_warps']) for r in rows}
-    expected = {(arch, *v) for arch in triton_resources.ARCHITECTURES
-                for v in triton_resources.variants()}
+    expected = {_key(a, v) for v, a in triton_resources.jobs_for(
+        triton_resources.ARCHITECTURES, 'ci')}
     assert compiled == expected
-    # forward and backward (with and without the input gradient) at every
-    # width, precision and launch entry
-    assert len(expected) == 3 * len(triton_band_networks.HIDDEN_CHANNELS) * \
+    # every variant for sm_90: forward and backward (with and without the
+    # input gradient) at every width, precision and launch entry
+    every = {_key(triton_resources.FULL_ARCH, v)
+             for v in triton_resources.variants()}
+    assert every <= compiled
+    assert len(every) == len(triton_band_networks.HIDDEN_CHANNELS) * \
         len(triton_band_networks.TOLERANCES) * (
             len(triton_band_networks.FORWARD_CONFIGS) +
             2 * len(triton_band_networks.BACKWARD_CONFIGS))
     assert all(r['registers'] > 0 and r['programs_per_sm'] >= 1
                for r in rows)
+
+
+def test_every_entry_precision_and_width_compiles_for_each_target(rows):
+    """On sm_80 and sm_89 too, each kernel (forward, backward with and
+    without the input gradient) compiles at every launch entry, every
+    precision and every width, and every default variant compiles."""
+    for arch in triton_resources.ARCHITECTURES:
+        mine = [r for r in rows if r['arch'] == arch]
+        for kernel, grad in (('band_forward', None), ('band_backward',
+                                                      False),
+                             ('band_backward', True)):
+            these = [r for r in mine if r['kernel'] == kernel and
+                     r['input_grad'] == grad]
+            configs = (triton_band_networks.FORWARD_CONFIGS if grad is None
+                       else triton_band_networks.BACKWARD_CONFIGS)
+            assert {(r['block'], r['num_warps']) for r in these} == \
+                {tuple(c) for c in configs}, (arch, kernel, grad)
+            assert {r['precision'] for r in these} == \
+                set(triton_band_networks.TOLERANCES), (arch, kernel, grad)
+            assert {r['hidden'] for r in these} == \
+                set(triton_band_networks.HIDDEN_CHANNELS), (arch, kernel)
+        assert sum(r['default'] for r in mine) == 2 * 3 * 3
+
+
+@pytest.mark.parametrize('fields, expected', [
+    (('band_forward', 32, 'tf32', None, 16, 4), False),   # the default
+    (('band_forward', 32, 'tf32', None, 32, 4), True),    # other entry
+    (('band_backward', 32, 'ieee', True, 16, 4), True),   # float32
+    (('band_backward', 64, 'tf32', False, 16, 4), True),  # 64 channels
+    (('band_backward', 64, 'ieee', False, 16, 4), False),  # two changes
+    (('band_forward', 16, 'fp16', None, 32, 4), False),   # from fp16
+])
+def test_one_step_from_default_by_hand(fields, expected):
+    variant = triton_resources.Variant(*fields)
+    assert triton_resources.one_step_from_default(variant) is expected
 
 
 def test_default_variants_use_no_local_memory(rows):

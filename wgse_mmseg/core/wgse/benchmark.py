@@ -21,7 +21,7 @@ import torch
 
 from ..io import atomic_output
 from ..machine import cpu_model
-from . import band_network_backends
+from . import band_network_backends, triton_band_networks
 from .wgse import WGSE
 
 IMPLEMENTATIONS = {
@@ -127,7 +127,8 @@ def worker(impl: str, shape: List[int], repeat: int, device: str) -> Dict:
                 shape=shape, device=device, peak_mib=peak_mib,
                 kib_per_pixel=peak_mib * 1024 / pixels,
                 median_s=statistics.median(times), min_s=min(times),
-                max_s=max(times), repeat=repeat)
+                max_s=max(times), repeat=repeat,
+                tuned_configs=triton_band_networks.tuned_configs())
 
 
 def agreement(shape: List[int], device: str) -> Dict:
@@ -151,7 +152,8 @@ def agreement(shape: List[int], device: str) -> Dict:
                 max_rel_grad_diff=grad_err)
 
 
-def _run_worker(args: List[str]) -> Dict:
+def run_worker(args: List[str]) -> Dict:
+    """What ``--worker ARGS`` prints, from a fresh process."""
     cmd = [sys.executable, '-m', __name__, '--worker'] + args
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -188,7 +190,7 @@ def run_benchmark(shapes: List[List[int]], impls: List[str], repeat: int,
     rows, checks = [], []
     for shape in shapes:
         text = 'x'.join(map(str, shape))
-        results = {impl: _run_worker([impl, text, str(repeat),
+        results = {impl: run_worker([impl, text, str(repeat),
                                       '--device', device])
                    for impl in impls}
         base = results.get('reference')
@@ -207,7 +209,7 @@ def run_benchmark(shapes: List[List[int]], impls: List[str], repeat: int,
                   f'{speed:>9} {mem:>7}')
             rows.append(res)
         if 'reference' in impls:
-            check = _run_worker(['agree', text, '--device', device])
+            check = run_worker(['agree', text, '--device', device])
             checks.append(check)
             print(f'{"":>14} output agreement ({check["backend"]}): max '
                   f'|WGSE - reference| = '

@@ -1,0 +1,136 @@
+"""tools/analysis_tools/gpu_report.py: the one-command GPU report, run on the
+CPU at tiny shapes (``--smoke``: Triton in its interpreter), so that the first
+GPU run does not fail on a bug in the script; failures are recorded, not
+fatal; the targets are judged right."""
+import json
+import os.path as osp
+import subprocess
+import sys
+
+import pytest
+
+from wgse_mmseg.core.wgse import gpu_report, triton_band_networks
+
+pytest.importorskip('pytorch_wavelets')
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+SECTIONS = {'correctness', 'wgse', 'segmentation', 'latency', 'paper',
+            'autotune', 'targets'}
+
+
+def test_smoke_run_writes_every_section(tmp_path):
+    env = {'OMP_NUM_THREADS': '1', 'PATH': '/usr/bin:/bin',
+           'PYTHONPATH': ROOT}
+    proc = subprocess.run(
+        [sys.executable, osp.join(ROOT, 'tools', 'analysis_tools',
+                                  'gpu_report.py'), '--smoke', '--out-dir',
+         str(tmp_path)], capture_output=True, text=True, cwd=ROOT, env=env)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert '[gpu_report' in proc.stdout  # progress lines
+    report = json.loads((tmp_path / 'gpu.json').read_text())
+    assert set(report['sections']) == SECTIONS
+    assert all(s['status'] == 'ok' for s in report['sections'].values())
+    env = report['environment']
+    assert env['device'] == 'cpu' and env['triton_interpreter'] is True
+    assert env['torch'] and env['triton'] != 'not installed'
+    sections = report['sections']
+
+    # both backends at every precision; Triton's bf16 cannot run in the
+    # interpreter and says so
+    rows = {(r['backend'], r['precision']): r
+            for r in sections['correctness']['rows']}
+    assert set(rows) == {(b, p) for b in ('triton', 'torch')
+                         for p in gpu_report.PRECISIONS}
+    for (backend, precision), row in rows.items():
+        if (backend, precision) == ('triton', 'bf16'):
+            assert row['ok'] is None and 'interpreter' in row['note']
+        else:
+            assert row['ok'] is True
+            assert row['max_rel_error'] <= \
+                triton_band_networks.TOLERANCES[precision]
+
+    wgse = {r['impl']: r for r in sections['wgse']['rows']}
+    assert {'reference', 'torch', 'triton'} <= set(wgse)
+    assert wgse['triton']['backend'] == 'triton'
+    assert wgse['reference']['time_vs_reference'] == 1
+    for row in wgse.values():
+        assert row['median_s'] > 0
+        assert row['time_vs_reference'] == pytest.approx(
+            row['median_s'] / wgse['reference']['median_s'])
+
+    steps = sections['segmentation']['rows']
+    assert [(r['model'], r['enhancer']) for r in steps] == [
+        (m, e) for m in gpu_report.MODELS for e in ('raw', 'WGSE')]
+    for raw, with_wgse in (steps[:2], steps[2:]):
+        assert raw['enhancer_backend'] is None
+        assert with_wgse['enhancer_backend'] in ('compiled', 'torch')
+        assert with_wgse['step_vs_raw'] == pytest.approx(
+            with_wgse['step_ms']['median'] / raw['step_ms']['median'])
+        assert with_wgse['added_latency_ms'] == pytest.approx(
+            with_wgse['latency_ms']['median'] -
+            raw['latency_ms']['median'])
+    assert [r['enhancer'] for r in sections['paper']['rows']] == \
+        ['raw', 'WGSE']
+    assert sections['paper']['shape'] == list(gpu_report.SMOKE.paper_shape)
+    assert len(sections['targets']['rows']) == len(gpu_report.TARGETS)
+    assert all(t['value'] is not None for t in sections['targets']['rows'])
+
+    markdown = (tmp_path / 'gpu.md').read_text()
+    assert markdown.startswith('# WGSE on cpu')
+    assert '**Not a GPU run**' in markdown
+    for heading in ('## Correctness against float64',
+                    '## WGSE forward+backward', '## Training steps',
+                    '## Latency at batch 1', "## The paper's shape",
+                    '## Autotune', '## Against the targets'):
+        assert heading in markdown
+    assert "| WGSE, backend='triton'" in markdown
+    assert markdown.count('| PSPNet R50-D8 | WGSE ') == 3  # steps, b1, paper
+
+
+def test_a_failing_job_is_recorded_and_the_others_run(tmp_path):
+    models = {'missing': ('configs/no_such_raw.py', 'configs/no_such.py')}
+    rows = gpu_report._model_rows(gpu_report.SMOKE, gpu_report._Clock(),
+                                  (2, 12, 32, 32), True, models, ROOT)
+    assert [r['status'] for r in rows] == ['failed', 'failed']
+    assert 'no_such_raw.py' in rows[0]['error']
+    assert 'step_vs_raw' not in rows[1]
+    table = gpu_report._model_table(rows, latency=True)
+    assert table.count('| failed: ') == 2
+
+
+def _row(impl, median_s, peak_mib):
+    return dict(impl=impl, status='ok', median_s=median_s,
+                peak_mib=peak_mib)
+
+
+def test_targets_by_hand():
+    sections = dict(
+        wgse=dict(rows=[_row('reference', 1.0, 40000),
+                        _row('torch', 0.1, 5000),
+                        _row('triton', 0.012, 4096)]),
+        segmentation=dict(rows=[
+            dict(model='PSPNet R50-D8', enhancer='raw', status='ok'),
+            dict(model='PSPNet R50-D8', enhancer='WGSE', status='ok',
+                 step_vs_raw=1.5, added_latency_ms=3.5)]),
+        paper=dict(rows=[dict(enhancer='WGSE', status='ok',
+                              memory=dict(peak_mb=20000))]))
+    found = {t['what']: t for t in gpu_report._targets(sections)}
+    time, memory, ratio, latency, paper = (found[t[0]]
+                                           for t in gpu_report.TARGETS)
+    assert time['value'] == pytest.approx(12)  # Triton's row, in ms
+    assert time['met'] and time['moonshot_met']  # <= 40, <= 15
+    assert memory['value'] == 4 and memory['met'] is False  # 4 GiB > 3
+    assert ratio['met'] and not ratio['moonshot_met']  # 1.5: <= 1.6, > 1.2
+    assert latency['met'] is False  # 3.5 ms > 3
+    assert paper['value'] == pytest.approx(20000 * 2**20 / 1e9)  # 20.97 GB
+    assert paper['met'] and paper['moonshot_met'] is None
+
+
+def test_targets_not_measured_when_their_jobs_failed():
+    failed = dict(status='failed', error='RuntimeError: CUDA out of memory')
+    sections = dict(
+        wgse=dict(rows=[dict(failed, impl='triton')]),
+        segmentation=dict(rows=[dict(failed, model='PSPNet R50-D8',
+                                     enhancer='WGSE')]),
+        paper=dict(rows=[dict(failed, enhancer='WGSE')]))
+    assert all(t['value'] is None and t['met'] is None
+               for t in gpu_report._targets(sections))

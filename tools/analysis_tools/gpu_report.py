@@ -1,0 +1,57 @@
+"""WGSE on a GPU in one command: correctness against float64, WGSE
+forward+backward per backend, PSPNet and SegFormer-B0 training steps raw and
+with WGSE, latency at batch 1, the paper's shape, the autotune choice and the
+issue's targets; writes gpu.md and gpu.json (device, driver, versions).
+
+    python tools/analysis_tools/gpu_report.py                       # CUDA: docs/gpu.md, docs/gpu.json
+    python tools/analysis_tools/gpu_report.py --smoke --out-dir DIR  # CPU, tiny shapes, Triton interpreted
+
+On a GPU machine with torch alone: ``bash tools/gpu_report.sh`` (installs
+``tools/gpu_bundle.sh``'s wheels, then runs this). What each section
+measures: ``wgse_mmseg/core/wgse/gpu_report.py``. A section that fails is
+recorded with its error and the others still run; the exit status is 1 then.
+"""
+import argparse
+import os
+import os.path as osp
+import sys
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--smoke', action='store_true',
+                        help='the same code on the CPU at tiny shapes, '
+                        'Triton in its interpreter (what CI runs)')
+    parser.add_argument('--out-dir', default=osp.join(ROOT, 'docs'),
+                        help='where gpu.md and gpu.json go (default: docs/)')
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.smoke:  # before triton is first imported
+        os.environ['TRITON_INTERPRET'] = '1'
+    import torch
+
+    from wgse_mmseg.core.wgse import gpu_report
+    if not args.smoke and not torch.cuda.is_available():
+        print('gpu_report.py: torch sees no CUDA device here (--smoke runs '
+              'the CPU check)', file=sys.stderr)
+        return 2
+    plan = gpu_report.SMOKE if args.smoke else gpu_report.GPU
+    report = gpu_report.run_report(plan, ROOT)
+    command = 'python tools/analysis_tools/gpu_report.py' + (
+        ' --smoke' if args.smoke else '')
+    gpu_report.write_report(report, args.out_dir, command)
+    print(f'wrote {osp.join(args.out_dir, "gpu.md")} and gpu.json')
+    failed = [name for name, section in report['sections'].items()
+              if section['status'] != 'ok']
+    if failed:
+        print(f'sections not all ok: {", ".join(failed)}', file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
