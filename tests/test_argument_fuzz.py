@@ -26,7 +26,8 @@ wgse_mmseg.register_all_modules()
 # the modules whose entry points are declared but not imported above
 for _module in ('wgse_mmseg.datasets.synthetic',
                 'wgse_mmseg.datasets.cityscapes_conversion',
-                'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction'):
+                'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
+                'wgse_mmseg.apis.experiments'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -86,6 +87,8 @@ def _required(entry):
                                    mid_channels=4),
         'WGSE': dict(hidden_channels=4),
         'BandNetwork': dict(hidden_channels=4),
+        'ExperimentSettings': dict(grid=files['clip'], data_root='data',
+                                   work_dir='work', seeds=[0], epochs=1),
     }.get(entry, {})
 
 
@@ -109,7 +112,7 @@ def test_the_public_entry_points_are_declared():
         'LoadSpikeImagePair', 'SimulatedSpikeImageDataset',
         'REDSSpikeDataset', 'SpikeReconstructor', 'ResidualBlock',
         'load_spikes', 'spike_shape', 'save_spikes', 'simulate_spikes',
-        'make_synthetic_dataset', 'ConversionSettings'
+        'make_synthetic_dataset', 'ConversionSettings', 'ExperimentSettings'
     } <= entries
     for declaration in DECLARATIONS.values():
         parameters = inspect.signature(declaration.function).parameters

@@ -1,10 +1,14 @@
 """tools/analysis_tools/run_experiments.py: the grids, the options it passes to the train
 and test tools, aggregation and reports, and one tiny run end to end."""
 import argparse
+import ast
 import csv
+import dataclasses
+import glob
 import importlib.util
 import json
 import math
+import os
 import os.path as osp
 import subprocess
 import sys
@@ -14,6 +18,8 @@ import pytest
 from mmseg.registry import MODELS
 from wgse_mmseg import register_all_modules
 from wgse_mmseg.apis import experiments as runner
+from wgse_mmseg.apis.experiments import ExperimentSettings, StaleRunError
+from wgse_mmseg.core.arguments import ArgumentError
 from wgse_mmseg.utils.config import add_runner_arguments, load_config
 from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
@@ -82,9 +88,8 @@ def test_entry_options_survive_the_command_line(name):
 
 def cfg_of(grid, entry):
     """The config a run of ``entry`` trains, through the command line."""
-    run, = runner.plan([entry], cli.parse_args(
-        [GRID_CPU, '--data-root', '/data/x', '--work-dir', '/tmp/w',
-         '--seeds', '0', '--max-iters', '10']), grid)
+    run, = runner.plan([entry], ExperimentSettings(
+        GRID_CPU, '/data/x', '/tmp/w', seeds=[0], max_iters=10), grid)
     parser = argparse.ArgumentParser()
     add_runner_arguments(parser)
     args = parser.parse_args(['--cfg-options',
@@ -219,11 +224,10 @@ def test_select_by_pattern_and_unknown_names():
 
 def test_runs_made_with_other_settings_are_not_mixed_in(tmp_path):
     grid, entries = runner.load_grid(GRID_CPU)
-    args = cli.parse_args([GRID_CPU, '--data-root', 'data/x',
-                              '--work-dir', str(tmp_path), '--seeds', '0',
-                              '1', '--epochs', '3'])
-    runs = runner.plan(runner.select(entries, ['segformer_b0_tf?']), args,
-                       grid)
+    settings = ExperimentSettings(GRID_CPU, 'data/x', str(tmp_path),
+                                  seeds=[0, 1], epochs=3)
+    runs = runner.plan(runner.select(entries, ['segformer_b0_tf?']),
+                       settings, grid)
     assert [(r.entry.name, r.seed) for r in runs] == [
         ('segformer_b0_tfp', 0), ('segformer_b0_tfi', 0),
         ('segformer_b0_tfp', 1), ('segformer_b0_tfi', 1)]
@@ -232,14 +236,99 @@ def test_runs_made_with_other_settings_are_not_mixed_in(tmp_path):
     assert run.train_options['train_cfg.max_epochs'] == 3
     assert run.checkpoint == osp.join(run.run_dir, 'epoch_3.pth')
     assert not runner.finished(run)
-    runner._write_json(osp.join(run.run_dir, 'result.json'),
-                       dict(train_options=run.train_options))
+    write_result(run, run.train_options)
     assert runner.finished(run)
-    runner._write_json(osp.join(run.run_dir, 'result.json'),
-                       dict(train_options=dict(run.train_options,
-                                               **{'train_cfg.max_epochs': 5})))
-    with pytest.raises(SystemExit, match='train_cfg.max_epochs differ'):
+    write_result(run, dict(run.train_options,
+                           **{'train_cfg.max_epochs': 5}))
+    with pytest.raises(StaleRunError, match='train_cfg.max_epochs differ'):
         runner.finished(run)
+
+    # the tool says so in one line, before it runs or reports anything
+    with pytest.raises(SystemExit, match=r'^\S+/segformer_b0_tfp/seed_0/'
+                       r'result.json was made with other settings '
+                       r'\(train_cfg.max_epochs differ\); use another '
+                       r'--work-dir$'):
+        cli.main([GRID_CPU, '--data-root', 'data/x', '--work-dir',
+                  str(tmp_path), '--seeds', '0', '1', '--epochs', '3',
+                  '--only', 'segformer_b0_tf?', '--report-only'])
+    assert not (tmp_path / 'results.md').exists()
+
+
+def write_result(run, train_options):
+    """A ``result.json`` of ``run`` made with ``train_options``."""
+    path = osp.join(run.run_dir, 'result.json')
+    os.makedirs(run.run_dir, exist_ok=True)
+    with open(path, 'w') as f:
+        json.dump(dict(train_options=train_options), f)
+
+
+def test_settings_are_checked_once():
+    settings = ExperimentSettings(GRID_CPU, 'data/x', 'work', seeds=[2, 0],
+                                  max_iters=60, only=['pspnet_*'])
+    assert settings.seeds == (2, 0) and settings.only == ('pspnet_*',)
+    assert settings.schedule == '60 iterations'
+    assert settings.report_to == 'work'
+    assert ExperimentSettings(GRID_CPU, 'd', 'w', [0], epochs=1,
+                              report_dir='r').report_to == 'r'
+    assert ExperimentSettings(GRID_CPU, 'd', 'w', [0],
+                              epochs=10).schedule == '10 epochs'
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        settings.seeds = (1,)
+    for schedule in (dict(), dict(epochs=2, max_iters=3)):
+        with pytest.raises(ValueError, match='exactly one'):
+            ExperimentSettings(GRID_CPU, 'd', 'w', [0], **schedule)
+    with pytest.raises(ArgumentError, match='ExperimentSettings: epochs '
+                       'must be an integer >= 1'):
+        ExperimentSettings(GRID_CPU, 'd', 'w', [0], epochs=0)
+    with pytest.raises(ArgumentError, match='ExperimentSettings: seeds'):
+        ExperimentSettings(GRID_CPU, 'd', 'w', [-1], epochs=1)
+    with pytest.raises(ArgumentError, match='ExperimentSettings: seeds'):
+        ExperimentSettings(GRID_CPU, 'd', 'w', [], epochs=1)
+    with pytest.raises(ValueError,
+                       match=r'seeds must not repeat.*\[0, 1, 0\]'):
+        ExperimentSettings(GRID_CPU, 'd', 'w', [0, 1, 0], epochs=1)
+    with pytest.raises(ArgumentError, match='ExperimentSettings: grid'):
+        ExperimentSettings(GRID_CPU + '.missing', 'd', 'w', [0], epochs=1)
+    with pytest.raises(ArgumentError, match='ExperimentSettings: only'):
+        ExperimentSettings(GRID_CPU, 'd', 'w', [0], epochs=1, only='x*')
+
+
+def test_the_tool_fills_the_grids_defaults_and_refuses_in_one_line(
+        tmp_path):
+    grid, _ = runner.load_grid(GRID_CPU)
+    args = cli.parse_args([GRID_CPU, '--data-root', 'd', '--work-dir', 'w'])
+    settings = cli.settings_from(args, grid)
+    assert settings.seeds == tuple(grid.seeds)
+    assert (settings.epochs, settings.max_iters) == (grid.epochs, None)
+    args = cli.parse_args([GRID_CPU, '--data-root', 'd', '--work-dir', 'w',
+                           '--seeds', '5', '--max-iters', '7'])
+    settings = cli.settings_from(args, grid)
+    assert (settings.seeds, settings.epochs, settings.max_iters) == (
+        (5,), None, 7)
+    with pytest.raises(SystemExit, match='^run_experiments.py: '
+                       'ExperimentSettings: seeds must not repeat'):
+        cli.main([GRID_CPU, '--data-root', 'd', '--work-dir',
+                  str(tmp_path), '--seeds', '1', '1', '--list'])
+
+
+def test_the_library_takes_no_namespace_and_exits_nowhere():
+    """Library functions get settings, not a command line; a library
+    error is an exception the tool turns into its exit."""
+    package = osp.join(ROOT, 'wgse_mmseg', 'apis', 'experiments')
+    for path in glob.glob(osp.join(ROOT, 'wgse_mmseg', '**', '*.py'),
+                          recursive=True):
+        tree = ast.parse(open(path, encoding='utf-8').read())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                call = node.exc.func if isinstance(node.exc, ast.Call) \
+                    else node.exc
+                assert getattr(call, 'id', None) != 'SystemExit', (
+                    f'{path}:{node.lineno} raises SystemExit')
+            if path.startswith(package) and isinstance(
+                    node, (ast.Import, ast.ImportFrom)):
+                names = [a.name for a in node.names] + [
+                    getattr(node, 'module', None) or '']
+                assert 'argparse' not in names, f'{path} imports argparse'
 
 
 def fake_result(path, entry, seed, miou, ms, seconds, loss_curve=None):
@@ -294,11 +383,10 @@ def test_aggregate_and_report(tmp_path):
             table[0]['train_memory_mb']) == ('2.5', '123.4', '456.7')
     assert table[1]['gflops'] == '' and table[1]['loss_change_mean'] == ''
 
-    args = cli.parse_args([GRID_CPU, '--data-root', 'data/x',
-                              '--work-dir', str(tmp_path), '--seeds', '0',
-                              '1', '--epochs', '3'])
+    settings = ExperimentSettings(GRID_CPU, 'data/x', str(tmp_path),
+                                  seeds=[0, 1], epochs=3)
     runner.write_markdown(rows, str(tmp_path / 'results.md'), 'python cmd',
-                          args, grid, 'plot.png')
+                          settings, grid, 'plot.png')
     text = (tmp_path / 'results.md').read_text()
     assert '```bash\npython cmd\n```' in text
     assert '3 epochs, seeds 0 1' in text and 'test cpu' in text

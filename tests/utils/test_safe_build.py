@@ -205,7 +205,8 @@ REVIEWED = {
      'Compose'):
         'the test pipeline of the user\'s config (a config is required: '
         'SpikeSegInferencer._init_model refuses a checkpoint\'s config text)',
-    ('wgse_mmseg/apis/experiments.py', 'load_grid', 'Config.fromfile'):
+    ('wgse_mmseg/apis/experiments/grid.py', 'load_grid',
+     'Config.fromfile'):
         'the user\'s grid config file (Python by design)',
     ('wgse_mmseg/utils/config.py', 'load_config', 'Config.fromfile'):
         'the user\'s config file (Python by design)',

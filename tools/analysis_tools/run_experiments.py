@@ -28,7 +28,8 @@ import shlex
 import sys
 import time
 
-from wgse_mmseg.apis.experiments import (RunFailed, benchmark_entry,
+from wgse_mmseg.apis.experiments import (ExperimentSettings, RunFailed,
+                                         StaleRunError, benchmark_entry,
                                          describe, finished, load_grid, plan,
                                          report, run_one, select)
 
@@ -70,6 +71,20 @@ def parse_args(argv=None):
     return parser.parse_args(argv)
 
 
+def settings_from(args, grid):
+    """The checked settings of the parsed command line, the grid's seeds
+    and epochs filling what it leaves out."""
+    epochs = args.epochs
+    if args.max_iters is None and args.epochs is None:
+        epochs = grid.epochs
+    return ExperimentSettings(
+        grid=args.grid, data_root=args.data_root, work_dir=args.work_dir,
+        seeds=args.seeds or list(grid.seeds), epochs=epochs,
+        max_iters=args.max_iters, only=args.only,
+        report_dir=args.report_dir, keep_checkpoints=args.keep_checkpoints,
+        benchmark=args.benchmark, report_only=args.report_only)
+
+
 def measure_entries(runs, grid, work_dir):
     """Benchmark each entry that has a finished run; the names that
     failed."""
@@ -98,36 +113,40 @@ def main(argv=None):
     command = shlex.join(['python', osp.relpath(__file__, os.getcwd())] +
                          list(sys.argv[1:] if argv is None else argv))
     grid, entries = load_grid(args.grid)
-    entries = select(entries, args.only)
+    try:
+        settings = settings_from(args, grid)
+    except ValueError as error:  # ArgumentError included
+        raise SystemExit(f'run_experiments.py: {error}') from None
+    entries = select(entries, settings.only)
     if args.list:
         for entry in entries:
             print(f'{entry.name:32s} '
                   f'{describe(entry.enhancer, entry.variant_options)}')
         return 0
-    if not args.report_only and not osp.isdir(
-            osp.join(args.data_root, 'spike', 'train')):
+    if not settings.report_only and not osp.isdir(
+            osp.join(settings.data_root, 'spike', 'train')):
         raise SystemExit(
             f'{args.data_root}/spike/train does not exist. Make the embedded '
             f'dataset with: python tools/dataset_converters/make_synthetic_dataset.py '
             f'{args.data_root} --num-steps {grid.cfg_options["num_steps"]}')
-    args.seeds = args.seeds or list(grid.seeds)
-    if args.max_iters is None and args.epochs is None:
-        args.epochs = grid.epochs
-    runs = plan(entries, args, grid)
-    done = [finished(run) for run in runs]  # checks every result first
+    runs = plan(entries, settings, grid)
+    try:
+        done = [finished(run) for run in runs]  # checks every result first
+    except StaleRunError as error:
+        raise SystemExit(str(error)) from None
     failures = []
     for index, (run, skip) in enumerate(zip(runs, done), 1):
         prefix = f'[{index}/{len(runs)}] {run.entry.name} seed {run.seed}:'
         if skip:
             print(f'{prefix} done before, skipped', flush=True)
             continue
-        if args.report_only:
+        if settings.report_only:
             print(f'{prefix} not run (--report-only)', flush=True)
             continue
         print(f'{prefix} running ...', flush=True)
         start = time.perf_counter()
         try:
-            result = run_one(run, args.keep_checkpoints, grid.latency)
+            result = run_one(run, settings.keep_checkpoints, grid.latency)
         except RunFailed as error:
             print(f'{prefix} FAILED: {error}', flush=True)
             failures.append(f'{run.entry.name} seed {run.seed}')
@@ -135,9 +154,9 @@ def main(argv=None):
         print(f"{prefix} mIoU {result['mIoU']:.2f}, "
               f"{result['ms_per_image']['median']:.1f} ms/image, "
               f'{time.perf_counter() - start:.0f} s', flush=True)
-    if args.benchmark:
-        failures += measure_entries(runs, grid, args.work_dir)
-    report(entries, args, grid, command)
+    if settings.benchmark:
+        failures += measure_entries(runs, grid, settings.work_dir)
+    report(entries, settings, grid, command)
     if failures:
         print(f'{len(failures)} runs failed: {", ".join(failures)}')
         return 1
