@@ -32,7 +32,9 @@ from mmengine.config import Config
 
 from .benchmarking import (benchmark_config, markdown_table, run_isolated,
                            validation_cost)
+from ..core.arguments import Integer, declare
 from ..core.io import atomic_output
+from ..core.limits import MAX_EPOCHS, MAX_ITERS
 
 #: where the package keeps its ``configs/`` and ``tools/`` (``setup.py``
 #: links them into ``wgse_mmseg/.mim``, MMSeg's convention for mim)
@@ -134,6 +136,8 @@ def enhancer_options(enhancer: Optional[dict]) -> Dict[str, Any]:
     return options
 
 
+@declare(epochs=Integer(1, MAX_EPOCHS, optional=True),
+         max_iters=Integer(1, MAX_ITERS, optional=True))
 def schedule_options(epochs: Optional[int],
                      max_iters: Optional[int]) -> Tuple[Dict[str, Any], str]:
     """``--cfg-options`` for the schedule and the final checkpoint's name.
@@ -147,8 +151,6 @@ def schedule_options(epochs: Optional[int],
     if (epochs is None) == (max_iters is None):
         raise ValueError('give exactly one of epochs and max_iters')
     length = epochs if max_iters is None else max_iters
-    if length < 1:
-        raise ValueError(f'epochs/max_iters must be >= 1, got {length}')
     warmup = max(1, length // 10)
     options = {
         'val_cfg': None, 'val_dataloader': None, 'val_evaluator': None,
