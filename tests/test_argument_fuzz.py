@@ -30,7 +30,8 @@ for _module in ('wgse_mmseg.datasets.synthetic',
                 'wgse_mmseg.datasets.cityscapes_conversion',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
                 'wgse_mmseg.core.exposure', 'wgse_mmseg.apis.benchmarking',
-                'wgse_mmseg.apis.experiments'):
+                'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
+                'wgse_mmseg.core.reconstruction_baselines'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -108,6 +109,13 @@ def _required(entry):
         'time_calls': dict(fn=lambda: None, device=torch.device('cpu'),
                            repeat=1, warmup=0),
         'schedule_options': dict(epochs=None, max_iters=10),
+        'band_lengths': dict(length=16, wavelet='haar'),
+        'analysis_matrix': dict(length=16, wavelet='haar'),
+        'synthesis_matrix': dict(lengths=(8, 8), wavelet='haar'),
+        'wavedec': dict(data=torch.zeros(2, 16), wavelet='haar'),
+        'waverec': dict(coeffs=[torch.zeros(2, 8)] * 2, wavelet='haar'),
+        'tfp': dict(spikes=np.zeros((3, 4, 5))),
+        'tfi': dict(spikes=np.zeros((3, 4, 5))),
     }.get(entry, {})
 
 
@@ -133,7 +141,8 @@ def test_the_public_entry_points_are_declared():
         'load_spikes', 'spike_shape', 'save_spikes', 'simulate_spikes',
         'make_synthetic_dataset', 'ConversionSettings', 'convert_cityscapes',
         'SpikeCityscapesDataset', 'auto_exposure', 'apply_exposure',
-        'time_calls', 'schedule_options'
+        'time_calls', 'schedule_options', 'wavedec', 'waverec',
+        'analysis_matrix', 'band_lengths', 'synthesis_matrix', 'tfp', 'tfi'
     } <= entries
     for declaration in DECLARATIONS.values():
         parameters = inspect.signature(declaration.function).parameters
