@@ -16,18 +16,22 @@ import time
 
 import numpy as np
 import pytest
+import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import wgse_mmseg
 from wgse_mmseg.core.arguments import DECLARATIONS, ArgumentError, Path
+from wgse_mmseg.datasets.cityscapes_conversion import ConversionSettings
 
 wgse_mmseg.register_all_modules()
 # the modules whose entry points are declared but not imported above
 for _module in ('wgse_mmseg.datasets.synthetic',
                 'wgse_mmseg.datasets.cityscapes_conversion',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
-                'wgse_mmseg.apis.experiments'):
+                'wgse_mmseg.core.exposure', 'wgse_mmseg.apis.benchmarking',
+                'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
+                'wgse_mmseg.core.reconstruction_baselines'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -51,11 +55,19 @@ def _files(tmp_path_factory):
     save_spikes(str(root / 'clip.npy'), np.zeros((9, 4, 6), np.uint8))
     (root / 'empty.npy').write_bytes(b'')
     (root / 'text.spk').write_text('it\'s "quoted" \\ text')
+    # a Cityscapes root of one annotated frame
+    for tree, suffix, value in [('leftImg8bit', 'leftImg8bit', 128),
+                                ('gtFine', 'gtFine_labelIds', 7)]:
+        city = root / 'cityscapes' / tree / 'train' / 'aachen'
+        city.mkdir(parents=True)
+        cv2.imwrite(str(city / f'aachen_000000_000019_{suffix}.png'),
+                    np.full((16, 32), value, np.uint8))
     FIXTURE_FILES.update(root=root, images=str(root / 'images'),
                          clip=str(root / 'clip.npy'),
                          empty=str(root / 'empty.npy'),
                          text=str(root / 'text.spk'),
                          missing=str(root / 'missing.npy'),
+                         cityscapes=str(root / 'cityscapes'),
                          directory=str(root))
     yield
 
@@ -89,6 +101,23 @@ def _required(entry):
         'BandNetwork': dict(hidden_channels=4),
         'ExperimentSettings': dict(grid=files['clip'], data_root='data',
                                    work_dir='work', seeds=[0], epochs=1),
+        'auto_exposure': dict(image=frames[0]),
+        'apply_exposure': dict(image=frames[0]),
+        'convert_cityscapes': dict(
+            root=files['cityscapes'], out_dir=str(files['root'] / 'spikes'),
+            settings=ConversionSettings(height=8, width=16, num_steps=3,
+                                        frames_around=0),
+            splits=('train',), progress=False),
+        'time_calls': dict(fn=lambda: None, device=torch.device('cpu'),
+                           repeat=1, warmup=0),
+        'schedule_options': dict(epochs=None, max_iters=10),
+        'band_lengths': dict(length=16, wavelet='haar'),
+        'analysis_matrix': dict(length=16, wavelet='haar'),
+        'synthesis_matrix': dict(lengths=(8, 8), wavelet='haar'),
+        'wavedec': dict(data=torch.zeros(2, 16), wavelet='haar'),
+        'waverec': dict(coeffs=[torch.zeros(2, 8)] * 2, wavelet='haar'),
+        'tfp': dict(spikes=np.zeros((3, 4, 5))),
+        'tfi': dict(spikes=np.zeros((3, 4, 5))),
     }.get(entry, {})
 
 
@@ -112,7 +141,11 @@ def test_the_public_entry_points_are_declared():
         'LoadSpikeImagePair', 'SimulatedSpikeImageDataset',
         'REDSSpikeDataset', 'SpikeReconstructor', 'ResidualBlock',
         'load_spikes', 'spike_shape', 'save_spikes', 'simulate_spikes',
-        'make_synthetic_dataset', 'ConversionSettings', 'ExperimentSettings'
+        'make_synthetic_dataset', 'ConversionSettings', 'convert_cityscapes',
+        'SpikeCityscapesDataset', 'auto_exposure', 'apply_exposure',
+        'time_calls', 'schedule_options', 'wavedec', 'waverec',
+        'analysis_matrix', 'band_lengths', 'synthesis_matrix', 'tfp', 'tfi',
+        'ExperimentSettings'
     } <= entries
     for declaration in DECLARATIONS.values():
         parameters = inspect.signature(declaration.function).parameters
@@ -144,7 +177,10 @@ def _bad_values(argument):
 
 
 @pytest.mark.parametrize('module, declaration, name', ENTRIES)
-def test_bad_arguments(module, declaration, name, single_thread):
+def test_bad_arguments(module, declaration, name, single_thread,
+                       monkeypatch):
+    # relative paths drawn for outputs land in the fixture folder
+    monkeypatch.chdir(FIXTURE_FILES['root'])
     call = getattr(importlib.import_module(module), declaration.entry)
     argument = declaration.arguments[name]
 

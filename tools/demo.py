@@ -26,7 +26,6 @@ from typing import Tuple
 import cv2
 import numpy as np
 import torch
-from mmengine.config import DictAction
 
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
@@ -34,26 +33,31 @@ from mmengine.dataset import Compose  # noqa: E402
 from mmengine.registry import init_default_scope  # noqa: E402
 from mmengine.runner.checkpoint import load_state_dict  # noqa: E402
 from mmseg.apis import init_model  # noqa: E402
-from wgse_mmseg.core.arguments import PROBABILITY, SIDE  # noqa: E402
-from wgse_mmseg.core.exposure import (Exposed,  # noqa: E402
-                                      apply_exposure, parse_exposure)
+from wgse_mmseg.core.arguments import (PROBABILITY, SIDE, Path,  # noqa
+                                       Text)
+from wgse_mmseg.core.exposure import (EXPOSURE, Exposed,  # noqa: E402
+                                      apply_exposure)
 from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
 from wgse_mmseg.core.reconstruction_baselines import tfp  # noqa: E402
 from wgse_mmseg.datasets import SpikeCityscapesDataset  # noqa: E402
 from wgse_mmseg.utils.checkpoint import read_checkpoint  # noqa: E402
-from wgse_mmseg.utils.config import load_config  # noqa: E402
+from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
+                                     load_config)
 
 
-def parse_args():
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description='Segment a spike stream and save a colour overlay')
-    parser.add_argument('spikes', help='spike file (.dat, .spk, .npy, .npz)')
-    parser.add_argument('config', help='config file')
-    parser.add_argument('checkpoint', help='checkpoint file')
+    parser.add_argument('spikes', type=Path(),
+                        help='spike file (.dat, .spk, .npy, .npz)')
+    parser.add_argument('config', type=Path(), help='config file')
+    parser.add_argument('checkpoint', type=Path(), help='checkpoint file')
     parser.add_argument(
-        '--out-file', help='output PNG (default: <stem>_seg.png)')
+        '--out-file', type=Path(),
+        help='output PNG (default: <stem>_seg.png)')
     parser.add_argument(
-        '--device', default='cuda:0' if torch.cuda.is_available() else 'cpu',
+        '--device', type=Text(empty=False),
+        default='cuda:0' if torch.cuda.is_available() else 'cpu',
         help='device used for inference (default: cuda:0 if available)')
     parser.add_argument(
         '--opacity', type=PROBABILITY, default=0.5,
@@ -62,20 +66,18 @@ def parse_args():
                         help='frame height of a .dat file')
     parser.add_argument('--width', type=SIDE,
                         help='frame width of a .dat file')
+    add_config_options(parser)
     parser.add_argument(
-        '--cfg-options', nargs='+', action=DictAction,
-        help='override config settings, key=value; num_steps, data_root and '
-        'crop_size re-derive every field that depends on them')
-    parser.add_argument(
-        '--exposure', default='auto',
+        '--exposure', type=EXPOSURE, default='auto',
         help='exposure of the grey clip under the overlay: auto (default: '
         'brightens only a clearly under-exposed clip, its 99.5th percentile '
         'to white), none, or a gain')
+    return parser
+
+
+def parse_args():
+    parser = build_parser()
     args = parser.parse_args()
-    try:
-        args.exposure = parse_exposure(args.exposure)
-    except ValueError as err:
-        parser.error(str(err))
     if (args.height is None) != (args.width is None):
         parser.error('--height and --width go together')
     if args.out_file is None:

@@ -9,23 +9,25 @@ import argparse
 import os.path as osp
 import sys
 
+from wgse_mmseg.core.arguments import Path
 from wgse_mmseg.core.io import SpikeFileError
 from wgse_mmseg.utils.checkpoint import read_checkpoint
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
 
 
-def parse_args():
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description='Test a segmentor')
-    parser.add_argument('config', help='test config file path')
-    parser.add_argument('checkpoint', help='checkpoint file')
-    parser.add_argument('--out', help='directory to save the predicted masks')
+    parser.add_argument('config', type=Path(), help='test config file path')
+    parser.add_argument('checkpoint', type=Path(), help='checkpoint file')
+    parser.add_argument('--out', type=Path(),
+                        help='directory to save the predicted masks')
     add_runner_arguments(parser)
-    return parser.parse_args()
+    return parser
 
 
 def main():
-    args = parse_args()
+    args = build_parser().parse_args()
     try:
         cfg = config_from_args(args)
         if args.out is not None:

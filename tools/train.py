@@ -9,26 +9,27 @@ import argparse
 import os.path as osp
 import sys
 
+from wgse_mmseg.core.arguments import Path
 from wgse_mmseg.core.io import SpikeFileError
 from wgse_mmseg.utils.checkpoint import CheckpointError
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
 
 
-def parse_args():
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description='Train a segmentor')
-    parser.add_argument('config', help='train config file path')
+    parser.add_argument('config', type=Path(), help='train config file path')
     parser.add_argument(
         '--resume', action='store_true', default=False,
         help='resume from the latest checkpoint in the work_dir')
     parser.add_argument('--amp', action='store_true', default=False,
                         help='enable automatic-mixed-precision training')
     add_runner_arguments(parser)
-    return parser.parse_args()
+    return parser
 
 
 def main():
-    args = parse_args()
+    args = build_parser().parse_args()
     try:
         cfg = config_from_args(args)
         if args.amp:

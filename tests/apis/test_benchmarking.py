@@ -93,7 +93,7 @@ def test_time_calls_warms_up_then_times_each_repeat():
                          repeat=3, warmup=2)
     assert len(calls) == 5 and len(samples) == 3
     assert all(s >= 0 for s in samples)
-    with pytest.raises(ValueError, match='repeat must be >= 1'):
+    with pytest.raises(ValueError, match='repeat must be an integer >= 1'):
         time_calls(lambda: None, torch.device('cpu'), repeat=0, warmup=0)
 
 

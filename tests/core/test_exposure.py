@@ -1,12 +1,14 @@
 """Exposure normalisation against hand-computed gains."""
+import argparse
+
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from wgse_mmseg.core.exposure import (UNDER_EXPOSED_BELOW, apply_exposure,
-                                      exposure_gain, parse_exposure)
+from wgse_mmseg.core.exposure import (EXPOSURE, UNDER_EXPOSED_BELOW,
+                                      apply_exposure, exposure_gain)
 
 
 def test_a_dark_image_gets_its_bright_end_to_white_ignoring_hot_pixels():
@@ -61,13 +63,15 @@ def test_bad_images_are_refused():
         exposure_gain(np.ones((2, 2)), under_exposed_below=0)
 
 
-def test_parse_exposure():
-    assert parse_exposure('auto') == 'auto'
-    assert parse_exposure('none') == 'none'
-    assert parse_exposure('2.5') == 2.5
-    for text in ('0', '-3', 'nan', 'bright', ''):
-        with pytest.raises(ValueError, match='--exposure'):
-            parse_exposure(text)
+def test_exposure_on_a_command_line():
+    assert EXPOSURE('auto') == 'auto'
+    assert EXPOSURE('none') == 'none'
+    assert EXPOSURE('2.5') == 2.5
+    for text in ('0', '-3', 'nan', 'inf', 'bright', ''):
+        with pytest.raises(argparse.ArgumentTypeError,
+                           match="must be one of \\['auto', 'none'\\], or a "
+                           'finite number > 0'):
+            EXPOSURE(text)
 
 
 @given(arrays(np.float64, (6, 7), elements=st.floats(0, 10)))

@@ -3,8 +3,10 @@ baselines, tools and the shipped weights."""
 import importlib.util
 import os
 import os.path as osp
+import resource
 import subprocess
 import sys
+import time
 
 import cv2
 import numpy as np
@@ -260,6 +262,46 @@ def test_a_checkpoint_config_chooses_no_code_at_any_depth(
     assert not marker.exists()
     assert 'this' not in sys.modules
     assert not (tmp_path / 'out.pth').exists()
+
+
+# (where the bomb sits in the exported model config, its key path)
+SIZE_BOMBS = [
+    (dict(channels=200000), '.channels'),
+    (dict(num_blocks=10**8), '.num_blocks'),
+    (dict(enhancer=dict(type='WGSE', wavelet='haar', level=10**6,
+                        hidden_channels=4)), '.enhancer.level'),
+    (dict(num_steps=10**8), '.num_steps'),
+    # each within its limit, together over MAX_PARAMETERS
+    (dict(channels=1024, mid_channels=1024, num_blocks=16), ''),
+]
+
+
+@pytest.mark.parametrize('form', ['model', 'cfg'])
+@pytest.mark.parametrize('bomb, key', SIZE_BOMBS,
+                         ids=[key or 'parameters' for _, key in SIZE_BOMBS])
+def test_a_checkpoint_asking_for_huge_sizes_is_refused_naming_the_file(
+        tmp_path, form, bomb, key):
+    """A crafted checkpoint's sizes are checked against the stated limits
+    before anything is allocated: refused within 5 s and 200 MB, the error
+    naming the file, the key path and the argument."""
+    model = dict(_exported_model_config(), **bomb)
+    meta = dict(model=model) if form == 'model' else dict(
+        cfg=f'model = {model!r}\n')
+    path = str(tmp_path / 'downloaded.pth')
+    torch.save(dict(state_dict=_tiny_model().state_dict(), meta=meta), path)
+    where = "meta['model']" if form == 'model' else "meta['cfg'] model"
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    start = time.perf_counter()
+    with pytest.raises(ConfigDataError) as info:
+        load_reconstructor(path)
+    assert time.perf_counter() - start < 5
+    grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - peak
+    assert grown < 200 << 20, f'{grown} bytes more at the peak'
+    message = str(info.value)
+    assert message.startswith(f'{path}: {where}{key}: '), message
+    argument = key.rsplit('.', 1)[-1] or 'channels'
+    assert argument in message.split(': ', 3)[-1]
+    assert 'must be' in message
 
 
 def test_an_exported_config_loads_and_round_trips(tmp_path):

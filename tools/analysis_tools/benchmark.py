@@ -15,40 +15,43 @@ import argparse
 import json
 import sys
 
-from mmengine.config import DictAction
-
 from wgse_mmseg.apis.benchmarking import (benchmark_config, format_results,
-                                     run_isolated)
+                                          run_isolated, time_calls)
+from wgse_mmseg.core.arguments import SIDE, Integer, Path, Text
 from wgse_mmseg.core.io import atomic_output
+from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
+from wgse_mmseg.utils.config import add_config_options
+
+#: the declarations of a measurement's repeats and warm-up calls
+TIMING = time_calls.declaration.arguments
 
 
-def parse_args():
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description=__doc__.splitlines()[0] + ' ' +
         __doc__.splitlines()[1])
-    parser.add_argument('configs', nargs='+', metavar='CONFIG')
-    parser.add_argument('--device', default='cpu',
+    parser.add_argument('configs', nargs='+', metavar='CONFIG', type=Path())
+    parser.add_argument('--device', type=Text(empty=False), default='cpu',
                         help='cpu, cuda or cuda:N (default: cpu)')
-    parser.add_argument('--crop', type=int, nargs=2, metavar=('H', 'W'),
+    parser.add_argument('--crop', type=SIDE, nargs=2, metavar=('H', 'W'),
                         help="input size (default: the config's crop_size)")
-    parser.add_argument('--repeat', type=int, default=10,
+    parser.add_argument('--repeat', type=TIMING['repeat'], default=10,
                         help='timed repeats of each measurement')
-    parser.add_argument('--warmup', type=int, default=2,
+    parser.add_argument('--warmup', type=TIMING['warmup'], default=2,
                         help='untimed calls before each measurement')
-    parser.add_argument('--batch-size', type=int,
+    parser.add_argument('--batch-size', type=Integer(1, MAX_BATCH_SIZE),
                         help='batch of the throughput and training-step '
                         "measurements (default: the config's training batch)")
-    parser.add_argument('--threads', type=int,
+    parser.add_argument('--threads', type=Integer(1, MAX_WORKERS),
                         help='torch intra-op threads (default: torch\'s)')
-    parser.add_argument('--out', help='also write the results as JSON here')
-    parser.add_argument(
-        '--cfg-options', nargs='+', action=DictAction, default={},
-        help='override config settings, key=value (num_steps=41 sets T)')
-    return parser.parse_args()
+    parser.add_argument('--out', type=Path(),
+                        help='also write the results as JSON here')
+    add_config_options(parser)
+    return parser
 
 
 def main():
-    args = parse_args()
+    args = build_parser().parse_args()
     results, failures = [], []
     for config in args.configs:
         print(f'benchmarking {config} ...', flush=True)

@@ -28,14 +28,14 @@ import argparse
 import numpy as np
 import torch
 
-from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence
+from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence, Text
 from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
 from wgse_mmseg.apis.simulator_benchmark import (header, load_rows,
                                                  simulator_rows)
 from wgse_mmseg.datasets.synthetic import render_street_scene
 
 
-def parse_args():
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--height', type=SIDE, default=256)
     parser.add_argument('--width', type=SIDE, default=512)
@@ -43,18 +43,18 @@ def parse_args():
     parser.add_argument('--frames', type=Integer(2, MAX_NUM_STEPS),
                         default=3, help='video frames over the stream')
     parser.add_argument('--repeat', type=Integer(1, MAX_REPEAT), default=5)
-    parser.add_argument('--device', default='cpu')
+    parser.add_argument('--device', type=Text(empty=False), default='cpu')
     parser.add_argument('--threads', type=Integer(0, MAX_WORKERS), default=1,
                         help='torch intra-op threads (0: torch default)')
     parser.add_argument('--load-shape', default=(129, 512, 1024),
                         type=Sequence(SIDE, names=('T', 'H', 'W')),
                         help='T,H,W of the load-time sample')
     parser.add_argument('--skip-load', action='store_true')
-    return parser.parse_args()
+    return parser
 
 
 def main():
-    args = parse_args()
+    args = build_parser().parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
     frames, _ = render_street_scene(np.random.default_rng(0), args.height,

@@ -31,32 +31,34 @@ import sys
 
 import torch
 
-from wgse_mmseg.core.arguments import Integer
+from wgse_mmseg.core.arguments import Choice, Integer, Path
 from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_mmseg.core.wgse.benchmark import (DEFAULT_SHAPES, IMPLEMENTATIONS,
-                                            available_backends, parse_shape,
+                                            SHAPE, available_backends,
                                             run_benchmark)
 
 
-def _shape(text: str):
-    try:
-        return parse_shape(text)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error))
-
-
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--shapes', nargs='+', type=_shape,
-                        default=[parse_shape(s) for s in DEFAULT_SHAPES],
+    parser.add_argument('--shapes', nargs='+', type=SHAPE,
+                        default=[SHAPE(s) for s in DEFAULT_SHAPES],
                         help='BxTxHxW batches (default: %s)' %
                         ' '.join(DEFAULT_SHAPES))
     parser.add_argument('--repeat', type=Integer(1, MAX_REPEAT), default=3)
-    parser.add_argument('--impls', nargs='+', choices=list(IMPLEMENTATIONS),
-                        help='rows to run (default: the reference and every '
-                        'backend that can run on --device here)')
-    parser.add_argument('--device', choices=['cpu', 'cuda'], default='cpu')
-    parser.add_argument('--out', help='also write the results as JSON')
+    parser.add_argument('--impls', nargs='+',
+                        type=Choice(list(IMPLEMENTATIONS)),
+                        help=f'rows to run, of {list(IMPLEMENTATIONS)} '
+                        '(default: the reference and every backend that can '
+                        'run on --device here)')
+    parser.add_argument('--device', type=Choice(['cpu', 'cuda']),
+                        default='cpu')
+    parser.add_argument('--out', type=Path(),
+                        help='also write the results as JSON')
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.device == 'cuda' and not torch.cuda.is_available():
         parser.error('--device cuda: torch sees no CUDA device here')

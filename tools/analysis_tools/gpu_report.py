@@ -19,20 +19,25 @@ import sys
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 
 
-def parse_args(argv=None):
+def build_parser() -> argparse.ArgumentParser:
+    # imported here: importing the package imports triton, which must come
+    # after main() has chosen the interpreter for --smoke
+    from wgse_mmseg.core.arguments import Path
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--smoke', action='store_true',
                         help='the same code on the CPU at tiny shapes, '
                         'Triton in its interpreter (what CI runs)')
-    parser.add_argument('--out-dir', default=osp.join(ROOT, 'docs'),
+    parser.add_argument('--out-dir', type=Path(),
+                        default=osp.join(ROOT, 'docs'),
                         help='where gpu.md and gpu.json go (default: docs/)')
-    return parser.parse_args(argv)
+    return parser
 
 
 def main(argv=None) -> int:
-    args = parse_args(argv)
-    if args.smoke:  # before triton is first imported
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if '--smoke' in argv:  # before triton is first imported
         os.environ['TRITON_INTERPRET'] = '1'
+    args = build_parser().parse_args(argv)
     import torch
 
     from wgse_mmseg.core.wgse import gpu_report

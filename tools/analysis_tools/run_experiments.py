@@ -31,28 +31,34 @@ import time
 from wgse_mmseg.apis.experiments import (ExperimentSettings, RunFailed,
                                          StaleRunError, benchmark_entry,
                                          describe, finished, load_grid, plan,
-                                         report, run_one, select)
+                                         report, run_one, schedule_options,
+                                         select)
+from wgse_mmseg.core.arguments import SEED, Path, Text
+
+#: the declarations of the training length
+SCHEDULE = schedule_options.declaration.arguments
 
 
-def parse_args(argv=None):
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('grid', help='grid file, e.g. '
+    parser.add_argument('grid', type=Path(), help='grid file, e.g. '
                         'configs/experiments/grid_cpu.py')
-    parser.add_argument('--data-root', required=True,
+    parser.add_argument('--data-root', type=Path(), required=True,
                         help='dataset root (Spike-Cityscapes layout)')
-    parser.add_argument('--work-dir', required=True,
+    parser.add_argument('--work-dir', type=Path(), required=True,
                         help='one sub-directory per entry and seed')
-    parser.add_argument('--seeds', type=int, nargs='+',
+    parser.add_argument('--seeds', type=SEED, nargs='+',
                         help="seeds (default: the grid's)")
     schedule = parser.add_mutually_exclusive_group()
-    schedule.add_argument('--epochs', type=int,
+    schedule.add_argument('--epochs', type=SCHEDULE['epochs'],
                           help="training epochs (default: the grid's)")
-    schedule.add_argument('--max-iters', type=int,
+    schedule.add_argument('--max-iters', type=SCHEDULE['max_iters'],
                           help='train for this many iterations instead')
     parser.add_argument('--only', nargs='+', metavar='NAME',
+                        type=Text(empty=False),
                         help='entries to run: names or shell patterns, '
                         "e.g. 'segformer_b0_*'")
-    parser.add_argument('--report-dir',
+    parser.add_argument('--report-dir', type=Path(),
                         help='where results.{md,csv} and the plot go '
                         '(default: the work dir)')
     parser.add_argument('--keep-checkpoints', action='store_true',
@@ -68,7 +74,11 @@ def parse_args(argv=None):
                         help='before reporting, measure FLOPs, training-step '
                         'time and memory of each entry with finished runs '
                         '(once per entry, in WORK_DIR/<entry>/benchmark.json)')
-    return parser.parse_args(argv)
+    return parser
+
+
+def parse_args(argv=None):
+    return build_parser().parse_args(argv)
 
 
 def settings_from(args, grid):

@@ -12,22 +12,28 @@ import sys
 from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
 
 
-def parse_args():
+#: the declarations of the dataset maker's arguments
+DECLARED = make_synthetic_dataset.declaration.arguments
+
+
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('out_dir', help='dataset root to write')
-    parser.add_argument('--num-train', type=int, default=48)
-    parser.add_argument('--num-val', type=int, default=12)
-    parser.add_argument('--height', type=int, default=128)
-    parser.add_argument('--width', type=int, default=256)
-    parser.add_argument('--num-steps', type=int, default=41,
+    parser.add_argument('out_dir', type=DECLARED['out_dir'],
+                        help='dataset root to write')
+    parser.add_argument('--num-train', type=DECLARED['num_train'], default=48)
+    parser.add_argument('--num-val', type=DECLARED['num_val'], default=12)
+    parser.add_argument('--height', type=DECLARED['height'], default=128)
+    parser.add_argument('--width', type=DECLARED['width'], default=256)
+    parser.add_argument('--num-steps', type=DECLARED['num_steps'], default=41,
                         help='T, spike frames per sample')
-    parser.add_argument('--threshold', type=float, default=1 / 0.6)
-    parser.add_argument('--seed', type=int, default=0)
-    return parser.parse_args()
+    parser.add_argument('--threshold', type=DECLARED['threshold'],
+                        default=1 / 0.6)
+    parser.add_argument('--seed', type=DECLARED['seed'], default=0)
+    return parser
 
 
 def main():
-    args = parse_args()
+    args = build_parser().parse_args()
     try:
         written = make_synthetic_dataset(
             args.out_dir, args.num_train, args.num_val, args.height,

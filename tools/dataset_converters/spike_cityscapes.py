@@ -9,45 +9,53 @@ docs/spike_cityscapes.md and wgse_mmseg/datasets/cityscapes_conversion.py.
 import argparse
 import time
 
-from wgse_mmseg.core.arguments import Integer
-from wgse_mmseg.core.limits import MAX_SAMPLES, MAX_WORKERS
+from wgse_mmseg.core.arguments import Text
 from wgse_mmseg.datasets.cityscapes_conversion import (ConversionSettings,
                                                        convert_cityscapes,
                                                        load_scene)
 
+#: the declarations of the converter's and its settings' arguments
+CONVERTER = convert_cityscapes.declaration.arguments
+SETTINGS = ConversionSettings.__init__.declaration.arguments
 
-def parse_args():
+
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('cityscapes_root',
+    parser.add_argument('cityscapes_root', type=CONVERTER['root'],
                         help='holds leftImg8bit/, gtFine/ and optionally '
                         'leftImg8bit_sequence/')
-    parser.add_argument('out_dir', help='Spike-Cityscapes root to write')
-    parser.add_argument('--splits', nargs='+', default=['train', 'val'])
-    parser.add_argument('--height', type=int, default=512)
-    parser.add_argument('--width', type=int, default=1024)
-    parser.add_argument('--num-steps', type=int, default=129,
+    parser.add_argument('out_dir', type=CONVERTER['out_dir'],
+                        help='Spike-Cityscapes root to write')
+    parser.add_argument('--splits', nargs='+', default=['train', 'val'],
+                        type=CONVERTER['splits'].item)
+    parser.add_argument('--height', type=SETTINGS['height'], default=512)
+    parser.add_argument('--width', type=SETTINGS['width'], default=1024)
+    parser.add_argument('--num-steps', type=SETTINGS['num_steps'],
+                        default=129,
                         help='T, spike readout steps per sample')
-    parser.add_argument('--threshold', type=float, default=1 / 0.6,
+    parser.add_argument('--threshold', type=SETTINGS['threshold'],
+                        default=1 / 0.6,
                         help='firing threshold (default: REDS convention '
                         '1/0.6, white fires 0.6 spikes per step)')
-    parser.add_argument('--frames-around', type=int, default=1,
+    parser.add_argument('--frames-around', type=SETTINGS['frames_around'],
+                        default=1,
                         help='K: the sequence frames frame-K..frame+K span '
                         'the stream (2K/17 s of scene time); 0 always uses '
                         'the static model')
-    parser.add_argument('--scene', default=None,
+    parser.add_argument('--scene', type=Text(empty=False), default=None,
                         help='extra simulator effects: a JSON/YAML file or '
                         'inline JSON, e.g. \'{"shot_noise": {}}\'')
-    parser.add_argument('--seed', type=int, default=0,
+    parser.add_argument('--seed', type=SETTINGS['seed'], default=0,
                         help='base seed; each sample also hashes its name')
-    parser.add_argument('--nproc', type=Integer(1, MAX_WORKERS), default=1,
+    parser.add_argument('--nproc', type=CONVERTER['nproc'], default=1,
                         help='worker processes')
-    parser.add_argument('--limit', type=Integer(1, MAX_SAMPLES), default=None,
+    parser.add_argument('--limit', type=CONVERTER['limit'], default=None,
                         help='at most N samples per split (for trials)')
-    return parser.parse_args()
+    return parser
 
 
 def main():
-    args = parse_args()
+    args = build_parser().parse_args()
     start = time.perf_counter()
     try:
         settings = ConversionSettings(

@@ -16,6 +16,9 @@ import sys
 import cv2
 import numpy as np
 
+from wgse_mmseg.core.arguments import (SIDE, Choice, Integer, Number, Path,
+                                       Sequence, Text)
+from wgse_mmseg.core.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
@@ -25,28 +28,39 @@ _FONT = cv2.FONT_HERSHEY_SIMPLEX
 _GAP = 4
 
 
-def parse_args(argv=None):
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description='Reconstructions of a spike stream over time, as a grid')
-    parser.add_argument('spikes', help='spike file (.dat, .spk, .npy, .npz)')
-    parser.add_argument('--out', required=True, help='output PNG')
-    parser.add_argument('--methods', default='wgse',
-                        help=f'comma-separated rows, of {METHODS}')
-    parser.add_argument('--frames', help='comma-separated centre frames')
-    parser.add_argument('--count', type=int, default=5,
+    parser.add_argument('spikes', type=Path(),
+                        help='spike file (.dat, .spk, .npy, .npz)')
+    parser.add_argument('--out', type=Path(), required=True,
+                        help='output PNG')
+    parser.add_argument('--methods', default=('wgse',),
+                        type=Sequence(Choice(METHODS),
+                                      max_length=len(METHODS)),
+                        help=f'comma-separated rows, of {list(METHODS)}')
+    parser.add_argument('--frames',
+                        type=Sequence(Integer(), max_length=MAX_FIGURE_TILES),
+                        help='comma-separated centre frames')
+    parser.add_argument('--count', type=Integer(1, MAX_FIGURE_TILES),
+                        default=5,
                         help='columns spread over the stream (no --frames)')
-    parser.add_argument('--checkpoint', help='wgse model (default: shipped)')
-    parser.add_argument('--height', type=int, help='frame height of a .dat')
-    parser.add_argument('--width', type=int, help='frame width of a .dat')
-    parser.add_argument('--scale', type=float, default=1.0,
+    parser.add_argument('--checkpoint', type=Path(),
+                        help='wgse model (default: shipped)')
+    parser.add_argument('--height', type=SIDE, help='frame height of a .dat')
+    parser.add_argument('--width', type=SIDE, help='frame width of a .dat')
+    parser.add_argument('--scale', default=1.0,
+                        type=Number(0, MAX_TILE_SCALE, strict_minimum=True),
                         help='tile scale factor')
-    parser.add_argument('--device', default='cpu')
+    parser.add_argument('--device', type=Text(empty=False), default='cpu')
+    return parser
+
+
+def parse_args(argv=None):
+    parser = build_parser()
     args = parser.parse_args(argv)
-    args.methods = [m.strip() for m in args.methods.split(',') if m.strip()]
-    if not args.methods or set(args.methods) - set(METHODS):
-        parser.error(f'--methods must name some of {METHODS}')
-    if args.count < 1 or args.scale <= 0:
-        parser.error('--count must be >= 1 and --scale > 0')
+    if (args.height is None) != (args.width is None):
+        parser.error('--height and --width go together')
     return args
 
 
@@ -81,7 +95,7 @@ def main(argv=None):
             else:
                 functions[method] = reconstruction_method(method)
         if args.frames:
-            frames = [int(f) for f in args.frames.split(',') if f.strip()]
+            frames = list(args.frames)
         else:
             first, last = length // 2, total - length + length // 2
             frames = np.linspace(first, last, args.count).round().astype(

@@ -29,8 +29,9 @@ import os.path as osp
 import sys
 
 
-from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence
-from wgse_mmseg.core.exposure import apply_exposure, parse_exposure
+from wgse_mmseg.core.arguments import (NUM_STEPS, SIDE, Choice, Integer,
+                                       Path, Sequence, Text)
+from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
 from wgse_mmseg.evaluation import entropy_2d
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
@@ -38,15 +39,18 @@ from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
                                               reconstruction_method)
 
 
-def parse_args(argv=None):
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description='Reconstruct images from a spike stream')
-    parser.add_argument('spikes', help='spike file (.dat, .spk, .npy, .npz)')
-    parser.add_argument('--out', required=True, help='output directory')
-    parser.add_argument('--method', choices=METHODS, default='wgse',
-                        help='reconstruction method (default: wgse)')
+    parser.add_argument('spikes', type=Path(),
+                        help='spike file (.dat, .spk, .npy, .npz)')
+    parser.add_argument('--out', type=Path(), required=True,
+                        help='output directory')
+    parser.add_argument('--method', type=Choice(METHODS), default='wgse',
+                        help=f'reconstruction method, of {list(METHODS)} '
+                        '(default: wgse)')
     parser.add_argument(
-        '--checkpoint',
+        '--checkpoint', type=Path(),
         help='model checkpoint for --method wgse (default: shipped weights)')
     parser.add_argument('--height', type=SIDE,
                         help='frame height of a .dat file')
@@ -59,15 +63,17 @@ def parse_args(argv=None):
         '--num-steps', type=NUM_STEPS, default=41,
         help='window length for tfp/tfi (wgse uses its model\'s; default 41)')
     parser.add_argument(
-        '--exposure', default='auto',
+        '--exposure', type=EXPOSURE, default='auto',
         help='auto (default: brightens only a clearly under-exposed image, '
         'its 99.5th percentile to white), none, or a gain')
-    parser.add_argument('--device', default='cpu', help='torch device')
+    parser.add_argument('--device', type=Text(empty=False), default='cpu',
+                        help='torch device')
+    return parser
+
+
+def parse_args(argv=None):
+    parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        args.exposure = parse_exposure(args.exposure)
-    except ValueError as err:
-        parser.error(str(err))
     if (args.height is None) != (args.width is None):
         parser.error('--height and --width go together')
     if args.checkpoint and args.method != 'wgse':

@@ -65,6 +65,8 @@ from mmengine.structures import PixelData
 from mmseg.registry import DATASETS, MODELS
 from mmseg.structures import SegDataSample
 from ..utils.config import load_config
+from ..core.arguments import Integer, declare
+from ..core.limits import MAX_REPEAT
 from ..core.machine import cpu_model, package_version, run_isolated
 from ..core.markdown import markdown_table
 
@@ -94,13 +96,11 @@ def _synchronize(device: torch.device) -> None:
         torch.cuda.synchronize(device)
 
 
+@declare(repeat=Integer(1, MAX_REPEAT), warmup=Integer(0, MAX_REPEAT))
 def time_calls(fn: Callable[[], Any], device: torch.device, repeat: int,
                warmup: int) -> List[float]:
     """Seconds taken by each of ``repeat`` calls of ``fn`` after ``warmup``
     untimed ones."""
-    if repeat < 1 or warmup < 0:
-        raise ValueError(f'repeat must be >= 1 and warmup >= 0, got '
-                         f'repeat={repeat}, warmup={warmup}')
     for _ in range(warmup):
         fn()
     samples = []

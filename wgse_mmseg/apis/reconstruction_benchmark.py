@@ -14,6 +14,8 @@ from typing import Dict, Optional, Sequence
 
 from tqdm import tqdm
 
+from ..core import arguments
+from ..core.arguments import NUM_STEPS, Choice, Path, Text
 from ..datasets.reds import (LoadSpikeImagePair, PackReconstructionInputs,
                              REDSSpikeDataset)
 from ..models.reconstruction import (METHODS, load_reconstructor,
@@ -76,22 +78,27 @@ def format_table(results: Dict[str, Dict[str, float]]) -> str:
     return '\n'.join(lines)
 
 
-def main(argv=None):
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description='Score reconstruction methods on a REDS-layout folder')
-    parser.add_argument('data_root', help='folder with spike/ and gt/')
-    parser.add_argument('--methods', default=','.join(METHODS),
-                        help=f'comma-separated, of {METHODS}')
-    parser.add_argument('--checkpoint',
+    parser.add_argument('data_root', type=Path(),
+                        help='folder with spike/ and gt/')
+    parser.add_argument('--methods', default=METHODS,
+                        type=arguments.Sequence(Choice(METHODS),
+                                      max_length=len(METHODS)),
+                        help=f'comma-separated, of {list(METHODS)}')
+    parser.add_argument('--checkpoint', type=Path(),
                         help='wgse model (default: shipped weights)')
-    parser.add_argument('--num-steps', type=int, default=41)
-    parser.add_argument('--spike-suffix', default='.dat')
-    parser.add_argument('--device', default='cpu')
-    args = parser.parse_args(argv)
-    methods = [m.strip() for m in args.methods.split(',') if m.strip()]
-    unknown = sorted(set(methods) - set(METHODS))
-    if unknown:
-        parser.error(f'unknown methods {unknown}; expected some of {METHODS}')
+    parser.add_argument('--num-steps', type=NUM_STEPS, default=41)
+    parser.add_argument('--spike-suffix', type=Text(empty=False),
+                        default='.dat')
+    parser.add_argument('--device', type=Text(empty=False), default='cpu')
+    return parser
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    methods = list(dict.fromkeys(args.methods))  # in order, once each
     results = benchmark(args.data_root, methods, args.checkpoint,
                         args.num_steps, args.spike_suffix, args.device)
     print(format_table(results))

@@ -88,17 +88,34 @@ class Argument:
             raise ArgumentError(entry, name, self.expected(), value)
 
     def convert(self, text: str) -> Any:
+        """The value a command-line word spells (unchecked; may raise)."""
         return text
 
-    def __call__(self, text: str) -> Any:
-        """argparse's ``type=``: the checked value of a command-line word."""
+    def _read(self, text: str) -> Any:
+        """:meth:`convert`'s value of ``text`` if accepted, else ``None``."""
         try:
             value = self.convert(text)
         except (TypeError, ValueError, OverflowError):
-            value = None
-        if value is None or not self.accepts(value):
+            return None
+        return value if value is not None and self.accepts(value) else None
+
+    def __call__(self, text: str) -> Any:
+        """argparse's ``type=``: the checked value of a command-line word."""
+        value = self._read(text)
+        if value is None:
             raise argparse.ArgumentTypeError(
                 f'must be {self.describe()}, got {excerpt(text)}')
+        return value
+
+    def parse(self, value: Any, entry: str, name: str) -> Any:
+        """``value`` checked as :meth:`check` does, a string first read as
+        a command-line word (a config option's ``'41'`` or ``'128,256'``);
+        the accepted value."""
+        if isinstance(value, str):
+            read = self._read(value)
+            if read is not None:
+                return read
+        self.check(value, entry, name)
         return value
 
     def __repr__(self):
@@ -248,22 +265,32 @@ class Sequence(Argument):
     """A list or tuple of values each accepted by ``item``.
 
     Args:
-        item: the declaration of every value.
+        item: the declaration of every value, or with ``names`` one per
+            name (``(NUM_STEPS, SIDE, SIDE)`` for ``('T', 'H', 'W')``).
         names: the values' names, fixing the length (``('h', 'w')``).
         ordered: values must not decrease (a ``(low, high)`` range).
         min_length, max_length: bounds on the length without ``names``.
         separator: splits a command-line word into values.
     """
 
-    def __init__(self, item: Argument, names: Optional[SequenceType] = None,
+    def __init__(self, item, names: Optional[SequenceType] = None,
                  ordered: bool = False, min_length: int = 1,
                  max_length: Optional[int] = None, separator: str = ',',
                  optional: bool = False):
         super().__init__(optional)
         self.item, self.ordered, self.separator = item, ordered, separator
         self.names = tuple(names) if names else None
+        if isinstance(item, (list, tuple)):
+            assert self.names and len(item) == len(self.names), \
+                'one declaration per name'
         self.min_length = len(self.names) if self.names else min_length
         self.max_length = len(self.names) if self.names else max_length
+
+    def _items(self, count: int):
+        """The declarations of ``count`` values, in order."""
+        if isinstance(self.item, (list, tuple)):
+            return self.item
+        return (self.item,) * count
 
     def accepts(self, value):
         if not isinstance(value, (list, tuple)):
@@ -271,7 +298,8 @@ class Sequence(Argument):
         if len(value) < self.min_length or (
                 self.max_length is not None and len(value) > self.max_length):
             return False
-        if not all(self.item.accepts(v) for v in value):
+        if not all(item.accepts(v)
+                   for item, v in zip(self._items(len(value)), value)):
             return False
         return not self.ordered or all(a <= b
                                        for a, b in zip(value, value[1:]))
@@ -287,11 +315,19 @@ class Sequence(Argument):
             head = f'a sequence of {count} values'
             if self.ordered:
                 head += ' in non-decreasing order'
+        if isinstance(self.item, (list, tuple)):
+            return head + ': ' + ', '.join(
+                f'{name} {item.describe()}'
+                for name, item in zip(self.names, self.item))
         return f'{head}, each {self.item.describe()}'
 
     def convert(self, text):
-        return tuple(self.item.convert(part)
-                     for part in text.split(self.separator))
+        parts = text.split(self.separator)
+        if isinstance(self.item, (list, tuple)) and \
+                len(parts) != len(self.item):
+            return None
+        return tuple(item.convert(part)
+                     for item, part in zip(self._items(len(parts)), parts))
 
 
 class OneOf(Argument):
@@ -309,11 +345,8 @@ class OneOf(Argument):
 
     def convert(self, text):
         for alternative in self.alternatives:
-            try:
-                value = alternative.convert(text)
-            except (TypeError, ValueError, OverflowError):
-                continue
-            if value is not None and alternative.accepts(value):
+            value = alternative._read(text)
+            if value is not None:
                 return value
         return None
 

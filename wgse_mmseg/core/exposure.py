@@ -17,12 +17,16 @@ from typing import NamedTuple, Tuple, Union
 
 import numpy as np
 
-__all__ = ['EXPOSURE_CHOICES', 'UNDER_EXPOSED_BELOW', 'Exposed',
-           'auto_exposure', 'exposure_gain', 'apply_exposure',
-           'parse_exposure']
+from .arguments import Choice, Number, OneOf, declare
+
+__all__ = ['EXPOSURE_CHOICES', 'EXPOSURE', 'UNDER_EXPOSED_BELOW', 'Exposed',
+           'auto_exposure', 'exposure_gain', 'apply_exposure']
 
 #: the non-numeric values of an ``exposure`` argument
 EXPOSURE_CHOICES = ('auto', 'none')
+#: an ``exposure`` argument (and the tools' ``--exposure``): ``'auto'``,
+#: ``'none'`` or a gain
+EXPOSURE = OneOf(Choice(EXPOSURE_CHOICES), Number(0, strict_minimum=True))
 
 #: ``'auto'`` brightens an image only when its bright end is below this
 #: fraction of white, i.e. when it would need a gain above 4. Calibrated
@@ -52,11 +56,12 @@ def _bright_end(image: np.ndarray, percentile: float) -> float:
                          f'shape {values.shape} with '
                          f'{np.size(values) - np.isfinite(values).sum()} '
                          f'non-finite values')
-    if not 0 < percentile <= 100:
-        raise ValueError(f'percentile must be in (0, 100]; got {percentile}')
     return float(np.percentile(values, percentile))
 
 
+@declare(percentile=Number(0, 100, strict_minimum=True),
+         max_gain=Number(1),
+         under_exposed_below=Number(0, 1, strict_minimum=True))
 def auto_exposure(image: np.ndarray, percentile: float = 99.5,
                   max_gain: float = 64.0,
                   under_exposed_below: float = UNDER_EXPOSED_BELOW
@@ -75,9 +80,6 @@ def auto_exposure(image: np.ndarray, percentile: float = 99.5,
     Returns:
         ``(gain, reason)``: a gain >= 1, and one sentence saying why.
     """
-    if max_gain < 1 or not 0 < under_exposed_below <= 1:
-        raise ValueError(f'max_gain must be >= 1 and under_exposed_below in '
-                         f'(0, 1]; got {max_gain}, {under_exposed_below}')
     bright = _bright_end(image, percentile)
     where = f'bright end ({percentile:g}th percentile) {bright:.3g} of white'
     if bright >= under_exposed_below:
@@ -100,6 +102,7 @@ def exposure_gain(image: np.ndarray, **kwargs) -> float:
     return auto_exposure(image, **kwargs)[0]
 
 
+@declare(exposure=EXPOSURE)
 def apply_exposure(image: np.ndarray, exposure: Exposure = 'auto') -> Exposed:
     """``image`` times a gain, clipped to ``[0, 1]``.
 
@@ -113,33 +116,13 @@ def apply_exposure(image: np.ndarray, exposure: Exposure = 'auto') -> Exposed:
         :class:`Exposed`: the ``(H, W)`` float32 image in ``[0, 1]``, the
         gain applied and the reason.
     """
-    if isinstance(exposure, str):
-        if exposure not in EXPOSURE_CHOICES:
-            raise ValueError(f'exposure must be one of {EXPOSURE_CHOICES} '
-                             f'or a positive gain, got {exposure!r}')
-        if exposure == 'auto':
-            gain, reason = auto_exposure(image)
-        else:
-            gain, reason = 1.0, 'exposure none: left as it is'
+    if exposure == 'auto':
+        gain, reason = auto_exposure(image)
+    elif exposure == 'none':
+        gain, reason = 1.0, 'exposure none: left as it is'
     else:
         gain = float(exposure)
-        if not np.isfinite(gain) or gain <= 0:
-            raise ValueError(f'exposure gain must be positive and finite, '
-                             f'got {exposure!r}')
         reason = f'fixed gain {gain:g}'
     scaled = np.clip(np.asarray(image, dtype=np.float32) * gain, 0, 1)
     return Exposed(scaled, gain, reason)
 
-
-def parse_exposure(text: str) -> Exposure:
-    """A command line's ``--exposure``: ``auto``, ``none`` or a gain > 0."""
-    if text in EXPOSURE_CHOICES:
-        return text
-    try:
-        gain = float(text)
-    except ValueError:
-        gain = float('nan')
-    if not np.isfinite(gain) or gain <= 0:
-        raise ValueError(f'--exposure must be auto, none or a positive gain, '
-                         f'got {text!r}')
-    return gain

@@ -55,8 +55,17 @@ MAX_CLASSES = 255
 MAX_SEED = 2**63 - 1
 #: repetitions of a benchmark measurement
 MAX_REPEAT = 100_000
-#: worker processes of a tool
+#: worker processes or threads of a tool
 MAX_WORKERS = 1024
+#: samples in one batch a tool builds (a benchmark's ``--batch-size``)
+MAX_BATCH_SIZE = 4096
+#: training length a tool asks for: epochs, or iterations
+MAX_EPOCHS = 100_000
+MAX_ITERS = 100_000_000
+#: tiles along one side of a figure (its columns of frames)
+MAX_FIGURE_TILES = 1024
+#: the factor a figure's tiles are resized by
+MAX_TILE_SCALE = 64
 
 #: bytes one spike read may allocate (a window, an ``.npz`` member)
 READ_LIMIT_BYTES = 2**31

@@ -15,29 +15,26 @@ the image". The package's simulator produces the same scale with
   frame (``1 / ISI``, with its conventions where the window cuts the
   interval) / ``white_rate``.
 """
-import math
-from numbers import Real
-
 import numpy as np
 import torch
 
+from .arguments import Number, declare
 from .constants import REDS_WHITE_RATE
 from .representations import TFI, TFP
 
 __all__ = ['tfp', 'tfi']
 
+#: the spike rate drawn as white
+_WHITE_RATE = Number(0, strict_minimum=True)
 
-def _check(spikes, white_rate: float) -> torch.Tensor:
+
+def _check(spikes) -> torch.Tensor:
     """``(1, T, H, W)`` float64 from a ``(T, H, W)`` array."""
     spikes = np.asarray(spikes)
     if spikes.ndim != 3 or 0 in spikes.shape:
         raise ValueError(
             f'spikes must be a non-empty (T, H, W) array, got shape '
             f'{spikes.shape}')
-    if isinstance(white_rate, bool) or not isinstance(white_rate, Real) or \
-            not 0 < white_rate < math.inf:
-        raise ValueError(f'white_rate must be a finite number > 0, got '
-                         f'{white_rate!r}')
     return torch.from_numpy(spikes.astype(np.float64))[None]
 
 
@@ -47,18 +44,20 @@ def _image(rates: torch.Tensor, white_rate: float) -> np.ndarray:
     return np.clip(centre / white_rate, 0.0, 1.0)
 
 
+@declare(white_rate=_WHITE_RATE)
 def tfp(spikes, white_rate: float = REDS_WHITE_RATE) -> np.ndarray:
     """Window average: ``(T, H, W)`` spikes -> ``(H, W)`` image in [0, 1].
 
     ``mean_t(spikes) / white_rate``, clipped to [0, 1]: TFP with a window
     that covers the whole clip at its centre frame.
     """
-    stream = _check(spikes, white_rate)
+    stream = _check(spikes)
     steps = stream.shape[1]
     window = steps if steps % 2 else steps + 1  # odd, reaches both ends
     return _image(TFP(window=window)(stream), white_rate)
 
 
+@declare(white_rate=_WHITE_RATE)
 def tfi(spikes, white_rate: float = REDS_WHITE_RATE) -> np.ndarray:
     """Inter-spike interval at the centre: ``(T, H, W)`` -> ``(H, W)``.
 
@@ -69,4 +68,4 @@ def tfi(spikes, white_rate: float = REDS_WHITE_RATE) -> np.ndarray:
     the nearest complete interval stands in; a pixel with fewer than two
     spikes in the window takes its spike count / ``T`` as its rate.
     """
-    return _image(TFI()(_check(spikes, white_rate)), white_rate)
+    return _image(TFI()(_check(spikes)), white_rate)

@@ -26,14 +26,24 @@ import numpy as np
 import pywt
 import torch
 
+from .arguments import Choice, Integer, declare
+from .limits import MAX_LEVEL, MAX_NUM_STEPS
+
 __all__ = [
-    'SUPPORTED_MODES', 'get_wavelet', 'check_mode', 'band_lengths', 'analysis_matrix', 'synthesis_matrix',
-    'wavedec', 'waverec'
+    'SUPPORTED_MODES', 'get_wavelet', 'band_lengths', 'analysis_matrix',
+    'synthesis_matrix', 'wavedec', 'waverec'
 ]
 
 #: Boundary modes with an exact matrix form here (``pywt.Modes`` names).
 SUPPORTED_MODES = ('zero', 'constant', 'symmetric', 'reflect', 'periodic',
                    'antisymmetric', 'periodization')
+
+#: the declarations the transforms share: a boundary mode, a number of
+#: levels (``None``: ``pywt.dwt_max_level``) and a signal's length (the
+#: matrices are dense, ``length**2`` values: up to ``T`` samples)
+_MODE = Choice(SUPPORTED_MODES)
+_LEVEL = Integer(0, MAX_LEVEL, optional=True)
+_LENGTH = Integer(1, MAX_NUM_STEPS)
 
 
 def get_wavelet(wavelet) -> pywt.Wavelet:
@@ -46,12 +56,6 @@ def get_wavelet(wavelet) -> pywt.Wavelet:
             f'wavelet must be a discrete wavelet known to PyWavelets '
             f'(pywt.wavelist(kind="discrete")), got {wavelet!r}')
     return pywt.Wavelet(wavelet)
-
-
-def check_mode(mode: str) -> None:
-    if mode not in SUPPORTED_MODES:
-        raise ValueError(
-            f'mode must be one of {SUPPORTED_MODES}, got {mode!r}')
 
 
 def _extend(positions: np.ndarray, length: int,
@@ -155,8 +159,6 @@ def _resolve_level(level: Optional[int], length: int,
                    wavelet: pywt.Wavelet) -> int:
     if level is None:
         return pywt.dwt_max_level(length, wavelet.dec_len)
-    if level < 0:
-        raise ValueError(f'level must be >= 0, got {level}')
     return level
 
 
@@ -199,29 +201,29 @@ def _synthesis(wavelet_name: str, mode: str,
     return approx
 
 
+@declare(length=_LENGTH, level=_LEVEL, mode=_MODE)
 def band_lengths(length: int, wavelet, level: Optional[int] = None,
                  mode: str = 'symmetric') -> Tuple[int, ...]:
     """Coefficient counts ``(len(cA_n), len(cD_n), ..., len(cD_1))``."""
     wavelet = get_wavelet(wavelet)
-    check_mode(mode)
     return _analysis(wavelet.name, mode, length,
                      _resolve_level(level, length, wavelet))[1]
 
 
+@declare(length=_LENGTH, level=_LEVEL, mode=_MODE)
 def analysis_matrix(length: int, wavelet, level: Optional[int] = None,
                     mode: str = 'symmetric') -> np.ndarray:
-    """The ``(sum(band_lengths), length)`` float64 matrix of :func:`wavedec`.
+    """The ``(sum(band_lengths), length)`` float64 matrix of :func:`wavedec`
+    (``length``: the signal's).
 
     Rows are ordered ``cA_n, cD_n, ..., cD_1``. Read-only and cached.
     """
     wavelet = get_wavelet(wavelet)
-    check_mode(mode)
-    if length < 1:
-        raise ValueError(f'signal length must be >= 1, got {length}')
     return _analysis(wavelet.name, mode, length,
                      _resolve_level(level, length, wavelet))[0]
 
 
+@declare(mode=_MODE)
 def synthesis_matrix(lengths: Sequence[int], wavelet,
                      mode: str = 'symmetric',
                      length: Optional[int] = None) -> np.ndarray:
@@ -232,7 +234,6 @@ def synthesis_matrix(lengths: Sequence[int], wavelet,
     samples of it).
     """
     wavelet = get_wavelet(wavelet)
-    check_mode(mode)
     matrix = _synthesis(wavelet.name, mode, tuple(int(n) for n in lengths))
     if length is not None:
         if not 1 <= length <= matrix.shape[0]:
@@ -252,6 +253,7 @@ def _apply(matrix: np.ndarray, data: torch.Tensor, axis: int) -> torch.Tensor:
     return torch.matmul(moved, weight.T).movedim(-1, axis)
 
 
+@declare(level=_LEVEL, mode=_MODE)
 def wavedec(data: torch.Tensor, wavelet, mode: str = 'symmetric',
             level: Optional[int] = None, axis: int = -1) -> List[torch.Tensor]:
     """Multi-level DWT of ``data`` along ``axis``: ``pywt.wavedec``'s
@@ -276,6 +278,7 @@ def wavedec(data: torch.Tensor, wavelet, mode: str = 'symmetric',
     return list(torch.split(coeffs, list(lengths), dim=axis))
 
 
+@declare(mode=_MODE)
 def waverec(coeffs: Sequence[torch.Tensor], wavelet,
             mode: str = 'symmetric', axis: int = -1,
             length: Optional[int] = None) -> torch.Tensor:

@@ -56,10 +56,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from ..core.arguments import (NUM_STEPS, SEED, SIDE, Integer, Number,
-                              declare_fields)
+from ..core import arguments
+from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
+                              Number, Path, declare, declare_fields)
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
+from ..core.limits import MAX_SAMPLES, MAX_WORKERS
 from ..core.markers import invalidate, is_complete, write_marker
 from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 
@@ -73,6 +75,8 @@ __all__ = [
 CITYSCAPES_FPS = 17.0  # leftImg8bit_sequence frame rate
 ANNOTATED_INDEX = 19  # the annotated frame is the 20th of a 30-frame snippet
 SNIPPET_LENGTH = 30
+#: the splits of a Cityscapes root
+CITYSCAPES_SPLITS = ('train', 'val', 'test')
 IGNORE_INDEX = 255
 
 # Cityscapes' class definitions (cityscapesscripts' labels.py): label id,
@@ -429,6 +433,10 @@ def _init_worker() -> None:
     cv2.setNumThreads(1)
 
 
+@declare(root=Path(), out_dir=Path(),
+         splits=arguments.Sequence(Choice(CITYSCAPES_SPLITS)),
+         nproc=Integer(1, MAX_WORKERS),
+         limit=Integer(1, MAX_SAMPLES, optional=True), progress=Flag())
 def convert_cityscapes(root: str, out_dir: str,
                        settings: Optional[ConversionSettings] = None,
                        splits: Sequence[str] = ('train', 'val'),
@@ -451,8 +459,6 @@ def convert_cityscapes(root: str, out_dir: str,
         ``'static'`` model, and ``'skipped'`` as already done.
     """
     settings = settings or ConversionSettings()
-    if nproc < 1:
-        raise ValueError(f'nproc must be >= 1, got {nproc}')
     samples = find_samples(root, splits, settings.frames_around)
     if limit is not None:
         samples = [s for split in splits

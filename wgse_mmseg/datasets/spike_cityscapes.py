@@ -8,6 +8,7 @@ from mmengine.logging import print_log
 from mmseg.datasets import CityscapesDataset
 from mmseg.registry import DATASETS
 
+from ..core.arguments import Choice, Text, declare
 from ..core.markers import sample_problem
 
 __all__ = ['SpikeCityscapesDataset']
@@ -45,15 +46,13 @@ class SpikeCityscapesDataset(CityscapesDataset):
             ``'none'`` (no marker needed: folders written by other tools).
     """
 
+    @declare(img_suffix=Text(empty=False), seg_map_suffix=Text(empty=False),
+             verify=Choice(VERIFY_MODES))
     def __init__(self,
                  img_suffix: str = '_spike.spk',
                  seg_map_suffix: str = '_gtFine_labelTrainIds.png',
                  verify: str = 'size',
                  **kwargs) -> None:
-        if verify not in VERIFY_MODES:
-            raise ValueError(
-                f'SpikeCityscapesDataset: verify must be one of '
-                f'{VERIFY_MODES}, got {verify!r}')
         self.verify = verify
         self.skipped: Dict[str, int] = {}
         super().__init__(

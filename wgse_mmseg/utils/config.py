@@ -11,18 +11,23 @@ environment variables the config reads, then merges the rest as usual.
 import argparse
 import os
 import os.path as osp
+from numbers import Integral
 from typing import Dict, Optional
 
 from mmengine.config import Config, DictAction
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
+from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SIDE, ArgumentError,
+                              Choice, Integer, OneOf, Path)
+from ..core.limits import MAX_WORKERS, excerpt
 from .distributed import prepare_launcher
 from .num_steps import apply_num_steps
 
 __all__ = [
-    'SPIKE_SETTINGS', 'load_config', 'add_runner_arguments',
-    'config_from_args', 'build_runner'
+    'SPIKE_SETTINGS', 'SPIKE_SETTING_KINDS', 'ConfigOptions', 'load_config',
+    'add_config_options', 'add_runner_arguments', 'config_from_args',
+    'build_runner'
 ]
 
 #: ``--cfg-options`` key -> environment variable read by the config files.
@@ -33,17 +38,28 @@ SPIKE_SETTINGS = {
 }
 
 
+#: ``--cfg-options`` key -> the declaration of its value: ``crop_size`` is
+#: one side (a square) or ``H,W``
+SPIKE_SETTING_KINDS = {
+    'num_steps': NUM_STEPS,
+    'data_root': Path(),
+    'crop_size': OneOf(SIDE, FRAME_SIZE),
+}
+
+
 def _as_env_value(key: str, value) -> str:
+    """The text of spike setting ``key``'s environment variable, its value
+    checked against :data:`SPIKE_SETTING_KINDS` (a string is read as a
+    command-line word: ``'41'``, ``'128,256'``).
+
+    Raises:
+        ArgumentError: naming ``key``, for a value its declaration refuses.
+    """
+    value = SPIKE_SETTING_KINDS[key].parse(value, 'load_config', key)
     if key == 'crop_size':
-        if isinstance(value, str):
-            value = value.split(',')
-        sizes = [value] * 2 if isinstance(value, int) else list(value)
-        if len(sizes) != 2:
-            raise ValueError(f'crop_size must be H,W; got {value!r}')
+        sizes = (value, value) if isinstance(value, Integral) else value
         return ','.join(str(int(v)) for v in sizes)
-    if key == 'num_steps' and int(value) < 1:
-        raise ValueError(f'num_steps must be >= 1, got {value!r}')
-    return str(value)
+    return str(int(value)) if key == 'num_steps' else os.fspath(value)
 
 
 def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
@@ -75,17 +91,55 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
     return cfg
 
 
-def add_runner_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments shared by the train and test tools (as in MMSeg's tools)."""
-    parser.add_argument('--work-dir', help='the dir to save logs and models')
+class ConfigOptions(DictAction):
+    """mmengine's ``DictAction`` (``key=value`` words, values read as
+    Python literals), refusing a word it cannot read and checking the spike
+    settings against :data:`SPIKE_SETTING_KINDS` as the command line is
+    parsed, so argparse exits with ``argument --cfg-options: num_steps must
+    be ...``."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        for word in values or ():
+            key, equals, value = word.partition('=')
+            if not key or not equals:
+                raise argparse.ArgumentError(
+                    self, f'must be key=value words, got {excerpt(word)}')
+            try:  # mmengine asserts balanced brackets, recurses on nesting
+                self._parse_iterable(value)
+            except (AssertionError, RecursionError):
+                raise argparse.ArgumentError(
+                    self, f'{key}: unbalanced or too deeply nested brackets '
+                    f'in {excerpt(value)}') from None
+        super().__call__(parser, namespace, values, option_string)
+        options = getattr(namespace, self.dest)
+        for key in SPIKE_SETTING_KINDS.keys() & options.keys():
+            try:
+                _as_env_value(key, options[key])
+            except ArgumentError as err:
+                raise argparse.ArgumentError(
+                    self, f'{key} must be {err.expected}, got '
+                    f'{excerpt(options[key])}') from None
+
+
+def add_config_options(parser: argparse.ArgumentParser) -> None:
+    """A tool's ``--cfg-options`` (:class:`ConfigOptions`), for
+    :func:`load_config`."""
     parser.add_argument(
-        '--cfg-options', nargs='+', action=DictAction,
+        '--cfg-options', nargs='+', action=ConfigOptions, default={},
         help='override config settings, key=value; num_steps, data_root and '
         'crop_size re-derive every field that depends on them')
+
+
+def add_runner_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments shared by the train and test tools (as in MMSeg's tools)."""
+    parser.add_argument('--work-dir', type=Path(),
+                        help='the dir to save logs and models')
+    add_config_options(parser)
     parser.add_argument('--launcher',
-                        choices=['none', 'pytorch', 'slurm', 'mpi'],
+                        type=Choice(['none', 'pytorch', 'slurm', 'mpi']),
                         default='none', help='job launcher')
-    parser.add_argument('--local_rank', '--local-rank', type=int, default=0)
+    parser.add_argument('--local_rank', '--local-rank',
+                        type=Integer(0, MAX_WORKERS - 1), default=0)
 
 
 def config_from_args(args: argparse.Namespace) -> Config:

@@ -28,12 +28,17 @@ file and the key path (``ckpt.pth: meta['model'].data_preprocessor.type:
 
 :func:`build_from_file_config` then builds it with every ``type`` replaced
 by the allowed class itself, so no registry looks up a name that came from
-a file. Every build from file data in the package goes through it
+a file; a value a built class refuses (its declared arguments and stated
+limits, :mod:`wgse_mmseg.core.arguments`: ``channels=200000``) is reported
+as a :class:`ConfigDataError` naming the file and the argument's key path
+(``ckpt.pth: meta['model'].channels: SpikeReconstructor: channels must be
+...``), before anything is allocated. Every build from file data in the package goes through it
 (``tests/utils/test_safe_build.py`` audits the call sites).
 """
 import inspect
-from typing import Any, Dict, FrozenSet, Mapping
+from typing import Any, Dict, FrozenSet, Mapping, Optional
 
+from ..core.arguments import ArgumentError
 from .config_data import ConfigDataError
 
 __all__ = ['AllowList', 'MAX_DEPTH', 'check_file_config',
@@ -152,9 +157,41 @@ def check_file_config(cfg: Any, allowed: AllowList, source: str,
     return _config(cfg, allowed, source, key, 0, resolve=False)
 
 
+def _declared_at(cfg: Any, path: str, err: ArgumentError) -> Optional[str]:
+    """The key path in resolved ``cfg`` (at ``path``) of the config of class
+    ``err.entry``, and of its argument ``err.argument`` where it is given
+    there; ``None`` if no such config."""
+    if isinstance(cfg, dict):
+        kind = cfg.get('type')
+        if isinstance(kind, type) and kind.__name__ == err.entry:
+            return (f'{path}.{err.argument}' if err.argument in cfg else
+                    path)
+        items = ((f'{path}.{k}', v) for k, v in cfg.items())
+    elif isinstance(cfg, (list, tuple)):
+        items = ((f'{path}[{i}]', v) for i, v in enumerate(cfg))
+    else:
+        return None
+    for where, value in items:
+        found = _declared_at(value, where, err)
+        if found is not None:
+            return found
+    return None
+
+
 def build_from_file_config(registry, cfg: Any, allowed: AllowList,
                            source: str, key: str):
     """``registry.build`` of ``cfg`` once :func:`check_file_config` accepts
     it, with each ``type`` given as the allowed class, so no name from the
-    file is looked up in any registry."""
-    return registry.build(_config(cfg, allowed, source, key, 0, resolve=True))
+    file is looked up in any registry.
+
+    Raises:
+        ConfigDataError: as :func:`check_file_config`, and for an argument
+            a built class refuses (:class:`~wgse_mmseg.core.arguments.
+            ArgumentError`), naming ``source`` and the argument's key path.
+    """
+    resolved = _config(cfg, allowed, source, key, 0, resolve=True)
+    try:
+        return registry.build(resolved)
+    except ArgumentError as err:
+        where = _declared_at(resolved, key, err) or key
+        raise ConfigDataError(f'{source}: {where}: {err}') from err

@@ -13,7 +13,8 @@ from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 from mmengine.config import Config
 
-from .settings import check_schedule
+from .settings import EPOCHS, ITERATIONS, check_schedule
+from ...core.arguments import declare
 
 #: where the package keeps its ``configs/`` and ``tools/`` (``setup.py``
 #: links them into ``wgse_mmseg/.mim``, MMSeg's convention for mim)
@@ -110,6 +111,7 @@ def enhancer_options(enhancer: Optional[dict]) -> Dict[str, Any]:
     return options
 
 
+@declare(epochs=EPOCHS.or_none(), max_iters=ITERATIONS.or_none())
 def schedule_options(epochs: Optional[int],
                      max_iters: Optional[int]) -> Tuple[Dict[str, Any], str]:
     """``--cfg-options`` for the schedule and the final checkpoint's name.

@@ -12,26 +12,26 @@ from typing import Optional, Tuple
 
 from ...core.arguments import (SEED, Flag, Integer, Path, Sequence, Text,
                                declare_fields)
+from ...core.limits import MAX_EPOCHS, MAX_ITERS
 
-#: epochs or iterations of one run
-SCHEDULE_LENGTH = Integer(1)
+#: epochs of one run
+EPOCHS = Integer(1, MAX_EPOCHS)
+#: iterations of one run
+ITERATIONS = Integer(1, MAX_ITERS)
 
 
 def check_schedule(epochs: Optional[int], max_iters: Optional[int]) -> int:
     """The length of a schedule given by exactly one of ``epochs`` and
-    ``max_iters`` (each ``>= 1``); a ``ValueError`` otherwise."""
+    ``max_iters`` (each declared: :data:`EPOCHS`, :data:`ITERATIONS`); a
+    ``ValueError`` otherwise."""
     if (epochs is None) == (max_iters is None):
         raise ValueError('give exactly one of epochs and max_iters')
-    length = epochs if max_iters is None else max_iters
-    if not SCHEDULE_LENGTH.accepts(length):
-        raise ValueError(f'epochs/max_iters must be >= 1, got {length}')
-    return length
+    return epochs if max_iters is None else max_iters
 
 
 @declare_fields(grid=Path(exists='file'), data_root=Path(),
                 work_dir=Path(), seeds=Sequence(SEED),
-                epochs=SCHEDULE_LENGTH.or_none(),
-                max_iters=SCHEDULE_LENGTH.or_none(),
+                epochs=EPOCHS.or_none(), max_iters=ITERATIONS.or_none(),
                 only=Sequence(Text(empty=False), optional=True),
                 report_dir=Path(optional=True), keep_checkpoints=Flag(),
                 benchmark=Flag(), report_only=Flag())

@@ -19,7 +19,9 @@ from typing import Dict, List, Optional
 
 import torch
 
+from ..arguments import NUM_STEPS, SIDE, Integer, Sequence
 from ..io import atomic_output
+from ..limits import MAX_BATCH_SIZE
 from ..machine import cpu_model
 from . import band_network_backends, triton_band_networks
 from .wgse import WGSE
@@ -33,15 +35,9 @@ IMPLEMENTATIONS = {
 DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
 
 
-def parse_shape(text: str) -> List[int]:
-    try:
-        shape = [int(v) for v in text.lower().split('x')]
-    except ValueError:
-        shape = []
-    if len(shape) != 4 or min(shape) < 1:
-        raise ValueError(
-            f'shape must be BxTxHxW with positive sizes, got {text!r}')
-    return shape
+#: a batch's shape, ``BxTxHxW`` on a command line
+SHAPE = Sequence((Integer(1, MAX_BATCH_SIZE), NUM_STEPS, SIDE, SIDE),
+                 names=('B', 'T', 'H', 'W'), separator='x')
 
 
 class ReferenceWGSE(torch.nn.Module):
@@ -236,9 +232,10 @@ def _worker_main(argv: List[str]) -> int:
     args = parser.parse_args(argv)
     kind, *rest = args.worker
     if kind == 'agree':
-        result = agreement(parse_shape(rest[0]), args.device)
+        result = agreement(list(SHAPE(rest[0])), args.device)
     else:
-        result = worker(kind, parse_shape(rest[0]), int(rest[1]), args.device)
+        result = worker(kind, list(SHAPE(rest[0])), int(rest[1]),
+                        args.device)
     print(json.dumps(result))
     return 0
 

@@ -31,6 +31,9 @@ import sys
 import tempfile
 from typing import Dict, List, NamedTuple, Optional, Sequence
 
+from ..arguments import Choice, Integer
+from ..limits import MAX_WORKERS
+
 __all__ = ['ARCHITECTURES', 'BAND_LENGTH', 'Variant', 'Resources',
            'FULL_ARCH', 'variants', 'one_step_from_default', 'jobs_for',
            'programs_per_sm', 'compile_variant', 'compile_all',
@@ -240,25 +243,33 @@ def format_table(rows: Sequence[Dict]) -> str:
     return '\n'.join(lines)
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description='Compile every WGSE Triton kernel variant for GPU '
         'targets (no GPU needed) and print registers, spills, shared memory '
         'and programs per SM.')
-    parser.add_argument('--archs', nargs='+', choices=list(ARCHITECTURES),
-                        default=list(ARCHITECTURES))
-    parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1)
-    parser.add_argument('--scope', choices=['all', 'ci'], default='all',
+    parser.add_argument('--archs', nargs='+',
+                        type=Choice(list(ARCHITECTURES)),
+                        default=list(ARCHITECTURES),
+                        help=f'of {list(ARCHITECTURES)} (default: all)')
+    parser.add_argument('--jobs', type=Integer(1, MAX_WORKERS),
+                        default=min(os.cpu_count() or 1, MAX_WORKERS))
+    parser.add_argument('--scope', type=Choice(['all', 'ci']), default='all',
                         help="'all': every variant for every target (the "
                         "default); 'ci': every variant for %s, defaults and "
                         "one step from them for the others" % FULL_ARCH)
     parser.add_argument('--json', action='store_true',
                         help='print the rows as JSON instead of a table')
+    return parser
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
         parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
                      'cannot be compiled')
-    rows = _compile_here(args.archs, max(args.jobs, 1), args.scope)
+    rows = _compile_here(args.archs, args.jobs, args.scope)
     print(json.dumps(rows) if args.json else format_table(rows))
     return 0
 
