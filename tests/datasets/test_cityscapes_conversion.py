@@ -14,8 +14,9 @@ from wgse_mmseg.datasets import SpikeCityscapesDataset
 from wgse_mmseg.datasets.cityscapes_conversion import (
     CITYSCAPES_LABELS, LABEL_ID_TO_TRAIN_ID, ConversionSettings,
     convert_cityscapes, find_samples, labelids_to_trainids, load_scene,
-    resize_nearest, sample_effects, sample_seed)
+    resize_nearest, sample_effects)
 from wgse_mmseg.core.io import load_spikes
+from wgse_mmseg.core.seeding import derive_seed
 from wgse_mmseg.core.simulation import simulate_spikes
 
 REPO_ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -229,7 +230,7 @@ def test_convert_layout_labels_spikes(tmp_path, cityscapes, calls):
         assert meta['simulation']['resampling'] == (
             'flow' if sequence else 'static')
         assert recipe['model'] == ('sequence' if sequence else 'static')
-        assert recipe['seed'] == sample_seed(stem)
+        assert recipe['seed'] == derive_seed(0, stem)
         assert recipe['effects'] == (
             {'interpolation': {'method': 'flow'}} if sequence else {})
         assert recipe['time_span']['scene_seconds'] == pytest.approx(
@@ -449,7 +450,7 @@ def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
                                       seed=base_seed)
         refs[base_seed] = str(tmp_path / f'ref{base_seed}')
         convert_cityscapes(root, refs[base_seed], settings, progress=False)
-    seed_of = {sample_seed(stem, base): base for stem in SAMPLES
+    seed_of = {derive_seed(base, stem): base for stem in SAMPLES
                for base in (0, 1)}
     out = str(tmp_path / 'out')
     shutil.copytree(refs[0], out)

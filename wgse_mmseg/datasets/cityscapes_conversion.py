@@ -36,11 +36,11 @@ recipe and matches both files (and SpikeCityscapesDataset serves only
 samples whose marker matches); a run removes the marker before it writes a sample's files and
 writes it last, each file atomically, so a run killed at any point leaves
 that sample without a marker, and the next run (with any settings) redoes
-it. Each sample's seed is derived from its name, so reruns give identical
+it. Each sample's seed is derived from the base seed and its name
+(:func:`~wgse_mmseg.core.seeding.derive_seed`), so reruns give identical
 files.
 """
 import contextlib
-import hashlib
 import json
 import multiprocessing
 import os
@@ -61,12 +61,13 @@ from ..core.arguments import (NUM_STEPS, SEED, SIDE, Integer, Number,
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
 from ..core.markers import invalidate, is_complete, write_marker
+from ..core.seeding import derive_seed
 from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = [
     'CITYSCAPES_LABELS', 'LABEL_ID_TO_TRAIN_ID', 'CityscapesSample',
     'ConversionSettings', 'find_samples', 'labelids_to_trainids',
-    'resize_nearest', 'sample_effects', 'sample_seed', 'output_paths',
+    'resize_nearest', 'sample_effects', 'output_paths',
     'convert_sample', 'convert_cityscapes', 'load_scene'
 ]
 
@@ -335,12 +336,6 @@ def sample_effects(sample: CityscapesSample,
     return effects
 
 
-def sample_seed(stem: str, base_seed: int = 0) -> int:
-    """A 31-bit seed from the sample's name and the base seed."""
-    digest = hashlib.sha256(f'{base_seed}:{stem}'.encode()).digest()
-    return int.from_bytes(digest[:4], 'little') & 0x7FFFFFFF
-
-
 def output_paths(out_dir: str, sample: CityscapesSample) -> Dict[str, str]:
     """``spike``, ``meta`` and ``label`` paths of ``sample`` in ``out_dir``."""
     spike_dir = osp.join(out_dir, 'spike', sample.split, sample.city)
@@ -364,7 +359,7 @@ def _recipe(sample: CityscapesSample, settings: ConversionSettings,
             sequence=[osp.relpath(p, root) for p in sample.sequence]),
         height=settings.height, width=settings.width,
         num_steps=settings.num_steps, threshold=settings.threshold,
-        seed=sample_seed(sample.stem, settings.seed),
+        seed=derive_seed(settings.seed, sample.stem),
         effects=sample_effects(sample, settings.scene),
         time_span=dict(
             readout_seconds=settings.num_steps / READOUT_HZ,

@@ -36,6 +36,7 @@ from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SEED, SIDE, Integer,
                               Number, Path, Sequence as Values, Text,
                               declare)
 from ..core.limits import MAX_SAMPLES
+from ..core.seeding import derive_generator, derive_seed
 from ..core.constants import REDS_WHITE_RATE
 from ..core.simulation import simulate_spikes, trajectory_source_maps
 from .transforms import LoadSpikeFromFile
@@ -274,8 +275,9 @@ _POSITIVE_RANGE = Values(Number(0, strict_minimum=True), names=('low', 'high'),
 class SimulatedSpikeImageDataset(BaseDataset):
     """Spike windows simulated from still images moved along trajectories.
 
-    Sample ``i`` is drawn from a generator seeded with ``(seed, i)``, so the
-    set is the same on every run: an image (chosen with probability
+    Sample ``i`` is drawn from ``derive_generator(seed, i)`` and its spikes
+    from ``derive_seed(seed, i, 'spikes')``
+    (:mod:`wgse_mmseg.core.seeding`), so the set is the same on every run: an image (chosen with probability
     proportional to its area), a view of ``crop_size`` moved along a random
     trajectory (:func:`render_trajectory`), a random brightness (gain in
     ``gain_range``, gamma log-uniform in ``gamma_range``), then
@@ -348,7 +350,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
 
     def simulate(self, index: int) -> dict:
         """Sample ``index`` as pipeline results (``img``, ``gt_image``)."""
-        rng = np.random.default_rng((self.seed, index))
+        rng = derive_generator(self.seed, index)
         choice = rng.choice(len(self.images), p=self.image_probs)
         frames = render_trajectory(self.images[choice], self.crop_size,
                                    self.num_steps, rng, **self.trajectory)
@@ -356,7 +358,8 @@ class SimulatedSpikeImageDataset(BaseDataset):
         frames = rng.uniform(*self.gain_range) * np.clip(frames, 0, 1)**gamma
         spikes, _ = simulate_spikes(frames, self.num_steps,
                                     threshold=1 / self.white_rate,
-                                    seed=int(rng.integers(2**31)))
+                                    seed=derive_seed(self.seed, index,
+                                                     'spikes'))
         return dict(
             img=np.ascontiguousarray(spikes.transpose(1, 2, 0)),
             gt_image=frames[self.num_steps // 2],
