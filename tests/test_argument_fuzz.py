@@ -24,8 +24,8 @@ from wgse_mmseg.core.arguments import DECLARATIONS, ArgumentError, Path
 
 wgse_mmseg.register_all_modules()
 # the modules whose entry points are declared but not imported above
-for _module in ('wgse_mmseg.datasets.synthetic',
-                'wgse_mmseg.datasets.cityscapes_conversion',
+for _module in ('wgse_mmseg.data_generation.synthetic',
+                'wgse_mmseg.data_generation.cityscapes_conversion',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
                 'wgse_mmseg.apis.experiments'):
     importlib.import_module(_module)

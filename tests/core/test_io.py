@@ -828,3 +828,20 @@ def test_one_entry_adds_a_format(tmp_path, monkeypatch):
         save_spikes(path, spikes * 2)
     with pytest.raises(SpikeFileError, match=r'frames \[4, 6\)'):
         load_spikes(path, start=4, length=2)
+
+
+def test_a_temporary_is_named_after_its_target(tmp_path):
+    """A killed writer's temporary file is found for its target only, so a
+    run removes its own and leaves another process's beside it."""
+    target = tmp_path / 'a_spike.spk'
+    with spike_io.atomic_output(str(target)) as f:
+        f.write(b'x')
+        (left, ) = [p for p in os.listdir(tmp_path) if p.startswith('.tmp-')]
+        assert left.startswith('.tmp-a_spike.spk.') and left.endswith('.spk')
+        assert spike_io.temporaries_of([str(target)]) == [
+            str(tmp_path / left)]
+        assert spike_io.temporaries_of([str(tmp_path / 'a_spike')]) == []
+        assert spike_io.temporaries_of([str(tmp_path / 'spike.spk')]) == []
+        assert spike_io.temporaries_of([str(tmp_path / 'no' / 'x')]) == []
+    assert os.listdir(tmp_path) == ['a_spike.spk']
+    assert spike_io.temporaries_of([str(target)]) == []

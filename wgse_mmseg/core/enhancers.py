@@ -5,7 +5,8 @@ in front of its network (``data_preprocessor=dict(enhancer=dict(type=...))``
 for segmentation, ``enhancer=`` of the reconstruction model). Every other
 list derives from :data:`ENHANCERS`: the MMSeg registration
 (:mod:`wgse_mmseg.models.enhancers`) and the classes a checkpoint's model
-config may build (:data:`wgse_mmseg.models.reconstruction.RECONSTRUCTION_BUILDS`).
+config may build
+(:data:`wgse_mmseg.models.reconstruction.RECONSTRUCTION_BUILDS`).
 """
 from .representations import (TFI, TFP, SpatialMeanFilter,
                               TemporalMeanFilter)

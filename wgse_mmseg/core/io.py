@@ -34,11 +34,12 @@ import io
 import math
 import os
 import os.path as osp
+import re
 import struct
 import tempfile
 import zipfile
-from typing import (BinaryIO, Callable, Dict, Iterator, NamedTuple, Optional,
-                    Tuple)
+from typing import (BinaryIO, Callable, Dict, Iterator, List, NamedTuple,
+                    Optional, Sequence, Tuple)
 
 import cv2
 import numpy as np
@@ -48,7 +49,8 @@ from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'centered_window', 'atomic_output', 'WrittenFile', 'write_bytes',
+           'centered_window', 'atomic_output', 'temporaries_of',
+           'WrittenFile', 'write_bytes',
            'write_png', 'to_uint8', 'SpikeFormat', 'SPIKE_FORMATS',
            'SPIKE_EXTENSIONS']
 
@@ -67,11 +69,16 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
 
     Writes go to a temporary file beside ``path``, renamed over it when the
     block ends without error (with the permissions ``open`` would give);
-    on error the temporary file is removed and ``path`` is untouched.
+    on error the temporary file is removed and ``path`` is untouched. The
+    temporary file is named after its target, ``.tmp-<name>.<random><ext>``
+    (:func:`temporaries_of`), so a process killed mid-write leaves one that
+    the next run for that target can find and remove, without touching the
+    temporaries of other processes writing beside it.
     """
     directory = osp.dirname(osp.abspath(path))
     os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix='.tmp-',
+    fd, tmp = tempfile.mkstemp(dir=directory,
+                               prefix=f'.tmp-{osp.basename(path)}.',
                                suffix=osp.splitext(path)[1])
     try:
         with os.fdopen(fd, 'wb') as f:
@@ -84,6 +91,26 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
         if osp.exists(tmp):
             os.remove(tmp)
         raise
+
+
+def temporaries_of(paths: Sequence[str]) -> List[str]:
+    """The temporary files :func:`atomic_output` left beside ``paths``
+    (a process killed mid-write), listing each folder once."""
+    patterns: Dict[str, list] = {}
+    for path in paths:
+        directory, name = osp.split(osp.abspath(path))
+        patterns.setdefault(directory, []).append(re.compile(
+            re.escape(f'.tmp-{name}.') + r'[A-Za-z0-9_]+' +
+            re.escape(osp.splitext(name)[1])))
+    found = []
+    for directory, names in patterns.items():
+        if not osp.isdir(directory):
+            continue
+        for entry in os.listdir(directory):
+            if entry.startswith('.tmp-') and any(
+                    pattern.fullmatch(entry) for pattern in names):
+                found.append(osp.join(directory, entry))
+    return sorted(found)
 
 
 class WrittenFile(NamedTuple):
