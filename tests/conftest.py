@@ -69,7 +69,7 @@ def tiny_spike_dataset(tmp_path_factory):
     """A synthetic Spike-Cityscapes-layout set for short runs of the tools:
     4 training and 1 validation sample, T=9, 32x64. Tests that change it
     work on a copy."""
-    from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
+    from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
     root = tmp_path_factory.mktemp('tiny_spike_dataset')
     make_synthetic_dataset(str(root), num_train=4, num_val=1, height=32,
                            width=64, num_steps=9, progress=False)

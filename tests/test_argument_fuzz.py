@@ -26,8 +26,8 @@ from wgse_mmseg.datasets.cityscapes_conversion import ConversionSettings
 
 wgse_mmseg.register_all_modules()
 # the modules whose entry points are declared but not imported above
-for _module in ('wgse_mmseg.datasets.synthetic',
-                'wgse_mmseg.datasets.cityscapes_conversion',
+for _module in ('wgse_mmseg.data_generation.synthetic',
+                'wgse_mmseg.data_generation.cityscapes_conversion',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
                 'wgse_mmseg.core.exposure', 'wgse_mmseg.apis.benchmarking',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',

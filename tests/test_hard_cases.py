@@ -253,3 +253,17 @@ def test_enhancers_name_a_meaningless_shape(name):
     enhancer = MODELS.build(ENHANCERS[name])
     with pytest.raises(ValueError, match=r'\(B, T, H, W\)'):
         enhancer(torch.zeros(NUM_STEPS, 4, 4))
+
+
+def test_every_enhancer_has_hard_cases():
+    """The cases above cover the one list of enhancers, so a new one is
+    tested here (add a config to ENHANCERS) and allowed in reconstruction
+    checkpoints, by its registered name."""
+    from wgse_mmseg.core.enhancers import ENHANCERS as CLASSES
+    from wgse_mmseg.models.reconstruction import (RECONSTRUCTION_BUILDS,
+                                                  SpikeReconstructor)
+    names = {cls.__name__ for cls in CLASSES}
+    assert {cfg['type'] for cfg in ENHANCERS.values()} == names
+    assert all(MODELS.get(cls.__name__) is cls for cls in CLASSES)
+    allowed = RECONSTRUCTION_BUILDS[SpikeReconstructor]['enhancer']
+    assert set(allowed) == set(CLASSES)

@@ -81,8 +81,9 @@ HOW = {
     'data_root=/data/spikes crop_size=128,256':
         TRAIN_TESTS,
     'python tools/dataset_converters/spike_cityscapes.py data/cityscapes '
-    'data/spike_cityscapes --nproc 2': 'tests/datasets/test_cityscapes_'
-    'conversion.py::test_cli_in_parallel_then_resume',
+    'data/spike_cityscapes --nproc 2':
+        'tests/data_generation/test_cityscapes_conversion.py::'
+        'test_cli_in_parallel_then_resume',
     'python tools/analysis_tools/benchmark.py configs/pspnet_wgse.py '
     'configs/pspnet_raw.py configs/segformer_b0_wgse.py '
     'configs/segformer_b0_raw.py --crop 64 128 --repeat 3 --cfg-options '

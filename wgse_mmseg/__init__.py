@@ -3,7 +3,9 @@
 Two layers:
 
 * :mod:`wgse_mmseg.core` needs only torch and numpy: spike I/O, wavelets,
-  representations, WGSE and its kernels, the simulator;
+  representations, WGSE and its kernels, the simulator; and
+  :mod:`wgse_mmseg.data_generation` (converters, synthetic scenes) on top
+  of it, without OpenMMLab as well;
 * the MMSeg layer (:mod:`.datasets`, :mod:`.engine`, :mod:`.evaluation`,
   :mod:`.models`; :mod:`.apis` and :mod:`.utils` for the tools) registers them, and the
   datasets, transforms, data preprocessor and metrics, with MMSeg's
@@ -27,8 +29,8 @@ from .version import __version__
 #: the packages that register with MMSeg, as a config's ``custom_imports``
 MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
                'wgse_mmseg.evaluation', 'wgse_mmseg.models')
-_LAZY = ('apis', 'compat', 'datasets', 'engine', 'evaluation', 'models',
-         'utils')
+_LAZY = ('apis', 'compat', 'data_generation', 'datasets', 'engine',
+         'evaluation', 'models', 'utils')
 
 
 def register_all_modules() -> None:

@@ -769,3 +769,79 @@ def test_any_window_arguments_read_or_name_the_problem(ext, start, length):
             return
         np.testing.assert_array_equal(
             window, spikes[start:None if length is None else start + length])
+
+
+# ------------------------------------------------------ the format registry
+def test_the_registry_is_the_one_list_of_formats():
+    from wgse_mmseg.apis import simulator_benchmark
+    assert spike_io.SPIKE_EXTENSIONS == tuple(spike_io.SPIKE_FORMATS) == (
+        '.dat', '.spk', '.npy', '.npz')
+    for ext, fmt in spike_io.SPIKE_FORMATS.items():
+        assert fmt.extension == ext == ext.lower()
+    assert simulator_benchmark.SPIKE_EXTENSIONS is spike_io.SPIKE_EXTENSIONS
+
+
+@pytest.mark.parametrize('ext', sorted(spike_io.SPIKE_FORMATS))
+def test_every_registered_format_round_trips_a_window(tmp_path, ext):
+    """What a new entry must do, on the shape .dat needs (8 | H*W)."""
+    spikes = _random_spikes((7, 4, 6), seed=11)
+    path = str(tmp_path / ('clip' + ext.upper()))  # any case
+    written = save_spikes(path, spikes)
+    assert written.size == osp.getsize(path)
+    with open(path, 'rb') as f:
+        assert spike_io.hashlib.sha256(f.read()).hexdigest() == \
+            written.sha256
+    size = dict(height=4, width=6)
+    assert spike_shape(path, **size) == (7, 4, 6)
+    got = load_spikes(path, start=2, length=3, **size)
+    assert got.dtype == np.uint8
+    np.testing.assert_array_equal(got, spikes[2:5])
+
+
+def test_one_entry_adds_a_format(tmp_path, monkeypatch):
+    """A format is one entry: shape, read and encode of an (illustrative)
+    raw byte-per-spike format with a 3-int header; the public functions
+    dispatch to it and keep their own checks."""
+    header = struct.Struct('<3I')
+
+    def shape(path, height, width):
+        with open(path, 'rb') as f:
+            return header.unpack(f.read(header.size))
+
+    def read(path, shape, start, length):
+        start, length = spike_io._window(path, shape[0], start, length,
+                                         shape[1] * shape[2])
+        data = np.fromfile(path, np.uint8, offset=header.size)
+        return data.reshape(shape)[start:start + length]
+
+    def encode(path, spikes):
+        return header.pack(*spikes.shape) + spikes.tobytes()
+
+    fmt = spike_io.SpikeFormat('.raw', shape, read, encode)
+    monkeypatch.setitem(spike_io.SPIKE_FORMATS, '.raw', fmt)
+    spikes = _random_spikes((5, 3, 2), seed=12)
+    path = str(tmp_path / 'clip.raw')
+    save_spikes(path, spikes)
+    assert spike_shape(path) == (5, 3, 2)
+    np.testing.assert_array_equal(load_spikes(path, start=1), spikes[1:])
+    with pytest.raises(SpikeFileError, match='only 0 and 1'):
+        save_spikes(path, spikes * 2)
+    with pytest.raises(SpikeFileError, match=r'frames \[4, 6\)'):
+        load_spikes(path, start=4, length=2)
+
+
+def test_a_temporary_is_named_after_its_target(tmp_path):
+    """A killed writer's temporary file is found for its target only, so a
+    run removes its own and leaves another process's beside it."""
+    target = tmp_path / 'a_spike.spk'
+    with spike_io.atomic_output(str(target)) as f:
+        f.write(b'x')
+        (left, ) = [p for p in os.listdir(tmp_path) if p.startswith('.tmp-')]
+        assert left.startswith('.tmp-a_spike.spk.') and left.endswith('.spk')
+        assert spike_io.temporaries_of([str(target)]) == [
+            str(tmp_path / left)]
+        assert spike_io.temporaries_of([str(tmp_path / 'a_spike')]) == []
+        assert spike_io.temporaries_of([str(tmp_path / 'spike.spk')]) == []
+        assert spike_io.temporaries_of([str(tmp_path / 'no' / 'x')]) == []
+    assert os.listdir(tmp_path) == ['a_spike.spk']
+    assert spike_io.temporaries_of([str(target)]) == []

@@ -737,7 +737,8 @@ def test_light_effects_check_the_frames(frames, effects, message):
 
 
 def test_existing_callers_keep_working():
-    """wgse_mmseg.datasets.synthetic's call: frames, num_steps, threshold, seed."""
+    """wgse_mmseg.data_generation.synthetic's call: frames, num_steps,
+    threshold, seed."""
     frames = np.random.default_rng(0).random((5, 6, 8))
     spikes, meta = simulate_spikes(frames, 41, threshold=1 / 0.6, seed=123)
     assert spikes.shape == (41, 6, 8) and spikes.dtype == np.uint8

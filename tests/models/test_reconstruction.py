@@ -20,8 +20,8 @@ from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
                                       PackReconstructionInputs,
                                       REDSSpikeDataset,
-                                      SimulatedSpikeImageDataset,
-                                      render_trajectory)
+                                      SimulatedSpikeImageDataset)
+from wgse_mmseg.data_generation.views import render_trajectory
 from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
                                    gaussian_window, psnr, ssim)
 from wgse_mmseg.apis.reconstruction_benchmark import (benchmark,

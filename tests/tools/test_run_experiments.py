@@ -21,7 +21,7 @@ from wgse_mmseg.apis import experiments as runner
 from wgse_mmseg.apis.experiments import ExperimentSettings, StaleRunError
 from wgse_mmseg.core.arguments import ArgumentError
 from wgse_mmseg.utils.config import add_runner_arguments, load_config
-from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
+from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 RUNNER = osp.join(ROOT, 'tools', 'analysis_tools', 'run_experiments.py')

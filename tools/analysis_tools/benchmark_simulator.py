@@ -6,7 +6,7 @@ Prints two tables:
    second) for the base model and for each effect alone, each against a
    plain NumPy step-loop integrate-and-fire on the same input in the same
    run (``vs NumPy loop``: its time over the row's time). Inputs are a
-   procedural street scene (:func:`wgse_mmseg.datasets.synthetic.
+   procedural street scene (:func:`wgse_mmseg.data_generation.synthetic.
    render_street_scene`): ``still`` is its middle frame, ``video`` its
    ``--frames`` frames spread over the stream. Where the compiled CPU
    kernel is built, the base model also runs on the torch path (as without
@@ -32,7 +32,7 @@ from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence, Text
 from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
 from wgse_mmseg.apis.simulator_benchmark import (header, load_rows,
                                                  simulator_rows)
-from wgse_mmseg.datasets.synthetic import render_street_scene
+from wgse_mmseg.data_generation.synthetic import render_street_scene
 
 
 def build_parser() -> argparse.ArgumentParser:

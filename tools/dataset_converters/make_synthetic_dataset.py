@@ -3,13 +3,13 @@
     python tools/dataset_converters/make_synthetic_dataset.py data/synthetic_spike_cityscapes
 
 Resumable: a sample whose marker matches the settings and its files is kept;
-any other is made again. See wgse_mmseg/datasets/synthetic.py.
+any other is made again. See wgse_mmseg/data_generation/synthetic.py.
 """
 import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
+from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
 
 
 #: the declarations of the dataset maker's arguments

@@ -3,16 +3,19 @@
     python tools/dataset_converters/spike_cityscapes.py data/cityscapes \\
         data/spike_cityscapes --nproc 2
 
-Resumable: rerun the same command after an interruption. See
-docs/spike_cityscapes.md and wgse_mmseg/datasets/cityscapes_conversion.py.
+Resumable: rerun the same command after an interruption. Shardable: N
+processes (machines sharing OUT_DIR, a Slurm array: tools/slurm_convert.sh),
+the K-th given --shard K/N and otherwise the same arguments, together write
+what one run writes. See docs/spike_cityscapes.md and
+wgse_mmseg/data_generation/cityscapes_conversion.py.
 """
 import argparse
 import time
 
 from wgse_mmseg.core.arguments import Text
-from wgse_mmseg.datasets.cityscapes_conversion import (ConversionSettings,
-                                                       convert_cityscapes,
-                                                       load_scene)
+from wgse_mmseg.data_generation.cityscapes_conversion import (
+    ConversionSettings, convert_cityscapes, load_scene)
+from wgse_mmseg.data_generation.shards import SHARD, WHOLE
 
 #: the declarations of the converter's and its settings' arguments
 CONVERTER = convert_cityscapes.declaration.arguments
@@ -51,6 +54,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help='worker processes')
     parser.add_argument('--limit', type=CONVERTER['limit'], default=None,
                         help='at most N samples per split (for trials)')
+    parser.add_argument('--shard', type=SHARD, default=WHOLE, metavar='K/N',
+                        help='convert only the K-th of N disjoint parts '
+                        '(every N-th sample, sorted by name); the N parts '
+                        'of one job, same other arguments, make the whole')
     return parser
 
 
@@ -64,12 +71,13 @@ def main():
             scene=load_scene(args.scene), seed=args.seed)
         counts = convert_cityscapes(args.cityscapes_root, args.out_dir,
                                     settings, args.splits, args.nproc,
-                                    args.limit)
+                                    args.limit, shard=args.shard)
     except (OSError, ValueError) as err:  # each names the file or option
         raise SystemExit(f'error: {err}') from err
-    print(f'{args.out_dir}: {counts["sequence"]} samples from sequences, '
-          f'{counts["static"]} from the static model, {counts["skipped"]} '
-          f'already done, in {time.perf_counter() - start:.1f} s')
+    part = '' if args.shard == WHOLE else f' (shard {args.shard})'
+    print(f'{args.out_dir}{part}: {counts["sequence"]} samples from '
+          f'sequences, {counts["static"]} from the static model, '
+          f'{counts["skipped"]} already done, in {time.perf_counter() - start:.1f} s')
 
 
 if __name__ == '__main__':

@@ -20,11 +20,9 @@ import numpy as np
 import torch
 
 from ..core.constants import REDS_THRESHOLD
-from ..core.io import load_spikes, save_spikes
+from ..core.io import SPIKE_EXTENSIONS, load_spikes, save_spikes
 from ..core.machine import cpu_model
 from ..core.simulation import fixed_point, simulate_spikes
-
-LOAD_FORMATS = ('.dat', '.spk', '.npy', '.npz')
 
 
 def numpy_step_loop(frames: np.ndarray, num_steps: int, threshold: float,
@@ -180,7 +178,7 @@ def load_rows(args, still: np.ndarray) -> List[str]:
              f'{simulated.wall * 1e3:9.1f} {simulated.cpu * 1e3:9.1f} '
              f'{1:13.2f}x']
     with tempfile.TemporaryDirectory() as tmp:
-        for ext in LOAD_FORMATS:
+        for ext in SPIKE_EXTENSIONS:
             path = osp.join(tmp, 'sample' + ext)
             save_spikes(path, spikes)
             load = median_time(lambda: load_spikes(path, height, width),

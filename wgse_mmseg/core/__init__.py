@@ -10,6 +10,9 @@ changes nothing outside it.
 * :mod:`.io`: spike files (``.dat``, ``.spk``, ``.npy``, ``.npz``) and
   atomic writes;
 * :mod:`.wavelets`: the DWT as matrices, equal to PyWavelets';
+* :mod:`.enhancers`: the one list of enhancers (WGSE and the classical
+  representations); :mod:`.seeding`: the one seed range, check and
+  derivation rule;
 * :mod:`.representations`: TFP, TFI and the mean filters as modules
   ``(B, T, H, W) -> (B, T, H, W)``; :mod:`.reconstruction_baselines`: TFP
   and TFI images of one window; :mod:`.exposure`: exposure normalisation

@@ -1,6 +1,8 @@
 """Reading and writing spike streams.
 
-Formats, chosen by the file extension:
+Formats, chosen by the file extension, each one entry of
+:data:`SPIKE_FORMATS` (:class:`SpikeFormat`: its shape, read and encode
+functions):
 
 ``.dat``
     The community's raw format (Spk2ImgNet, WGSE, Spike-Zoo): no header,
@@ -32,10 +34,12 @@ import io
 import math
 import os
 import os.path as osp
+import re
 import struct
 import tempfile
 import zipfile
-from typing import BinaryIO, Iterator, NamedTuple, Optional, Tuple
+from typing import (BinaryIO, Callable, Dict, Iterator, List, NamedTuple,
+                    Optional, Sequence, Tuple)
 
 import cv2
 import numpy as np
@@ -45,11 +49,11 @@ from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'centered_window', 'atomic_output', 'WrittenFile', 'write_bytes',
-           'write_png', 'to_uint8',
+           'centered_window', 'atomic_output', 'temporaries_of',
+           'WrittenFile', 'write_bytes',
+           'write_png', 'to_uint8', 'SpikeFormat', 'SPIKE_FORMATS',
            'SPIKE_EXTENSIONS']
 
-SPIKE_EXTENSIONS = ('.dat', '.spk', '.npy', '.npz')
 _MAGIC = b'WGSESPK1'
 _VERSION = 1
 _HEADER = struct.Struct('<8sIIII8x')  # magic, version, T, H, W, reserved
@@ -65,11 +69,16 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
 
     Writes go to a temporary file beside ``path``, renamed over it when the
     block ends without error (with the permissions ``open`` would give);
-    on error the temporary file is removed and ``path`` is untouched.
+    on error the temporary file is removed and ``path`` is untouched. The
+    temporary file is named after its target, ``.tmp-<name>.<random><ext>``
+    (:func:`temporaries_of`), so a process killed mid-write leaves one that
+    the next run for that target can find and remove, without touching the
+    temporaries of other processes writing beside it.
     """
     directory = osp.dirname(osp.abspath(path))
     os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix='.tmp-',
+    fd, tmp = tempfile.mkstemp(dir=directory,
+                               prefix=f'.tmp-{osp.basename(path)}.',
                                suffix=osp.splitext(path)[1])
     try:
         with os.fdopen(fd, 'wb') as f:
@@ -82,6 +91,26 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
         if osp.exists(tmp):
             os.remove(tmp)
         raise
+
+
+def temporaries_of(paths: Sequence[str]) -> List[str]:
+    """The temporary files :func:`atomic_output` left beside ``paths``
+    (a process killed mid-write), listing each folder once."""
+    patterns: Dict[str, list] = {}
+    for path in paths:
+        directory, name = osp.split(osp.abspath(path))
+        patterns.setdefault(directory, []).append(re.compile(
+            re.escape(f'.tmp-{name}.') + r'[A-Za-z0-9_]+' +
+            re.escape(osp.splitext(name)[1])))
+    found = []
+    for directory, names in patterns.items():
+        if not osp.isdir(directory):
+            continue
+        for entry in os.listdir(directory):
+            if entry.startswith('.tmp-') and any(
+                    pattern.fullmatch(entry) for pattern in names):
+                found.append(osp.join(directory, entry))
+    return sorted(found)
 
 
 class WrittenFile(NamedTuple):
@@ -117,15 +146,6 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
 def _check_binary(path: str, spikes: np.ndarray) -> None:
     if not ((spikes == 0) | (spikes == 1)).all():
         raise SpikeFileError(f'{path}: spikes must hold only 0 and 1')
-
-
-def _extension(path: str) -> str:
-    ext = osp.splitext(path)[1].lower()
-    if ext not in SPIKE_EXTENSIONS:
-        raise SpikeFileError(
-            f'{path}: unknown spike file extension {ext!r}; expected one of '
-            f'{SPIKE_EXTENSIONS}')
-    return ext
 
 
 def _frame_bytes(height: int, width: int) -> int:
@@ -377,20 +397,129 @@ def _inflated_window(path: str, identity: Tuple[int, int, int], start: int,
 _SIDE = Integer(1, MAX_IMAGE_SIDE, optional=True)
 
 
+def _read_packed(path: str, shape: Tuple[int, int, int], start: int,
+                 length: Optional[int], offset: int,
+                 bottom_up: bool) -> np.ndarray:
+    """Frames ``[start, start + length)`` of packed frames (``.dat``,
+    ``.spk``) after ``offset`` header bytes, memory-mapped, upright."""
+    steps, height, width = shape
+    frame = _frame_bytes(height, width)
+    start, length = _window(path, steps, start, length, height * width)
+    raw = np.memmap(path, dtype=np.uint8, mode='r',
+                    offset=offset + start * frame, shape=(length * frame, ))
+    spikes = _unpack(np.asarray(raw), length, height, width)
+    if bottom_up:
+        spikes = spikes[:, ::-1]
+    return np.ascontiguousarray(spikes)
+
+
+def _read_dat(path, shape, start, length):
+    return _read_packed(path, shape, start, length, 0, bottom_up=True)
+
+
+def _read_spk(path, shape, start, length):
+    return _read_packed(path, shape, start, length, _HEADER.size,
+                        bottom_up=False)
+
+
+def _array_shape(path: str, height: Optional[int],
+                 width: Optional[int]) -> Tuple[int, int, int]:
+    """``(T, H, W)`` an ``.npy``/``.npz`` header declares, checked (the
+    array records its size: ``height``/``width`` are not used)."""
+    with _array_file(path) as (_, shape, _, _):
+        return shape
+
+
+def _read_array(path, shape, start, length):
+    window = _read_array_window(path, start, length)
+    _check_binary(path, window)
+    return window.astype(np.uint8)
+
+
+def _encode_dat(path: str, spikes: np.ndarray) -> bytes:
+    height, width = spikes.shape[1:]
+    if (height * width) % 8:
+        raise SpikeFileError(
+            f'{path}: .dat needs height*width divisible by 8, got '
+            f'{height}x{width}')
+    return _pack(spikes[:, ::-1]).tobytes()
+
+
+def _encode_spk(path: str, spikes: np.ndarray) -> bytes:
+    return _HEADER.pack(_MAGIC, _VERSION, *spikes.shape) + \
+        _pack(spikes).tobytes()
+
+
+def _encode_npy(path: str, spikes: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.save(buffer, spikes)
+    return buffer.getvalue()
+
+
+def _encode_npz(path: str, spikes: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, spikes=spikes)
+    return buffer.getvalue()
+
+
+class SpikeFormat(NamedTuple):
+    """One spike file format: what :func:`spike_shape`, :func:`load_spikes`
+    and :func:`save_spikes` do for its extension.
+
+    ``shape(path, height, width)``
+        ``(T, H, W)`` of the existing file ``path`` without reading its
+        frames, every size the file declares checked against the file and
+        :mod:`~wgse_mmseg.core.limits` (``height``/``width``: the caller's,
+        or ``None``; formats that record their size ignore them).
+    ``read(path, shape, start, length)``
+        frames ``[start, start + length)`` (``length=None``: to the end)
+        of the file ``shape`` describes, as a ``(length, H, W)`` ``uint8``
+        array of 0/1, the window checked by :func:`_window` and the values
+        checked to be 0/1 where the format can hold others.
+    ``encode(path, spikes)``
+        the file's bytes for a checked, non-empty ``(T, H, W)`` ``uint8``
+        array of 0/1; a :class:`SpikeFileError` naming ``path`` for what
+        the format cannot hold.
+    """
+    extension: str
+    shape: Callable[[str, Optional[int], Optional[int]],
+                    Tuple[int, int, int]]
+    read: Callable[[str, Tuple[int, int, int], int, Optional[int]],
+                   np.ndarray]
+    encode: Callable[[str, np.ndarray], bytes]
+
+
+#: the spike formats, by lower-case extension (see the module docstring)
+SPIKE_FORMATS: Dict[str, SpikeFormat] = {fmt.extension: fmt for fmt in (
+    SpikeFormat('.dat', _dat_geometry, _read_dat, _encode_dat),
+    SpikeFormat('.spk', lambda path, height, width: _spk_geometry(path),
+                _read_spk, _encode_spk),
+    SpikeFormat('.npy', _array_shape, _read_array, _encode_npy),
+    SpikeFormat('.npz', _array_shape, _read_array, _encode_npz),
+)}
+#: the extensions of :data:`SPIKE_FORMATS`
+SPIKE_EXTENSIONS = tuple(SPIKE_FORMATS)
+
+
+def _format(path: str) -> SpikeFormat:
+    """The entry of :data:`SPIKE_FORMATS` for ``path``'s extension."""
+    ext = osp.splitext(path)[1].lower()
+    if ext not in SPIKE_FORMATS:
+        raise SpikeFileError(
+            f'{path}: unknown spike file extension {ext!r}; expected one of '
+            f'{SPIKE_EXTENSIONS}')
+    return SPIKE_FORMATS[ext]
+
+
 @declare(path=Path(), height=_SIDE, width=_SIDE)
 def spike_shape(path: str, height: Optional[int] = None,
                 width: Optional[int] = None) -> Tuple[int, int, int]:
     """``(T, H, W)`` of a spike file without reading its frames."""
     path = os.fspath(path)
-    ext = _extension(path)
+    fmt = _format(path)
     if not osp.exists(path):
         raise SpikeFileError(f'{path}: no such spike file')
-    if ext == '.dat':
-        return _dat_geometry(path, height, width)
-    if ext == '.spk':
-        return _spk_geometry(path)
-    with _array_file(path) as (_, shape, _, _):
-        return shape
+    return fmt.shape(path, height, width)
 
 
 @declare(path=Path(), height=_SIDE, width=_SIDE, start=Integer(0),
@@ -401,7 +530,8 @@ def load_spikes(path: str, height: Optional[int] = None,
     """Read frames ``[start, start + length)`` of a spike file.
 
     Args:
-        path: a ``.dat``, ``.spk``, ``.npy`` or ``.npz`` file.
+        path: a file of one of :data:`SPIKE_FORMATS` (``.dat``, ``.spk``,
+            ``.npy``, ``.npz``).
         height, width: frame size of a ``.dat`` file (others record it).
         start: first frame.
         length: number of frames; ``None`` reads to the end.
@@ -415,21 +545,8 @@ def load_spikes(path: str, height: Optional[int] = None,
             :data:`~wgse_mmseg.core.limits.READ_LIMIT_BYTES`.
     """
     path = os.fspath(path)
-    steps, h, w = spike_shape(path, height, width)
-    ext = _extension(path)
-    if ext in ('.npy', '.npz'):
-        window = _read_array_window(path, start, length)
-        _check_binary(path, window)
-        return window.astype(np.uint8)
-    frame = _frame_bytes(h, w)
-    start, length = _window(path, steps, start, length, h * w)
-    offset = 0 if ext == '.dat' else _HEADER.size
-    raw = np.memmap(path, dtype=np.uint8, mode='r',
-                    offset=offset + start * frame, shape=(length * frame, ))
-    spikes = _unpack(np.asarray(raw), length, h, w)
-    if ext == '.dat':
-        spikes = spikes[:, ::-1]  # rows are stored bottom-up
-    return np.ascontiguousarray(spikes)
+    shape = spike_shape(path, height, width)
+    return _format(path).read(path, shape, start, length)
 
 
 @declare(path=Path())
@@ -440,29 +557,11 @@ def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
     (:class:`WrittenFile`: size and SHA-256 of the bytes, from memory).
     """
     path = os.fspath(path)
-    ext = _extension(path)
+    fmt = _format(path)
     spikes = np.asarray(spikes)
     if spikes.ndim != 3 or 0 in spikes.shape:
         raise SpikeFileError(
             f'{path}: expected a non-empty (T, H, W) array, got shape '
             f'{spikes.shape}')
     _check_binary(path, spikes)
-    spikes = spikes.astype(np.uint8)
-    steps, height, width = spikes.shape
-    if ext == '.dat' and (height * width) % 8:
-        raise SpikeFileError(
-            f'{path}: .dat needs height*width divisible by 8, got '
-            f'{height}x{width}')
-    if ext == '.dat':
-        data = _pack(spikes[:, ::-1]).tobytes()
-    elif ext == '.spk':
-        data = _HEADER.pack(_MAGIC, _VERSION, steps, height, width) + \
-            _pack(spikes).tobytes()
-    else:
-        buffer = io.BytesIO()
-        if ext == '.npy':
-            np.save(buffer, spikes)
-        else:
-            np.savez_compressed(buffer, spikes=spikes)
-        data = buffer.getvalue()
-    return write_bytes(path, data)
+    return write_bytes(path, fmt.encode(path, spikes.astype(np.uint8)))

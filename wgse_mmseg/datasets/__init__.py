@@ -1,10 +1,12 @@
 """Datasets and pipeline transforms, registered with MMSeg.
 
-* :class:`SpikeCityscapesDataset` (:mod:`.spike_cityscapes`) and its
-  converter from Cityscapes (:mod:`.cityscapes_conversion`);
+* :class:`SpikeCityscapesDataset` (:mod:`.spike_cityscapes`);
 * reconstruction data (:mod:`.reds`);
-* the embedded synthetic street-scene dataset (:mod:`.synthetic`);
 * transforms (:mod:`.transforms`).
+
+What makes the data (the Cityscapes converter, the synthetic street scenes,
+REDS-style views) is :mod:`wgse_mmseg.data_generation`, which needs no
+OpenMMLab.
 """
 from .._openmmlab import prepare_mmseg_layer
 

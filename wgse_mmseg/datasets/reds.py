@@ -24,7 +24,6 @@ import glob
 import os.path as osp
 from typing import List, Optional, Sequence, Tuple
 
-import cv2
 import numpy as np
 import torch
 from mmcv.transforms import BaseTransform
@@ -36,27 +35,17 @@ from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SEED, SIDE, Integer,
                               Number, Path, Sequence as Values, Text,
                               declare)
 from ..core.limits import MAX_SAMPLES
+from ..core.seeding import derive_generator, derive_seed
 from ..core.constants import REDS_WHITE_RATE
-from ..core.simulation import simulate_spikes, trajectory_source_maps
+from ..core.simulation import simulate_spikes
+from ..data_generation.views import (load_images, read_grey_image,
+                                     render_trajectory)
 from .transforms import LoadSpikeFromFile
 
 __all__ = [
     'REDSSpikeDataset', 'SimulatedSpikeImageDataset', 'LoadSpikeImagePair',
-    'PackReconstructionInputs', 'read_grey_image', 'default_image_dir',
-    'render_trajectory'
+    'PackReconstructionInputs', 'default_image_dir'
 ]
-
-IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff',
-                    '.webp')
-
-
-def read_grey_image(path: str) -> np.ndarray:
-    """An image file as ``(H, W)`` float32 grey in [0, 1] (colour -> luma)."""
-    image = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise FileNotFoundError(f'{path}: missing or not a readable image')
-    return image.astype(np.float32) / 255.0
-
 
 @TRANSFORMS.register_module()
 class LoadSpikeImagePair(BaseTransform):
@@ -198,73 +187,6 @@ def default_image_dir() -> str:
     return osp.join(matplotlib.get_data_path(), 'sample_data')
 
 
-def _load_images(image_dir: str, max_side: int) -> Tuple[List[str],
-                                                         List[np.ndarray]]:
-    paths = sorted(p for p in glob.glob(osp.join(image_dir, '**', '*'),
-                                        recursive=True)
-                   if p.lower().endswith(IMAGE_EXTENSIONS))
-    if not paths:
-        raise FileNotFoundError(
-            f'{image_dir}: no images ({", ".join(IMAGE_EXTENSIONS)})')
-    images = []
-    for path in paths:
-        image = read_grey_image(path)
-        scale = max_side / max(image.shape)
-        if scale < 1:
-            image = cv2.resize(image, None, fx=scale, fy=scale,
-                               interpolation=cv2.INTER_AREA)
-        images.append(image)
-    return paths, images
-
-
-def render_trajectory(image: np.ndarray, size: Tuple[int, int],
-                      num_steps: int, rng: np.random.Generator,
-                      max_speed: float = 0.6, max_rotation: float = 0.002,
-                      max_zoom: float = 0.003,
-                      scale_range: Tuple[float, float] = (0.7, 2.5)
-                      ) -> np.ndarray:
-    """A ``num_steps``-frame clip of a camera moving over a still image.
-
-    A view of ``size`` ``(h, w)`` pixels, centred at a random point of
-    ``image`` ``(H, W)`` at a random base angle and base scale (source pixels
-    per view pixel, log-uniform in ``scale_range``), moves along a random
-    trajectory of :func:`~wgse_mmseg.core.simulation.trajectory_source_maps`
-    with ``tau = t - num_steps // 2`` steps: speed up to ``max_speed`` view
-    px/step, acceleration up to ``max_speed / num_steps``, rotation up to
-    ``max_rotation`` rad/step and zoom up to ``max_zoom`` per step, each in a
-    random direction. Borders reflect.
-
-    Returns:
-        ``(num_steps, h, w)`` float32 frames; frame ``num_steps // 2`` is the
-        view at the trajectory's reference point.
-    """
-    height, width = size
-
-    def random_vector(magnitude):
-        angle = rng.uniform(-np.pi, np.pi)
-        return tuple(rng.uniform(0, magnitude) *
-                     np.array([np.cos(angle), np.sin(angle)]))
-
-    maps = trajectory_source_maps(
-        torch.arange(num_steps, dtype=torch.float64) - num_steps // 2,
-        (height, width),
-        source_centre=tuple(rng.uniform([0, 0], [image.shape[1] - 1,
-                                                 image.shape[0] - 1])),
-        base_scale=float(np.exp(rng.uniform(*np.log(scale_range)))),
-        base_angle=rng.uniform(-np.pi, np.pi),
-        translation=random_vector(max_speed),
-        acceleration=random_vector(max_speed / num_steps),
-        rotation=rng.uniform(-max_rotation, max_rotation),
-        zoom=rng.uniform(-max_zoom, max_zoom)).numpy()
-    frames = np.empty((num_steps, height, width), np.float32)
-    for step, matrix in enumerate(maps):
-        frames[step] = cv2.warpAffine(
-            image, matrix, (width, height),
-            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-            borderMode=cv2.BORDER_REFLECT_101)
-    return frames
-
-
 #: a ``(low, high)`` range of positive numbers
 _POSITIVE_RANGE = Values(Number(0, strict_minimum=True), names=('low', 'high'),
                          ordered=True)
@@ -274,8 +196,9 @@ _POSITIVE_RANGE = Values(Number(0, strict_minimum=True), names=('low', 'high'),
 class SimulatedSpikeImageDataset(BaseDataset):
     """Spike windows simulated from still images moved along trajectories.
 
-    Sample ``i`` is drawn from a generator seeded with ``(seed, i)``, so the
-    set is the same on every run: an image (chosen with probability
+    Sample ``i`` is drawn from ``derive_generator(seed, i)`` and its spikes
+    from ``derive_seed(seed, i, 'spikes')``
+    (:mod:`wgse_mmseg.core.seeding`), so the set is the same on every run: an image (chosen with probability
     proportional to its area), a view of ``crop_size`` moved along a random
     trajectory (:func:`render_trajectory`), a random brightness (gain in
     ``gain_range``, gamma log-uniform in ``gamma_range``), then
@@ -320,7 +243,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
                  gamma_range: Tuple[float, float] = (0.7, 1.4),
                  max_side: int = 1024, **kwargs):
         self.image_dir = image_dir or default_image_dir()
-        self.image_paths, self.images = _load_images(self.image_dir,
+        self.image_paths, self.images = load_images(self.image_dir,
                                                      max_side)
         areas = np.array([im.size for im in self.images], np.float64)
         self.image_probs = areas / areas.sum()
@@ -348,7 +271,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
 
     def simulate(self, index: int) -> dict:
         """Sample ``index`` as pipeline results (``img``, ``gt_image``)."""
-        rng = np.random.default_rng((self.seed, index))
+        rng = derive_generator(self.seed, index)
         choice = rng.choice(len(self.images), p=self.image_probs)
         frames = render_trajectory(self.images[choice], self.crop_size,
                                    self.num_steps, rng, **self.trajectory)
@@ -356,7 +279,8 @@ class SimulatedSpikeImageDataset(BaseDataset):
         frames = rng.uniform(*self.gain_range) * np.clip(frames, 0, 1)**gamma
         spikes, _ = simulate_spikes(frames, self.num_steps,
                                     threshold=1 / self.white_rate,
-                                    seed=int(rng.integers(2**31)))
+                                    seed=derive_seed(self.seed, index,
+                                                     'spikes'))
         return dict(
             img=np.ascontiguousarray(spikes.transpose(1, 2, 0)),
             gt_image=frames[self.num_steps // 2],

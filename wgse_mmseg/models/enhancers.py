@@ -1,18 +1,15 @@
-"""The enhancers a config puts in front of a model, registered with MMSeg.
+"""The enhancers registered with MMSeg, by class name.
 
 ``data_preprocessor=dict(enhancer=dict(type='WGSE', ...))`` builds
-:class:`~wgse_mmseg.core.wgse.WGSE`; ``'TFP'``, ``'TFI'``,
-``'SpatialMeanFilter'`` and ``'TemporalMeanFilter'`` build the classical
-representations of :mod:`wgse_mmseg.core.representations`. The classes live
-in :mod:`wgse_mmseg.core` (torch only); this module only registers them.
+:class:`~wgse_mmseg.core.wgse.WGSE`; every class of
+:data:`wgse_mmseg.core.enhancers.ENHANCERS` (the one list) is registered
+the same way. The classes live in :mod:`wgse_mmseg.core` (torch only); this
+module only registers them.
 """
 from mmseg.registry import MODELS
 
-from ..core.representations import (TFI, TFP, SpatialMeanFilter,
-                                    TemporalMeanFilter)
-from ..core.wgse import WGSE
+from ..core.enhancers import ENHANCERS
 
-ENHANCERS = (WGSE, TFP, TFI, SpatialMeanFilter, TemporalMeanFilter)
 for _enhancer in ENHANCERS:
     MODELS.register_module(module=_enhancer)
 

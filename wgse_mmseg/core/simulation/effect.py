@@ -17,48 +17,30 @@ stage of the simulation they act on:
     shot noise), applied per block of steps in the order of ``order``.
 
 Each effect draws its random numbers from its own generator
-(:meth:`SimulationContext.generator`), keyed by the clip's seed and the
+(:meth:`SimulationContext.generator`), seeded by
+:func:`~wgse_mmseg.core.seeding.derive_seed` from the clip's seed and the
 effect's name, so switching one effect on or off never changes another's
 draws.
 """
-import zlib
 from dataclasses import dataclass
 from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Type
 
 import numpy as np
 import torch
 
-from ..arguments import SEED, Choice, Number, Sequence as Values
+from ..arguments import Choice, Number, Sequence as Values
 from ..limits import excerpt
+from ..seeding import derive_seed
 
 __all__ = [
     'SimulationContext', 'Effect', 'LightEffect', 'SensorEffect',
-    'ChargeEffect', 'EFFECTS', 'register_effect', 'derive_seed',
-    'check_number', 'check_choice', 'check_pair', 'check_seed'
+    'ChargeEffect', 'EFFECTS', 'register_effect', 'check_number',
+    'check_choice', 'check_pair'
 ]
 
 
 #: the entry point errors about effect parameters name
 _EFFECTS = 'effects'
-
-
-def check_seed(name: str, value: Any, allow_none: bool = False) -> Any:
-    """A seed in ``0 ..`` :data:`~wgse_mmseg.core.limits.MAX_SEED` (or
-    ``None`` where allowed), as an ``int``."""
-    if value is None and allow_none:
-        return None
-    SEED.check(value, _EFFECTS, name)
-    return int(value)
-
-
-def derive_seed(seed: int, key: str) -> int:
-    """A 64-bit seed for the stream ``key`` of the clip seeded ``seed``.
-
-    Stable across runs, platforms and Python versions (no ``hash()``).
-    """
-    entropy = [check_seed('seed', seed), zlib.crc32(key.encode())]
-    state = np.random.SeedSequence(entropy).generate_state(1, np.uint64)
-    return int(state[0])
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,9 @@ from typing import Optional
 
 import torch
 
+from ..seeding import check_seed
 from .effect import (SensorEffect, SimulationContext, check_number,
-                     check_seed, register_effect)
+                     register_effect)
 
 __all__ = ['SensorMaps', 'FixedPattern', 'DarkCurrent', 'HotPixels']
 
@@ -62,8 +63,9 @@ class SensorMaps:
 
 
 def _sensor_seed(effect, params):
-    params['sensor_seed'] = check_seed(f'{effect}.sensor_seed',
-                                       params['sensor_seed'], allow_none=True)
+    params['sensor_seed'] = check_seed(params['sensor_seed'],
+                                       f'{effect}.sensor_seed', 'effects',
+                                       allow_none=True)
 
 
 @register_effect

@@ -11,7 +11,6 @@ a few float passes over it: crop or resize the frames first (MMSeg's
 """
 import os
 import os.path as osp
-import zlib
 from typing import Optional
 
 import mmcv
@@ -20,6 +19,7 @@ from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
 from ...core.arguments import NUM_STEPS, SEED, Choice, Number, declare
+from ...core.seeding import derive_seed, draw_seed
 from ...core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = ['SimulateSpikes']
@@ -50,8 +50,9 @@ class SimulateSpikes(BaseTransform):
         seed: ``None`` draws a new stream each call (from NumPy's global
             generator, which mmengine seeds per worker). An integer makes
             each sample's stream deterministic: its seed is derived from
-            this one and the sample's ``img_path`` (or ``sample_idx``), so
-            samples differ from each other but not from epoch to epoch.
+            this one and the sample's ``img_path`` (or ``sample_idx``) by
+            :func:`~wgse_mmseg.core.seeding.derive_seed`, so samples differ
+            from each other but not from epoch to epoch.
         channel_order: ``'bgr'`` (``LoadImageFromFile``'s and OpenCV's) or
             ``'rgb'``: the order of colour frames in ``frames`` and ``img``.
             Frames must be ``uint8`` or float in [0, 1].
@@ -101,12 +102,11 @@ class SimulateSpikes(BaseTransform):
 
     def _sample_seed(self, results: dict) -> int:
         if self.seed is None:
-            return int(np.random.randint(0, 2**31 - 1))
+            return draw_seed()
         identity = results.get('img_path', results.get('sample_idx'))
         if identity is None:
             return self.seed
-        key = osp.normpath(str(identity)).encode()
-        return (self.seed * 1_000_003 + zlib.crc32(key)) % 2**63
+        return derive_seed(self.seed, osp.normpath(str(identity)))
 
     def transform(self, results: dict) -> dict:
         frames = self._frames(results)

@@ -8,14 +8,17 @@ import sys
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, strategies as st
 
-import wgse_mmseg.datasets.cityscapes_conversion as conversion
+import wgse_mmseg.data_generation.cityscapes_conversion as conversion
 from wgse_mmseg.datasets import SpikeCityscapesDataset
-from wgse_mmseg.datasets.cityscapes_conversion import (
+from wgse_mmseg.data_generation.cityscapes_conversion import (
     CITYSCAPES_LABELS, LABEL_ID_TO_TRAIN_ID, ConversionSettings,
     convert_cityscapes, find_samples, labelids_to_trainids, load_scene,
-    resize_nearest, sample_effects, sample_seed)
+    resize_nearest, sample_effects)
 from wgse_mmseg.core.io import load_spikes
+from wgse_mmseg.core.seeding import derive_seed
+from wgse_mmseg.data_generation.shards import WHOLE, Shard
 from wgse_mmseg.core.simulation import simulate_spikes
 
 REPO_ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -229,7 +232,7 @@ def test_convert_layout_labels_spikes(tmp_path, cityscapes, calls):
         assert meta['simulation']['resampling'] == (
             'flow' if sequence else 'static')
         assert recipe['model'] == ('sequence' if sequence else 'static')
-        assert recipe['seed'] == sample_seed(stem)
+        assert recipe['seed'] == derive_seed(0, stem)
         assert recipe['effects'] == (
             {'interpolation': {'method': 'flow'}} if sequence else {})
         assert recipe['time_span']['scene_seconds'] == pytest.approx(
@@ -259,9 +262,11 @@ def test_resume_after_interruption(tmp_path, cityscapes, calls, monkeypatch):
     first = 'aachen_000000_000123'
     assert _files(out) == [p for p in _expected_files() if first in p]
     mtimes = {p: os.stat(osp.join(out, p)).st_mtime_ns for p in _files(out)}
-    stale = osp.join(out, 'spike', 'val', 'bonn', '.tmp-killed.spk')
+    # what a SIGKILL mid-write leaves: atomic_output's temporary file
+    stale = osp.join(out, 'spike', 'val', 'bonn',
+                     '.tmp-bonn_000000_000019_spike.spk.k1lled_.spk')
     os.makedirs(osp.dirname(stale))
-    open(stale, 'wb').close()  # what a SIGKILL mid-write leaves
+    open(stale, 'wb').close()
 
     monkeypatch.setattr(conversion, 'simulate_spikes', recording)
     del calls[:]
@@ -449,7 +454,7 @@ def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
                                       seed=base_seed)
         refs[base_seed] = str(tmp_path / f'ref{base_seed}')
         convert_cityscapes(root, refs[base_seed], settings, progress=False)
-    seed_of = {sample_seed(stem, base): base for stem in SAMPLES
+    seed_of = {derive_seed(base, stem): base for stem in SAMPLES
                for base in (0, 1)}
     out = str(tmp_path / 'out')
     shutil.copytree(refs[0], out)
@@ -491,3 +496,77 @@ def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
     assert _files(out) == _expected_files()  # no temporary file is left
     for stem in SAMPLES:
         assert _sample_bytes(out, stem) == _sample_bytes(refs[1], stem)
+
+
+# ----------------------------------------------------------------- shards
+@given(count=st.integers(0, 40), parts=st.integers(1, 9))
+def test_shards_partition_a_job_in_order(count, parts):
+    items = list(range(count))
+    shards = [Shard(k, parts).select(items) for k in range(1, parts + 1)]
+    assert sorted(sum(shards, [])) == items  # disjoint and complete
+    for k, part in enumerate(shards, 1):
+        assert part == sorted(part)
+        assert all(i % parts == k - 1 for i in part)
+    assert WHOLE.select(items) == items
+
+
+@pytest.mark.parametrize('text', ['0/2', '3/2', '1/0', 'a/b', '1', '1/2/3',
+                                  '-1/2', ''])
+def test_a_bad_shard_is_refused_naming_the_option(tmp_path, text):
+    script = osp.join(REPO_ROOT, 'tools', 'dataset_converters',
+                      'spike_cityscapes.py')
+    proc = subprocess.run(
+        [sys.executable, script, str(tmp_path), str(tmp_path / 'out'),
+         f'--shard={text}'], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2
+    assert 'argument --shard: must be K/N with 1 <= K <= N' in proc.stderr
+    assert not (tmp_path / 'out').exists()
+    with pytest.raises(ValueError, match='convert_cityscapes: shard must be'):
+        convert_cityscapes(str(tmp_path), str(tmp_path / 'out'),
+                           shard=(3, 2), progress=False)
+
+
+def test_shards_on_a_slurm_array_equal_one_run(tmp_path, cityscapes,
+                                               single_thread):
+    """Two array tasks of tools/slurm_convert.sh, at the same time into one
+    folder, write byte-identical files to one run's; a stale temporary of
+    a sample of one shard is removed by that shard, another process's
+    temporary beside it is left alone."""
+    root, _ = cityscapes
+    settings = ConversionSettings(height=32, width=64, num_steps=9,
+                                  scene={'shot_noise': {}})
+    single = str(tmp_path / 'single')
+    convert_cityscapes(root, single, settings, progress=False)
+    out = str(tmp_path / 'sharded')
+    city = osp.join(out, 'spike', 'val', 'bonn')
+    os.makedirs(city)
+    stale = osp.join(city, '.tmp-bonn_000000_000019_spike.spk.abc_12.spk')
+    foreign = osp.join(city, '.tmp-other_000000_000019_spike.spk.abc_12.spk')
+    for path in (stale, foreign):
+        open(path, 'wb').close()
+    env = dict(os.environ, OMP_NUM_THREADS='1', SLURM_ARRAY_TASK_MIN='0',
+               SLURM_ARRAY_TASK_COUNT='2', SLURM_SUBMIT_DIR=REPO_ROOT,
+               PYTHON=sys.executable)
+    env.pop('TRITON_INTERPRET', None)
+    tasks = [subprocess.Popen(
+        ['bash', osp.join(REPO_ROOT, 'tools', 'slurm_convert.sh'), root, out,
+         '--height', '32', '--width', '64', '--num-steps', '9', '--scene',
+         json.dumps(settings.scene)],
+        env=dict(env, SLURM_ARRAY_TASK_ID=str(task)), stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True) for task in (0, 1)]
+    outputs = [task.communicate(timeout=600) for task in tasks]
+    for task, (stdout, stderr) in zip(tasks, outputs):
+        assert task.returncode == 0, stderr
+    # sorted samples: aachen_000000 (train), aachen_000001, bonn (val)
+    assert '(shard 1/2): 1 samples from sequences, 1 from the static' in \
+        outputs[0][0]
+    assert '(shard 2/2): 0 samples from sequences, 1 from the static' in \
+        outputs[1][0]
+    assert not osp.exists(stale) and osp.exists(foreign)
+    os.remove(foreign)
+    assert _files(out) == _files(single) == _expected_files()
+    _assert_same_files(out, single)
+    # a shard run again finds its samples done
+    counts = convert_cityscapes(root, out, settings, progress=False,
+                                shard=Shard(2, 2))
+    assert counts == dict(sequence=0, static=0, skipped=1)

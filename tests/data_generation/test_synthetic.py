@@ -2,7 +2,7 @@
 import os
 
 from wgse_mmseg.core.io import load_spikes, spike_shape
-from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
+from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
 
 
 def _tree(out):

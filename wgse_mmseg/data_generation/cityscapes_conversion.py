@@ -33,14 +33,23 @@ Complete or absent. A sample's json is its marker: the settings that made it
 (the recipe) and the size and SHA-256 of the spike file and label its run
 wrote. A sample is done only when its marker exists, holds the current
 recipe and matches both files (and SpikeCityscapesDataset serves only
-samples whose marker matches); a run removes the marker before it writes a sample's files and
-writes it last, each file atomically, so a run killed at any point leaves
-that sample without a marker, and the next run (with any settings) redoes
-it. Each sample's seed is derived from its name, so reruns give identical
-files.
+samples whose marker matches); a run removes the marker before it writes a
+sample's files and writes it last, each file atomically, so a run killed at
+any point leaves that sample without a marker, and the next run (with any
+settings) redoes it. Temporary files are named after their target
+(:func:`~wgse_mmseg.core.io.atomic_output`), and a run removes only those of
+its own samples. Each sample's seed is derived from the base seed and its
+name (:func:`~wgse_mmseg.core.seeding.derive_seed`), so reruns give
+identical files.
+
+Shards. ``convert_cityscapes(..., shard=Shard(K, N))`` (``--shard K/N``)
+converts every ``N``-th sample of the sorted list from the ``K``-th on
+(:mod:`.shards`): the shards of a job are disjoint, may run at the same time
+on machines sharing ``out_dir`` (``tools/slurm_convert.sh``), and together
+write the files one run writes, byte for byte, since nothing a sample's
+files hold depends on the other samples.
 """
 import contextlib
-import hashlib
 import json
 import multiprocessing
 import os
@@ -60,15 +69,17 @@ from ..core import arguments
 from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
                               Number, Path, declare, declare_fields)
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
-from ..core.io import save_spikes, write_png
+from ..core.io import save_spikes, temporaries_of, write_png
 from ..core.limits import MAX_SAMPLES, MAX_WORKERS
 from ..core.markers import invalidate, is_complete, write_marker
+from ..core.seeding import derive_seed
 from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
+from .shards import SHARD, WHOLE, Shard
 
 __all__ = [
     'CITYSCAPES_LABELS', 'LABEL_ID_TO_TRAIN_ID', 'CityscapesSample',
     'ConversionSettings', 'find_samples', 'labelids_to_trainids',
-    'resize_nearest', 'sample_effects', 'sample_seed', 'output_paths',
+    'resize_nearest', 'sample_effects', 'output_paths',
     'convert_sample', 'convert_cityscapes', 'load_scene'
 ]
 
@@ -339,12 +350,6 @@ def sample_effects(sample: CityscapesSample,
     return effects
 
 
-def sample_seed(stem: str, base_seed: int = 0) -> int:
-    """A 31-bit seed from the sample's name and the base seed."""
-    digest = hashlib.sha256(f'{base_seed}:{stem}'.encode()).digest()
-    return int.from_bytes(digest[:4], 'little') & 0x7FFFFFFF
-
-
 def output_paths(out_dir: str, sample: CityscapesSample) -> Dict[str, str]:
     """``spike``, ``meta`` and ``label`` paths of ``sample`` in ``out_dir``."""
     spike_dir = osp.join(out_dir, 'spike', sample.split, sample.city)
@@ -368,7 +373,7 @@ def _recipe(sample: CityscapesSample, settings: ConversionSettings,
             sequence=[osp.relpath(p, root) for p in sample.sequence]),
         height=settings.height, width=settings.width,
         num_steps=settings.num_steps, threshold=settings.threshold,
-        seed=sample_seed(sample.stem, settings.seed),
+        seed=derive_seed(settings.seed, sample.stem),
         effects=sample_effects(sample, settings.scene),
         time_span=dict(
             readout_seconds=settings.num_steps / READOUT_HZ,
@@ -419,12 +424,15 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
     return recipe['model']
 
 
-def _remove_stale_temporaries(out_dir: str, splits: Sequence[str]) -> None:
-    """Remove temporary files a killed run left (``atomic_output``'s)."""
-    for tree in ('spike', 'gtFine'):
-        for split in splits:
-            for path in glob(osp.join(out_dir, tree, split, '*', '.tmp-*')):
-                os.remove(path)
+def _remove_stale_temporaries(out_dir: str,
+                              samples: Sequence[CityscapesSample]) -> None:
+    """Remove the temporary files a killed run left for ``samples``
+    (``atomic_output``'s), and no other: another shard may be writing its
+    own beside them."""
+    paths = [path for sample in samples
+             for path in output_paths(out_dir, sample).values()]
+    for path in temporaries_of(paths):
+        os.remove(path)
 
 
 def _init_worker() -> None:
@@ -436,12 +444,14 @@ def _init_worker() -> None:
 @declare(root=Path(), out_dir=Path(),
          splits=arguments.Sequence(Choice(CITYSCAPES_SPLITS)),
          nproc=Integer(1, MAX_WORKERS),
-         limit=Integer(1, MAX_SAMPLES, optional=True), progress=Flag())
+         limit=Integer(1, MAX_SAMPLES, optional=True), progress=Flag(),
+         shard=SHARD)
 def convert_cityscapes(root: str, out_dir: str,
                        settings: Optional[ConversionSettings] = None,
                        splits: Sequence[str] = ('train', 'val'),
                        nproc: int = 1, limit: Optional[int] = None,
-                       progress: bool = True) -> Dict[str, int]:
+                       progress: bool = True,
+                       shard: Shard = WHOLE) -> Dict[str, int]:
     """Convert the Cityscapes ``root`` into Spike-Cityscapes at ``out_dir``.
 
     Args:
@@ -453,6 +463,10 @@ def convert_cityscapes(root: str, out_dir: str,
         nproc: worker processes (1: in this process).
         limit: convert at most this many samples per split (first by name).
         progress: show a progress bar.
+        shard: ``Shard(K, N)``: only the samples at positions ``K - 1``,
+            ``K - 1 + N``, ... of the job's list (``splits`` in order, each
+            sorted by name, cut to ``limit``); the ``N`` shards of a job
+            (same root, settings, splits and limit) together convert it.
 
     Returns:
         How many samples were made from a ``'sequence'``, made by the
@@ -463,7 +477,8 @@ def convert_cityscapes(root: str, out_dir: str,
     if limit is not None:
         samples = [s for split in splits
                    for s in [s for s in samples if s.split == split][:limit]]
-    _remove_stale_temporaries(out_dir, splits)
+    samples = Shard(*shard).select(samples)
+    _remove_stale_temporaries(out_dir, samples)
     convert = partial(convert_sample, root=root, out_dir=out_dir,
                       settings=settings)
     counts = dict(sequence=0, static=0, skipped=0)
@@ -475,7 +490,8 @@ def convert_cityscapes(root: str, out_dir: str,
                 multiprocessing.Pool(nproc, _init_worker))
             outcomes = pool.imap_unordered(convert, samples)
         for outcome in tqdm(outcomes, total=len(samples),
-                            desc='Spike-Cityscapes', disable=not progress):
+                            desc=f'Spike-Cityscapes {Shard(*shard)}',
+                            disable=not progress):
             counts[outcome] += 1
     return counts
 

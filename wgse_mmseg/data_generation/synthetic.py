@@ -5,7 +5,10 @@ poles and signs, sidewalk, road with lane marks) with cars and pedestrians
 moving across it. The scene is rendered at several instants, turned into a
 spike stream by :func:`wgse_mmseg.core.simulation.simulate_spikes`, and labelled
 with Cityscapes train ids at the middle instant, where the stream is centred.
-Everything is seeded: the same arguments give the same files.
+Everything is seeded: scene ``i`` is drawn from
+``derive_generator(seed, i)`` and its spikes from
+``derive_seed(seed, i, 'spikes')`` (:mod:`wgse_mmseg.core.seeding`), so the
+same arguments give the same files.
 """
 import os.path as osp
 from typing import Tuple
@@ -14,12 +17,13 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from ..core.arguments import (NUM_STEPS, SIDE, Flag, Integer, Number, Path,
-                              declare)
+from ..core.arguments import (NUM_STEPS, SEED, SIDE, Flag, Integer, Number,
+                              Path, declare)
 from ..core.limits import MAX_SAMPLES
 from ..core.constants import REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
 from ..core.markers import invalidate, is_complete, write_marker
+from ..core.seeding import derive_generator, derive_seed
 from ..core.simulation import simulate_spikes
 
 __all__ = ['render_street_scene', 'make_synthetic_dataset']
@@ -129,7 +133,7 @@ _COUNT = Integer(0, MAX_SAMPLES)
 
 @declare(out_dir=Path(), num_train=_COUNT, num_val=_COUNT, height=SIDE,
          width=SIDE, num_steps=NUM_STEPS, num_frames=Integer(1, 1024),
-         threshold=Number(0, strict_minimum=True), seed=Integer(0, 2**31 - 1),
+         threshold=Number(0, strict_minimum=True), seed=SEED,
          progress=Flag())
 def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                            num_val: int = 12, height: int = 128,
@@ -165,10 +169,10 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
         files = dict(spike=spike_path, label=label_path)
         if is_complete(marker, recipe, files):
             continue
-        rng = np.random.default_rng([seed, scene])
-        frames, label = render_street_scene(rng, height, width, num_frames)
+        frames, label = render_street_scene(
+            derive_generator(seed, scene), height, width, num_frames)
         spikes, _ = simulate_spikes(frames, num_steps, threshold=threshold,
-                                    seed=seed * 100003 + scene)
+                                    seed=derive_seed(seed, scene, 'spikes'))
         invalidate(marker)
         records = dict(label=write_png(label_path, label),
                        spike=save_spikes(spike_path, spikes))
