@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 import wgse_mmseg
 from wgse_mmseg.core.arguments import DECLARATIONS, ArgumentError, Path
-from wgse_mmseg.datasets.cityscapes_conversion import ConversionSettings
+from wgse_mmseg.data_generation.cityscapes_conversion import ConversionSettings
 
 wgse_mmseg.register_all_modules()
 # the modules whose entry points are declared but not imported above

@@ -30,7 +30,8 @@ from hypothesis import strategies as st
 
 from wgse_mmseg.core.arguments import (Argument, Choice, Integer, Number,
                                        OneOf, Path, Sequence, Text)
-from wgse_mmseg.core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from wgse_mmseg.core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
+from wgse_mmseg.data_generation.shards import Shard, ShardArgument
 from wgse_mmseg.utils.config import SPIKE_SETTING_KINDS, ConfigOptions
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -161,6 +162,14 @@ def _accepted(kind, word):
         if kind.ordered and any(a > b for a, b in zip(values, values[1:])):
             return no
         return True, values
+    if isinstance(kind, ShardArgument):
+        parts = word.split('/')
+        try:
+            index, count = (int(part) for part in parts)
+        except ValueError:
+            return no
+        ok = len(parts) == 2 and 1 <= index <= count <= MAX_SAMPLES
+        return (True, Shard(index, count)) if ok else no
     raise AssertionError(f'no reading of {kind!r}')
 
 
