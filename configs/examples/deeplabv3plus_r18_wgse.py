@@ -31,7 +31,6 @@ _base_ = [
 norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN on multi-GPU runs: sync_bn
 ohem = dict(type='OHEMPixelSampler', thresh=0.7, min_kept=100000)
 model = dict(
-    type='SpikeEncoderDecoder',  # runs the enhancer in its forward
     pretrained=None,  # no RGB ImageNet weights: the stem takes T channels
     # (2) batch and enhance spike streams instead of normalising RGB images:
     data_preprocessor=dict(
