@@ -5,9 +5,8 @@
 # lr 1e-3 / wd 0.01, 10-epoch warm-up, OHEM cross-entropy).
 #
 # Any MMSeg segmentor takes spike streams once three things are in place:
-#   1. custom_imports naming wgse_mmseg.datasets, .engine, .evaluation and
-#      .models --
-#      comes with the dataset base config below; it registers the spike
+#   1. custom_imports naming wgse_mmseg.mmseg_layer -- comes with the dataset
+#      base config below; it sets up the MMSeg layer and registers the spike
 #      loader/transforms, SpikeCityscapesDataset, SpikeSegDataPreProcessor
 #      and WGSE.
 #   2. model.data_preprocessor = SpikeSegDataPreProcessor (replacing the RGB

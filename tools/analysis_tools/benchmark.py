@@ -17,9 +17,11 @@ import sys
 
 from mmengine.config import DictAction
 
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.apis.benchmarking import (benchmark_config, format_results,
                                      run_isolated)
-from wgse_mmseg.core.io import atomic_output
+from wgse_mmseg.core.io import atomic_output  # noqa: E402
 
 
 def parse_args():

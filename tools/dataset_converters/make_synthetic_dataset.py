@@ -9,7 +9,9 @@ import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.datasets.synthetic import make_synthetic_dataset
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
+from wgse_mmseg.datasets.synthetic import make_synthetic_dataset  # noqa: E402
 
 
 def parse_args():

@@ -9,8 +9,10 @@ docs/spike_cityscapes.md and wgse_mmseg/datasets/cityscapes_conversion.py.
 import argparse
 import time
 
-from wgse_mmseg.core.arguments import Integer
-from wgse_mmseg.core.limits import MAX_SAMPLES, MAX_WORKERS
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
+from wgse_mmseg.core.arguments import Integer  # noqa: E402
+from wgse_mmseg.core.limits import MAX_SAMPLES, MAX_WORKERS  # noqa: E402
 from wgse_mmseg.datasets.cityscapes_conversion import (ConversionSettings,
                                                        convert_cityscapes,
                                                        load_scene)

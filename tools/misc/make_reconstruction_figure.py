@@ -16,6 +16,8 @@ import sys
 import cv2
 import numpy as np
 
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,

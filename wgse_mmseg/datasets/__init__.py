@@ -6,9 +6,9 @@
 * the embedded synthetic street-scene dataset (:mod:`.synthetic`);
 * transforms (:mod:`.transforms`).
 """
-from .._openmmlab import prepare_mmseg_layer
+from .._openmmlab import check_mmseg_layer
 
-prepare_mmseg_layer('wgse_mmseg.datasets')
+check_mmseg_layer('wgse_mmseg.datasets')
 
 from .reds import (LoadSpikeImagePair,  # noqa: E402
                    PackReconstructionInputs, REDSSpikeDataset,

@@ -2,9 +2,9 @@
 enhancer in every segmentor, the registered enhancers (:mod:`.enhancers`),
 the legacy segmentor name (:mod:`.segmentors`) and image reconstruction
 (:mod:`.reconstruction`)."""
-from .._openmmlab import prepare_mmseg_layer
+from .._openmmlab import check_mmseg_layer
 
-prepare_mmseg_layer('wgse_mmseg.models')
+check_mmseg_layer('wgse_mmseg.models')
 
 from .data_preprocessor import SpikeSegDataPreProcessor  # noqa: E402
 from .enhancers import ENHANCERS  # noqa: E402

@@ -1,12 +1,11 @@
 """Loading configs with the spike settings overridable from the command line.
 
-The dataset base config sets ``num_steps`` (T), ``data_root`` and
-``crop_size`` once, through mmengine's ``{{$ENV:default}}`` substitution, and
-every field that depends on them (the loader's window, the preprocessor's
-check and padding, the backbone's ``in_channels``) is derived from them when
-the file is parsed. ``--cfg-options num_steps=41`` can therefore not be a
-plain merge after parsing: :func:`load_config` turns these keys into the
-environment variables the config reads, then merges the rest as usual.
+The dataset base configs set ``num_steps`` (T), ``data_root`` and
+``crop_size`` once; :func:`load_config` gives the values of
+``--cfg-options num_steps=41 data_root=DIR crop_size=128,256`` (and those a
+child config sets) to every field that carries them
+(:func:`~wgse_mmseg.utils.spike_settings.apply_spike_settings`, which lists
+them), and merges the other keys as mmengine does.
 """
 import argparse
 import os
@@ -18,60 +17,30 @@ from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from .distributed import prepare_launcher
-from .num_steps import apply_num_steps
+from .spike_settings import SPIKE_SETTINGS, apply_spike_settings
 
 __all__ = [
-    'SPIKE_SETTINGS', 'load_config', 'add_runner_arguments',
-    'config_from_args', 'build_runner'
+    'load_config', 'add_runner_arguments', 'config_from_args', 'build_runner'
 ]
-
-#: ``--cfg-options`` key -> environment variable read by the config files.
-SPIKE_SETTINGS = {
-    'num_steps': 'WGSE_NUM_STEPS',
-    'data_root': 'WGSE_DATA_ROOT',
-    'crop_size': 'WGSE_CROP_SIZE',
-}
-
-
-def _as_env_value(key: str, value) -> str:
-    if key == 'crop_size':
-        if isinstance(value, str):
-            value = value.split(',')
-        sizes = [value] * 2 if isinstance(value, int) else list(value)
-        if len(sizes) != 2:
-            raise ValueError(f'crop_size must be H,W; got {value!r}')
-        return ','.join(str(int(v)) for v in sizes)
-    if key == 'num_steps' and int(value) < 1:
-        raise ValueError(f'num_steps must be >= 1, got {value!r}')
-    return str(value)
 
 
 def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
     """``Config.fromfile(path)`` with ``cfg_options`` applied.
 
-    ``num_steps``, ``data_root`` and ``crop_size`` in ``cfg_options`` are
-    applied before parsing (see module docstring); other keys are merged
-    with ``Config.merge_from_dict``. Then the config's ``num_steps`` reaches
-    every field built from it, also where a child config set it
-    (:func:`~wgse_mmseg.utils.num_steps.apply_num_steps`).
+    ``num_steps``, ``data_root`` and ``crop_size`` in ``cfg_options`` go to
+    the fields that carry them, before the other keys are merged with
+    ``Config.merge_from_dict`` (so ``val_dataloader.dataset.data_root=A``
+    beside ``data_root=B`` keeps ``A``); then the fields are checked against
+    the settings once more (see :mod:`wgse_mmseg.utils.spike_settings`).
     """
     options = dict(cfg_options or {})
-    saved = {}
-    for key, env in SPIKE_SETTINGS.items():
-        if key in options:
-            saved[env] = os.environ.get(env)
-            os.environ[env] = _as_env_value(key, options.pop(key))
-    try:
-        cfg = Config.fromfile(path)
-    finally:
-        for env, value in saved.items():
-            if value is None:
-                os.environ.pop(env, None)
-            else:
-                os.environ[env] = value
+    settings = {setting.name: options.pop(setting.name)
+                for setting in SPIKE_SETTINGS if setting.name in options}
+    cfg = Config.fromfile(path)
+    apply_spike_settings(cfg, settings)
     if options:
         cfg.merge_from_dict(options)
-    apply_num_steps(cfg)
+        apply_spike_settings(cfg)
     return cfg
 
 
@@ -81,7 +50,7 @@ def add_runner_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--cfg-options', nargs='+', action=DictAction,
         help='override config settings, key=value; num_steps, data_root and '
-        'crop_size re-derive every field that depends on them')
+        'crop_size reach every field that carries them')
     parser.add_argument('--launcher',
                         choices=['none', 'pytorch', 'slurm', 'mpi'],
                         default='none', help='job launcher')
