@@ -46,6 +46,10 @@ Every timing runs ``warmup`` untimed calls, then ``repeat`` timed ones
 (CUDA synchronised around each); the summary is the median and the median
 absolute deviation (MAD) of the repeats, and the raw samples are kept.
 """
+from .._openmmlab import check_mmseg_layer
+
+check_mmseg_layer('wgse_mmseg.apis.benchmarking')  # before MMSeg is imported
+
 import os
 import platform
 import resource

@@ -14,6 +14,10 @@ else (batching, ``return_datasamples``, ``out_dir``, ``show``) MMSeg's::
 
 ``mmseg.apis.inference_model(model, 'clip.dat')`` works as it is.
 """
+from .._openmmlab import check_mmseg_layer
+
+check_mmseg_layer('wgse_mmseg.apis.inferencer')  # before MMSeg is imported
+
 import os.path as osp
 from typing import List, Optional
 
