@@ -62,6 +62,7 @@ if __name__ == '__main__':
             'numpy',
             'PyWavelets>=1.4',
             'opencv-python>=4.8,<5',
+            'PyYAML>=6',  # core: scene files (core.simulation.scene)
             'tqdm',
         ],
         extras_require={'tests': ['pytest>=7', 'hypothesis>=6.80'], 'mim': ['openmim==0.3.8']},

@@ -15,7 +15,6 @@ _base_ = [
 norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN on multi-GPU runs: sync_bn
 ohem = dict(type='OHEMPixelSampler', thresh=0.7, min_kept=100000)
 model = dict(
-    type='SpikeEncoderDecoder',  # runs the enhancer in its forward
     pretrained=None,
     data_preprocessor=dict(
         _delete_=True, **_base_.spike_data_preprocessor,

@@ -10,7 +10,6 @@ _base_ = [
 ]
 norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN on multi-GPU runs: sync_bn
 model = dict(
-    type='SpikeEncoderDecoder',  # runs the enhancer in its forward
     data_preprocessor=dict(
         _delete_=True, **_base_.spike_data_preprocessor, enhancer=_base_.wgse),
     backbone=dict(in_channels={{_base_.num_steps}}),

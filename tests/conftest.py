@@ -11,6 +11,15 @@ import pytest  # noqa: E402
 import torch  # noqa: E402
 from hypothesis import settings  # noqa: E402
 
+from wgse_mmseg._openmmlab import (missing_openmmlab,  # noqa: E402
+                                   prepare_mmseg_layer)
+
+# The test process sets the MMSeg layer up as every entry point does, by an
+# explicit call before anything imports MMSeg (importing the package's
+# modules applies no patch); where OpenMMLab is absent, core tests still run.
+if not missing_openmmlab():
+    prepare_mmseg_layer('the tests')
+
 settings.register_profile('ci', deadline=None, max_examples=40)
 settings.load_profile('ci')
 

@@ -2,7 +2,8 @@
 
 Two layers:
 
-* :mod:`wgse_mmseg.core` needs only torch and numpy: spike I/O, wavelets,
+* :mod:`wgse_mmseg.core` needs torch, NumPy, PyWavelets, OpenCV and PyYAML
+  (Triton for the GPU kernels), not OpenMMLab: spike I/O, wavelets,
   representations, WGSE and its kernels, the simulator; and
   :mod:`wgse_mmseg.data_generation` (converters, synthetic scenes) on top
   of it, without OpenMMLab as well;
@@ -11,22 +12,26 @@ Two layers:
   datasets, transforms, data preprocessor and metrics, with MMSeg's
   registries.
 
-``import wgse_mmseg`` imports core only and changes nothing in the process,
-as ``import mmseg`` registers nothing. The MMSeg layer registers when it is
-imported: a config names it in ``custom_imports`` (the shipped ``_base_``
-configs do), Python code calls :func:`register_all_modules`, and
-``wgse_mmseg.models`` (any layer name) imports it on first use. A layer
-package applies the compatibility patches of :mod:`wgse_mmseg.compat` before
-it imports MMSeg (once per process; ``WGSE_MMSEG_NO_COMPAT=1`` turns them
-off); without the OpenMMLab stack it raises an ImportError that says what to
-install.
+Importing a module changes nothing in the process (``import wgse_mmseg``
+imports core only, as ``import mmseg`` registers nothing). The MMSeg layer
+needs compatibility patches (:mod:`wgse_mmseg.compat`: under mmcv-lite a
+stand-in ``mmcv.ops`` that MMSeg imports at module level; torch's
+weights-only allowlist for mmengine checkpoints; MMSeg's own deprecation
+warnings quieted) before MMSeg is imported, applied by one explicit call,
+:func:`register_all_modules`, which also registers the layer: Python code
+calls it, a config names :mod:`wgse_mmseg.mmseg_layer` in ``custom_imports``
+(whose import makes the call; the shipped configs do), and the tools and the
+configs' runner make it themselves. ``WGSE_MMSEG_NO_COMPAT=1`` turns the
+patches off. A layer package imported before the call, where MMSeg cannot
+be imported without it, raises an ImportError that names the call; without
+the OpenMMLab stack it says what to install.
 """
 import importlib
 
 from . import core
 from .version import __version__
 
-#: the packages that register with MMSeg, as a config's ``custom_imports``
+#: the packages that register with MMSeg
 MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
                'wgse_mmseg.evaluation', 'wgse_mmseg.models')
 _LAZY = ('apis', 'compat', 'data_generation', 'datasets', 'engine',
@@ -34,9 +39,13 @@ _LAZY = ('apis', 'compat', 'data_generation', 'datasets', 'engine',
 
 
 def register_all_modules() -> None:
-    """Register every module of the package with MMSeg's registries (import
-    :data:`MMSEG_LAYER`); for Python code that builds from configs that do
-    not list ``custom_imports``."""
+    """Set up the MMSeg layer: apply the compatibility patches (once per
+    process; :func:`wgse_mmseg._openmmlab.prepare_mmseg_layer`), then
+    register every module of the package with MMSeg's registries (import
+    :data:`MMSEG_LAYER`). Call it before importing MMSeg or a layer
+    package."""
+    from ._openmmlab import prepare_mmseg_layer
+    prepare_mmseg_layer()
     for name in MMSEG_LAYER:
         importlib.import_module(name)
 

@@ -5,6 +5,7 @@ log_processor = dict(by_epoch=True)
 # SyncBN configs do; single-process runs keep BN (mmengine converts only when
 # distributed), and so do CPU runs with gloo. sync_bn=None keeps per-GPU BN.
 sync_bn = 'torch'
-# mmengine's Runner that first gives num_steps to every field built from it,
-# so a config that inherits this one can set `num_steps = 41` alone.
+# mmengine's Runner that first gives num_steps, data_root and crop_size to the
+# fields that carry them, so a config that inherits this one can set
+# `num_steps = 41` alone (and MMSeg's tools take `--cfg-options num_steps=41`).
 runner_type = 'SpikeRunner'

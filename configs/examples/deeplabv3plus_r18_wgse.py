@@ -5,9 +5,8 @@
 # lr 1e-3 / wd 0.01, 10-epoch warm-up, OHEM cross-entropy).
 #
 # Any MMSeg segmentor takes spike streams once three things are in place:
-#   1. custom_imports naming wgse_mmseg.datasets, .engine, .evaluation and
-#      .models --
-#      comes with the dataset base config below; it registers the spike
+#   1. custom_imports naming wgse_mmseg.mmseg_layer -- comes with the dataset
+#      base config below; it sets up the MMSeg layer and registers the spike
 #      loader/transforms, SpikeCityscapesDataset, SpikeSegDataPreProcessor
 #      and WGSE.
 #   2. model.data_preprocessor = SpikeSegDataPreProcessor (replacing the RGB
@@ -31,7 +30,6 @@ _base_ = [
 norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN on multi-GPU runs: sync_bn
 ohem = dict(type='OHEMPixelSampler', thresh=0.7, min_kept=100000)
 model = dict(
-    type='SpikeEncoderDecoder',  # runs the enhancer in its forward
     pretrained=None,  # no RGB ImageNet weights: the stem takes T channels
     # (2) batch and enhance spike streams instead of normalising RGB images:
     data_preprocessor=dict(

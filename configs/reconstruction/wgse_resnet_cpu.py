@@ -3,7 +3,7 @@
 # residual blocks narrowed from 256 to 64 channels (0.30 M parameters
 # instead of 3.8 M), trained on small simulated crops with a short schedule.
 _base_ = ['./wgse_resnet.py']
-crop_size = tuple(map(int, '{{$WGSE_CROP_SIZE:48,48}}'.split(',')))
+crop_size = (48, 48)
 model = dict(channels=64)
 train_dataloader = dict(batch_size=4, num_workers=1,
                         dataset=dict(crop_size=crop_size))

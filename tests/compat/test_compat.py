@@ -170,3 +170,35 @@ def test_patches_are_applied_once_and_can_be_turned_off():
     count = len(torch.serialization.get_safe_globals())
     assert apply_compat() is True
     assert len(torch.serialization.get_safe_globals()) == count
+
+
+def test_importing_a_layer_module_patches_nothing():
+    """The patches come from an explicit call only: importing the layer's
+    packages leaves torch's allowlist, ``sys.modules``, the warning filters
+    and the environment as they were; under mmcv-lite a package that imports
+    MMSeg names the call instead. ``wgse_mmseg.mmseg_layer``, what a config
+    imports, is that call."""
+    out = _run(
+        'import os, sys, warnings, torch\n'
+        'state = lambda: (len(torch.serialization.get_safe_globals()),\n'
+        '                 "mmcv.ops" in sys.modules, len(warnings.filters),\n'
+        '                 dict(os.environ))\n'
+        '# what the third-party modules do on import themselves\n'
+        'import cv2, mmengine.config, mmengine.runner, mmengine.logging\n'
+        'before = state()\n'
+        'import wgse_mmseg.utils.config, wgse_mmseg.utils.spike_settings\n'
+        'try:\n'
+        '    import wgse_mmseg.models\n'
+        'except ImportError as error:\n'
+        '    print(error)\n'
+        'assert state() == before, "an import patched the process"\n'
+        'import wgse_mmseg.mmseg_layer\n'
+        'assert state()[0] > before[0]\n'
+        'from mmseg.registry import MODELS\n'
+        'assert MODELS.get("WGSE") is wgse_mmseg.core.WGSE\n'
+        'print("registered")\n')
+    assert 'registered' in out
+    if not HAS_COMPILED_OPS:  # mmcv-lite: MMSeg needs the stand-in first
+        assert 'wgse_mmseg.models imports MMSeg' in out
+        assert 'wgse_mmseg.register_all_modules()' in out
+        assert "imports=['wgse_mmseg.mmseg_layer']" in out

@@ -216,14 +216,14 @@ def test_selectable_in_a_config_like_wgse(enhancer):
     assert type(built).__name__ == enhancer['type']
     data = dict(inputs=[random_spikes((9, 32, 32)).to(torch.uint8)],
                 data_samples=None)
-    batch = model.data_preprocessor(data)['inputs']  # batched, not enhanced
     raw = data['inputs'][0][None].float()
-    torch.testing.assert_close(batch, raw)
+    batch = model.data_preprocessor(data)['inputs']  # batched and enhanced
+    assert batch.shape == (1, 9, 32, 32)
+    torch.testing.assert_close(batch, built(raw))
     seen = []  # what the backbone receives: the enhancer's output
     model.backbone.register_forward_pre_hook(
         lambda module, args: seen.append(args[0]))
     model.eval()
     with torch.no_grad():
         model(batch, mode='tensor')
-    assert seen[0].shape == (1, 9, 32, 32)
     torch.testing.assert_close(seen[0], built(raw))

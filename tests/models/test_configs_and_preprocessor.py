@@ -68,7 +68,7 @@ def test_config_defaults_are_the_papers(name):
     has_wgse = cfg.model.data_preprocessor.enhancer is not None
     assert has_wgse == name.endswith('_wgse')
     assert cfg.model.get('pretrained') is None
-    assert tuple(cfg.custom_imports.imports) == wgse_mmseg.MMSEG_LAYER
+    assert tuple(cfg.custom_imports.imports) == ('wgse_mmseg.mmseg_layer', )
 
 
 def test_pspnet_starts_wgse_at_the_low_pass_approximation():

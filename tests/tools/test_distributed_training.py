@@ -1,6 +1,7 @@
 """Distributed training on CPUs (gloo): two processes keep the WGSE
-enhancer (a module of the data preprocessor, run in the segmentor's
-forward) identical, and match one process with the same total batch."""
+enhancer (a module of the data preprocessor, which runs it inside
+``MMDistributedDataParallel.train_step``) identical, and match one process
+with the same total batch."""
 import os
 import os.path as osp
 import re

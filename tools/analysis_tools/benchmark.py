@@ -15,6 +15,8 @@ import argparse
 import json
 import sys
 
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.apis.benchmarking import (benchmark_config, format_results,
                                           run_isolated, time_calls)
 from wgse_mmseg.core.arguments import SIDE, Integer, Path, Text

@@ -16,6 +16,8 @@ import sys
 import cv2
 import numpy as np
 
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.core.arguments import (SIDE, Choice, Integer, Number, Path,
                                        Sequence, Text)
 from wgse_mmseg.core.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE

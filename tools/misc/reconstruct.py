@@ -29,10 +29,12 @@ import os.path as osp
 import sys
 
 
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.core.arguments import (NUM_STEPS, SIDE, Choice, Integer,
                                        Path, Sequence, Text)
 from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
-from wgse_mmseg.evaluation import entropy_2d
+from wgse_mmseg.evaluation import entropy_2d  # noqa: E402
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,

@@ -2,6 +2,6 @@
 (:mod:`.inferencer`), model benchmarks (:mod:`.benchmarking`), the
 experiment grid (:mod:`.experiments`) and the reconstruction and simulator
 benchmarks. Import the module you need."""
-from .._openmmlab import prepare_mmseg_layer
+from .._openmmlab import require_openmmlab
 
-prepare_mmseg_layer('wgse_mmseg.apis')
+require_openmmlab('wgse_mmseg.apis')  # each module checks MMSeg itself

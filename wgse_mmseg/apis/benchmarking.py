@@ -46,6 +46,10 @@ Every timing runs ``warmup`` untimed calls, then ``repeat`` timed ones
 (CUDA synchronised around each); the summary is the median and the median
 absolute deviation (MAD) of the repeats, and the raw samples are kept.
 """
+from .._openmmlab import check_mmseg_layer
+
+check_mmseg_layer('wgse_mmseg.apis.benchmarking')  # before MMSeg is imported
+
 import os
 import platform
 import resource
@@ -169,22 +173,15 @@ def inference_parameters(model: nn.Module) -> Dict[str, int]:
 
 class _Segmentor(nn.Module):
     """The segmentor's ``mode='tensor'`` forward (backbone and decode head)
-    without the enhancer, as a module of its own, for tracing: a
-    ``SpikeEncoderDecoder`` runs its preprocessor's enhancer in that
-    forward, so it is set aside while this runs."""
+    as a module of its own, for tracing; the enhancer is not in it (the data
+    preprocessor runs it) and is traced on its own."""
 
     def __init__(self, model: nn.Module):
         super().__init__()
         self.model = model
 
     def forward(self, inputs: torch.Tensor) -> torch.Tensor:
-        preprocessor = self.model.data_preprocessor
-        enhancer = getattr(preprocessor, 'enhancer', None)
-        preprocessor.enhancer = None
-        try:
-            return self.model(inputs, mode='tensor')
-        finally:
-            preprocessor.enhancer = enhancer
+        return self.model(inputs, mode='tensor')
 
 
 def _analyze(module: nn.Module, inputs: torch.Tensor) -> FlopAnalyzer:

@@ -6,25 +6,28 @@ neither. :class:`SpikeSegInferencer` keeps the config's ``LoadSpikeFromFile``
 and draws each stream as an exposure-normalised TFP image, with everything
 else (batching, ``return_datasamples``, ``out_dir``, ``show``) MMSeg's::
 
+    import wgse_mmseg
+    wgse_mmseg.register_all_modules()  # set-up, before MMSeg is imported
     from wgse_mmseg.apis.inferencer import SpikeSegInferencer
     inferencer = SpikeSegInferencer('configs/pspnet_wgse.py', 'epoch_100.pth')
     result = inferencer('clip.dat', out_dir='vis/')   # or a list, a folder
 
 ``mmseg.apis.inference_model(model, 'clip.dat')`` works as it is.
 """
+from .._openmmlab import check_mmseg_layer
+
+check_mmseg_layer('wgse_mmseg.apis.inferencer')  # before MMSeg is imported
+
 import os.path as osp
 from typing import List, Optional
 
 import numpy as np
 from mmcv.transforms import Compose
 
-import wgse_mmseg
 from mmseg.apis import MMSegInferencer
 from ..engine.visualization_hook import spike_clip_image
 
 __all__ = ['SpikeSegInferencer']
-
-wgse_mmseg.register_all_modules()
 
 
 def _as_results(spike_file) -> dict:

@@ -14,6 +14,11 @@ from typing import Dict, Optional, Sequence
 
 from tqdm import tqdm
 
+from .. import register_all_modules
+
+# a command line (``python -m``): its own explicit set-up of the MMSeg layer,
+# as the tools make it, before the layer's packages are imported
+register_all_modules()
 from ..core import arguments
 from ..core.arguments import NUM_STEPS, Choice, Path, Text
 from ..datasets.reds import (LoadSpikeImagePair, PackReconstructionInputs,

@@ -1,9 +1,10 @@
 """The compatibility patches the MMSeg layer needs, in one place.
 
-Two changes to the process, both made by :func:`apply_compat`, which each
-package of the MMSeg layer calls before it imports MMSeg
-(:func:`wgse_mmseg._openmmlab.prepare_mmseg_layer`); ``import wgse_mmseg``
-and :mod:`wgse_mmseg.core` apply neither:
+Two changes to the process, both made by :func:`apply_compat`, which the
+explicit set-up of the MMSeg layer calls before MMSeg is imported
+(:func:`wgse_mmseg.register_all_modules`, also made by importing
+:mod:`wgse_mmseg.mmseg_layer` from a config, by the tools and by the
+configs' runner); importing a module of the package applies neither:
 
 * :func:`install_mmcv_ops_fallback`: where mmcv's compiled ops are missing
   (mmcv-lite), a stand-in ``mmcv.ops`` with the few names MMSeg imports at

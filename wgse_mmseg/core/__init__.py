@@ -1,8 +1,9 @@
-"""What needs only torch and numpy: spike data and WGSE without OpenMMLab.
+"""Spike data and WGSE without OpenMMLab.
 
-This subpackage imports and runs where mmengine, mmseg and mmcv are not
-installed (a GPU machine with torch alone, a notebook), and importing it
-changes nothing outside it.
+This subpackage needs torch, NumPy, PyWavelets, OpenCV and PyYAML (all in
+``install_requires``; Triton only for the GPU kernels). It imports and runs
+where mmengine, mmseg and mmcv are not installed (a GPU machine without
+OpenMMLab, a notebook), and importing it changes nothing outside it.
 
 * :mod:`.constants`: the readout rate and the REDS intensity scale;
   :mod:`.arguments`: the declared argument checks of the public entry

@@ -8,9 +8,9 @@ What makes the data (the Cityscapes converter, the synthetic street scenes,
 REDS-style views) is :mod:`wgse_mmseg.data_generation`, which needs no
 OpenMMLab.
 """
-from .._openmmlab import prepare_mmseg_layer
+from .._openmmlab import check_mmseg_layer
 
-prepare_mmseg_layer('wgse_mmseg.datasets')
+check_mmseg_layer('wgse_mmseg.datasets')
 
 from .reds import (LoadSpikeImagePair,  # noqa: E402
                    PackReconstructionInputs, REDSSpikeDataset,

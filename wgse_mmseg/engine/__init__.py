@@ -2,9 +2,9 @@
 (:mod:`.runner`), the visualisation hook that draws spike clips
 (:mod:`.visualization_hook`) and the model wrapper for distributed runs on
 CPUs (:mod:`.model_wrappers`)."""
-from .._openmmlab import prepare_mmseg_layer
+from .._openmmlab import check_mmseg_layer
 
-prepare_mmseg_layer('wgse_mmseg.engine')
+check_mmseg_layer('wgse_mmseg.engine')
 
 from .model_wrappers import CPUDistributedDataParallel  # noqa: E402
 from .runner import SpikeRunner  # noqa: E402

@@ -1,6 +1,7 @@
 """The shipped configs' runner: mmengine's ``Runner`` that first gives the
-config's ``num_steps`` to every field built from it
-(:func:`wgse_mmseg.utils.num_steps.apply_num_steps`), writes each
+config's spike settings (``num_steps``, ``data_root``, ``crop_size``) to
+the fields that carry them
+(:func:`wgse_mmseg.utils.spike_settings.apply_spike_settings`), writes each
 checkpoint whole or not at all, and never executes config text a checkpoint
 carries.
 
@@ -18,27 +19,31 @@ from mmengine.logging import print_log
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
+from .._openmmlab import prepare_mmseg_layer
 from ..utils.checkpoint import CheckpointError
-from ..utils.num_steps import apply_num_steps
+from ..utils.spike_settings import apply_spike_settings
 
 __all__ = ['SpikeRunner']
 
 
 @RUNNERS.register_module()
 class SpikeRunner(Runner):
-    """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` applies
-    ``cfg.num_steps`` first, whose :meth:`save_checkpoint` is atomic on
+    """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` sets up the
+    MMSeg layer (:func:`~wgse_mmseg._openmmlab.prepare_mmseg_layer`, once
+    per process) and applies the config's spike settings first (also those ``--cfg-options`` of MMSeg's
+    own tools merged in), whose :meth:`save_checkpoint` is atomic on
     local disks and whose :meth:`load_checkpoint` refuses config text that
     mmengine would execute; otherwise the same."""
 
     @classmethod
     def from_cfg(cls, cfg) -> 'SpikeRunner':
-        changed = apply_num_steps(cfg)
+        prepare_mmseg_layer('SpikeRunner')  # resuming needs the allowlist
+        changed = apply_spike_settings(cfg)
         if changed:
-            print_log(f'num_steps = {cfg.num_steps} applied to '
-                      f'{", ".join(sorted(changed))} (they held '
-                      f'{sorted(set(changed.values()))[0]}, from a base '
-                      f'config)', logger='current')
+            print_log('spike settings applied (the fields held a base '
+                      "config's values): " + ', '.join(
+                          f'{path} (was {old!r})' for path, old in
+                          sorted(changed.items())), logger='current')
         return super().from_cfg(cfg)
 
     def load_checkpoint(self, filename: str, *args, **kwargs) -> dict:

@@ -1,7 +1,7 @@
 """Metrics beyond MMSeg's: reconstruction quality (PSNR, SSIM, 2-D entropy)."""
-from .._openmmlab import prepare_mmseg_layer
+from .._openmmlab import check_mmseg_layer
 
-prepare_mmseg_layer('wgse_mmseg.evaluation')
+check_mmseg_layer('wgse_mmseg.evaluation')
 
 from .metrics import (ReconstructionMetric, entropy_2d,  # noqa: E402
                       gaussian_window, psnr, ssim)

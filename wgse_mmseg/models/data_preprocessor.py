@@ -28,9 +28,17 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
     no spike; labels with ``seg_pad_val``, the ignore index) and stacks them
     into ``(B, T, H, W)``. If ``enhancer`` is given (for example
     ``dict(type='WGSE')``), its output ``(B, C, H, W)`` is what the backbone
-    receives; its parameters train with the model. In front of a
-    :class:`~wgse_mmseg.models.SpikeEncoderDecoder` (the shipped configs)
-    the segmentor runs it in its own forward, and this only batches.
+    receives, whatever segmentor holds this preprocessor (MMSeg's
+    ``EncoderDecoder``, ``CascadeEncoderDecoder``, ...): the enhancer is a
+    module of the model (parameters ``data_preprocessor.enhancer.*``) and
+    runs here and nowhere else. Its parameters train with the model: mmengine
+    calls the preprocessor inside ``train_step`` (also
+    ``MMDistributedDataParallel``'s, whose gradient averaging covers every
+    parameter the loss depends on), so the loss backpropagates into it.
+    What measures only the model's forward (mmengine's
+    ``get_model_complexity_info``) leaves the enhancer out; the project's
+    benchmark (:func:`wgse_mmseg.apis.benchmarking.count_flops`) counts it
+    on its own and adds it.
 
     Args:
         num_steps: the ``T`` the model is built for (the backbone's
@@ -79,9 +87,6 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
         self.num_steps = num_steps
         self.num_classes = num_classes
         self.enhancer = MODELS.build(enhancer) if enhancer else None
-        #: whether forward runs the enhancer; a SpikeEncoderDecoder turns it
-        #: off and runs it in its own forward instead
-        self.run_enhancer = True
 
     def _check_num_steps(self, inputs: Sequence[torch.Tensor],
                          data_samples: Optional[list]) -> None:
@@ -165,6 +170,6 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
                 'to stack a training batch (the configs set size to '
                 'crop_size)')
         data = super().forward(data, training)
-        if self.enhancer is not None and self.run_enhancer:
+        if self.enhancer is not None:
             data['inputs'] = self.enhancer(data['inputs'])
         return data

@@ -1,6 +1,7 @@
 """Helpers of the MMSeg layer: loading configs with the package's overrides
-(:mod:`.config`) and reading the config stored in a checkpoint as data
-(:mod:`.config_data`)."""
-from .._openmmlab import prepare_mmseg_layer
+(:mod:`.config`), the spike settings and the fields that carry them
+(:mod:`.spike_settings`) and reading the config stored in a checkpoint as
+data (:mod:`.config_data`). They need mmengine, not MMSeg itself."""
+from .._openmmlab import require_openmmlab
 
-prepare_mmseg_layer('wgse_mmseg.utils')
+require_openmmlab('wgse_mmseg.utils')

@@ -1,93 +1,56 @@
 """Loading configs with the spike settings overridable from the command line.
 
-The dataset base config sets ``num_steps`` (T), ``data_root`` and
-``crop_size`` once, through mmengine's ``{{$ENV:default}}`` substitution, and
-every field that depends on them (the loader's window, the preprocessor's
-check and padding, the backbone's ``in_channels``) is derived from them when
-the file is parsed. ``--cfg-options num_steps=41`` can therefore not be a
-plain merge after parsing: :func:`load_config` turns these keys into the
-environment variables the config reads, then merges the rest as usual.
+The dataset base configs set ``num_steps`` (T), ``data_root`` and
+``crop_size`` once; :func:`load_config` gives the values of
+``--cfg-options num_steps=41 data_root=DIR crop_size=128,256`` (and those a
+child config sets) to every field that carries them
+(:func:`~wgse_mmseg.utils.spike_settings.apply_spike_settings`, which lists
+them), and merges the other keys as mmengine does.
 """
 import argparse
 import os
 import os.path as osp
-from numbers import Integral
 from typing import Dict, Optional
 
 from mmengine.config import Config, DictAction
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
-from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SIDE, ArgumentError,
-                              Choice, Integer, OneOf, Path)
+from ..core.arguments import Choice, Integer, Path
 from ..core.limits import MAX_WORKERS, excerpt
 from .distributed import prepare_launcher
-from .num_steps import apply_num_steps
+from .spike_settings import (SPIKE_SETTINGS, SpikeSettingsError,
+                             apply_spike_settings, check_setting)
 
 __all__ = [
-    'SPIKE_SETTINGS', 'SPIKE_SETTING_KINDS', 'ConfigOptions', 'load_config',
+    'SPIKE_SETTING_KINDS', 'ConfigOptions', 'load_config',
     'add_config_options', 'add_runner_arguments', 'config_from_args',
     'build_runner'
 ]
 
-#: ``--cfg-options`` key -> environment variable read by the config files.
-SPIKE_SETTINGS = {
-    'num_steps': 'WGSE_NUM_STEPS',
-    'data_root': 'WGSE_DATA_ROOT',
-    'crop_size': 'WGSE_CROP_SIZE',
-}
-
-
-#: ``--cfg-options`` key -> the declaration of its value: ``crop_size`` is
-#: one side (a square) or ``H,W``
-SPIKE_SETTING_KINDS = {
-    'num_steps': NUM_STEPS,
-    'data_root': Path(),
-    'crop_size': OneOf(SIDE, FRAME_SIZE),
-}
-
-
-def _as_env_value(key: str, value) -> str:
-    """The text of spike setting ``key``'s environment variable, its value
-    checked against :data:`SPIKE_SETTING_KINDS` (a string is read as a
-    command-line word: ``'41'``, ``'128,256'``).
-
-    Raises:
-        ArgumentError: naming ``key``, for a value its declaration refuses.
-    """
-    value = SPIKE_SETTING_KINDS[key].parse(value, 'load_config', key)
-    if key == 'crop_size':
-        sizes = (value, value) if isinstance(value, Integral) else value
-        return ','.join(str(int(v)) for v in sizes)
-    return str(int(value)) if key == 'num_steps' else os.fspath(value)
+#: ``--cfg-options`` key -> the declaration of its value (from
+#: :data:`~wgse_mmseg.utils.spike_settings.SPIKE_SETTINGS`)
+SPIKE_SETTING_KINDS = {setting.name: setting.kind
+                       for setting in SPIKE_SETTINGS}
 
 
 def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
     """``Config.fromfile(path)`` with ``cfg_options`` applied.
 
-    ``num_steps``, ``data_root`` and ``crop_size`` in ``cfg_options`` are
-    applied before parsing (see module docstring); other keys are merged
-    with ``Config.merge_from_dict``. Then the config's ``num_steps`` reaches
-    every field built from it, also where a child config set it
-    (:func:`~wgse_mmseg.utils.num_steps.apply_num_steps`).
+    ``num_steps``, ``data_root`` and ``crop_size`` in ``cfg_options`` go to
+    the fields that carry them, before the other keys are merged with
+    ``Config.merge_from_dict`` (so ``val_dataloader.dataset.data_root=A``
+    beside ``data_root=B`` keeps ``A``); then the fields are checked against
+    the settings once more (see :mod:`wgse_mmseg.utils.spike_settings`).
     """
     options = dict(cfg_options or {})
-    saved = {}
-    for key, env in SPIKE_SETTINGS.items():
-        if key in options:
-            saved[env] = os.environ.get(env)
-            os.environ[env] = _as_env_value(key, options.pop(key))
-    try:
-        cfg = Config.fromfile(path)
-    finally:
-        for env, value in saved.items():
-            if value is None:
-                os.environ.pop(env, None)
-            else:
-                os.environ[env] = value
+    settings = {setting.name: options.pop(setting.name)
+                for setting in SPIKE_SETTINGS if setting.name in options}
+    cfg = Config.fromfile(path)
+    apply_spike_settings(cfg, settings)
     if options:
         cfg.merge_from_dict(options)
-    apply_num_steps(cfg)
+        apply_spike_settings(cfg)
     return cfg
 
 
@@ -114,11 +77,9 @@ class ConfigOptions(DictAction):
         options = getattr(namespace, self.dest)
         for key in SPIKE_SETTING_KINDS.keys() & options.keys():
             try:
-                _as_env_value(key, options[key])
-            except ArgumentError as err:
-                raise argparse.ArgumentError(
-                    self, f'{key} must be {err.expected}, got '
-                    f'{excerpt(options[key])}') from None
+                check_setting(key, options[key], text=True)
+            except SpikeSettingsError as err:
+                raise argparse.ArgumentError(self, str(err)) from None
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:
@@ -127,7 +88,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--cfg-options', nargs='+', action=ConfigOptions, default={},
         help='override config settings, key=value; num_steps, data_root and '
-        'crop_size re-derive every field that depends on them')
+        'crop_size reach every field that carries them')
 
 
 def add_runner_arguments(parser: argparse.ArgumentParser) -> None:

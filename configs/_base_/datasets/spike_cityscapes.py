@@ -1,24 +1,24 @@
 # Spike-Cityscapes: Cityscapes scenes as spike streams (README, "Spike-Cityscapes").
 #
-# The settings every T-dependent field derives from are set here, once:
+# The spike settings are set here, once:
 #   num_steps  T, spike frames per sample (the paper: 129)
 #   data_root  the dataset root
 #   crop_size  training crop (H, W) (the paper: 256 x 512)
 # Override them with `--cfg-options num_steps=41 data_root=DIR crop_size=128,256`
-# (tools/train.py, tools/test.py and tools/demo.py pass them in as the
-# environment variables WGSE_NUM_STEPS, WGSE_DATA_ROOT and WGSE_CROP_SIZE, which
-# mmengine substitutes below), so the loader, the preprocessor and the
+# (any tool: the configs' runner, SpikeRunner) or by setting them alone in a
+# child config: they reach every field that carries them (the list:
+# wgse_mmseg/utils/spike_settings.py), so the loader, the preprocessor and the
 # backbone's in_channels always agree.
-custom_imports = dict(
-    imports=['wgse_mmseg.datasets', 'wgse_mmseg.engine', 'wgse_mmseg.evaluation',
-             'wgse_mmseg.models'],
-    allow_failed_imports=False)
+# Sets up and registers the MMSeg layer of wgse_mmseg (its import is the
+# explicit opt-in to the compatibility patches, wgse_mmseg/mmseg_layer.py).
+custom_imports = dict(imports=['wgse_mmseg.mmseg_layer'],
+                      allow_failed_imports=False)
 
 dataset_type = 'SpikeCityscapesDataset'
 num_classes = 19  # Cityscapes train ids 0-18; 255 is ignored
-data_root = '{{$WGSE_DATA_ROOT:data/spike_cityscapes}}'
-num_steps = int('{{$WGSE_NUM_STEPS:129}}')
-crop_size = tuple(map(int, '{{$WGSE_CROP_SIZE:256,512}}'.split(',')))
+data_root = 'data/spike_cityscapes'
+num_steps = 129
+crop_size = (256, 512)
 
 train_pipeline = [
     dict(type='LoadSpikeFromFile', num_steps=num_steps),

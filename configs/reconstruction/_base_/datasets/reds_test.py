@@ -2,16 +2,17 @@
 #   data_root/spike/<name>.dat  (250x400 frames)  beside  data_root/gt/<name>.png
 # Each sample is the num_steps-frame window centred on the ground truth's
 # frame (the middle frame of the stream). Settings overridable with
-# `--cfg-options num_steps=41 data_root=DIR crop_size=H,W` (tools/train.py,
-# tools/test.py); crop_size is the training crop of the configs that train.
-custom_imports = dict(
-    imports=['wgse_mmseg.datasets', 'wgse_mmseg.engine', 'wgse_mmseg.evaluation',
-             'wgse_mmseg.models'],
-    allow_failed_imports=False)
+# `--cfg-options num_steps=41 data_root=DIR crop_size=H,W` or in a child
+# config (wgse_mmseg/utils/spike_settings.py lists the fields they reach);
+# crop_size is the training crop of the configs that train.
+# Sets up and registers the MMSeg layer of wgse_mmseg (its import is the
+# explicit opt-in to the compatibility patches, wgse_mmseg/mmseg_layer.py).
+custom_imports = dict(imports=['wgse_mmseg.mmseg_layer'],
+                      allow_failed_imports=False)
 
-num_steps = int('{{$WGSE_NUM_STEPS:41}}')
-data_root = '{{$WGSE_DATA_ROOT:data/reds}}'
-crop_size = tuple(map(int, '{{$WGSE_CROP_SIZE:128,128}}'.split(',')))
+num_steps = 41
+data_root = 'data/reds'
+crop_size = (128, 128)
 
 test_pipeline = [
     dict(type='LoadSpikeImagePair', num_steps=num_steps),

@@ -1,8 +1,8 @@
 # Adam with a linear warm-up, then cosine decay, by iterations; checkpoints
 # keep the best validation PSNR.
 _base_ = ['mmseg::_base_/default_runtime.py']
-# mmengine's Runner that first gives num_steps to every field built from it
-# (wgse_mmseg.engine.SpikeRunner).
+# mmengine's Runner that first gives num_steps, data_root and crop_size to the
+# fields that carry them (wgse_mmseg.engine.SpikeRunner).
 runner_type = 'SpikeRunner'
 max_iters = 100000
 warmup_iters = 1000

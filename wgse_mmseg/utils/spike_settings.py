@@ -1,0 +1,234 @@
+"""The spike settings a config sets once, and the fields that carry them.
+
+A spike config sets ``num_steps`` (T), ``data_root`` and ``crop_size`` once,
+as plain top-level values (the dataset base configs), and its fields take
+them from there when it is parsed: ``{{_base_.num_steps}}`` or a plain
+variable. A change made after parsing (``--cfg-options num_steps=41``) or in
+a child config (``num_steps = 41`` in a config that inherits a shipped one)
+reaches the setting but not the fields already computed from it.
+:func:`apply_spike_settings` closes that gap, the one mechanism for the
+three settings: it gives each setting's value to the fields listed for it in
+:data:`SPIKE_SETTINGS`, and to no other field. The project's config loader
+(:func:`wgse_mmseg.utils.config.load_config`) and the configs' runner
+(:class:`~wgse_mmseg.engine.SpikeRunner`, so MMSeg's own ``tools/train.py``
+and ``mim train`` too) call it.
+
+Which fields take a setting's value:
+
+* the listed fields that hold one value, different from the setting's: the
+  config changed the setting after its base derived them, so all take it;
+* ``num_steps``: its fields must all hold T (the loader's window, the
+  preprocessor's check, the backbone's input channels, ...); fields that
+  disagree among themselves raise :class:`SpikeSettingsError` listing them,
+  since which of them was meant cannot be told;
+* ``data_root`` and ``crop_size``: a field that holds another value than
+  the setting while others hold the setting was set apart on purpose (a
+  separate training root, a validation crop) and keeps its value.
+
+A command-line value (``overrides``) goes to the fields that hold the
+setting's value as the config gives it, then becomes the setting's value.
+"""
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Tuple
+
+from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf,
+                              Path)
+from ..core.limits import excerpt
+
+__all__ = ['SpikeSettingsError', 'SpikeSetting', 'SPIKE_SETTINGS',
+           'apply_spike_settings', 'check_setting']
+
+
+class SpikeSettingsError(ValueError):
+    """A spike setting is not valid, or its fields cannot be made to agree
+    with it."""
+
+
+@dataclass(frozen=True)
+class SpikeSetting:
+    """A top-level config value and the fields that carry it.
+
+    Attributes:
+        name: the top-level key (``num_steps``).
+        kind: what the value must be.
+        fields: dotted paths from the config's root. A part ``pipeline[A|B]``
+            stands for every step of type ``A`` or ``B`` in that pipeline;
+            a path missing from a config is skipped.
+        agree: every field must hold the value (else a field may be set
+            apart).
+        conditional: ``{field: path}``: the field carries the setting only
+            where ``path`` exists in the config.
+        hint: the value's form on the command line.
+    """
+    name: str
+    kind: Argument
+    fields: Tuple[str, ...]
+    agree: bool = False
+    conditional: Optional[Dict[str, str]] = None
+    hint: str = ''
+
+
+def _loaders(*suffixes: str) -> Tuple[str, ...]:
+    """``suffix`` under the dataset of each of the three data loaders."""
+    return tuple(f'{split}_dataloader.dataset.{suffix}'
+                 for split in ('train', 'val', 'test') for suffix in suffixes)
+
+
+#: the steps of a pipeline that read or simulate T frames
+_T_STEPS = 'pipeline[LoadSpikeFromFile|LoadSpikeImagePair|SimulateSpikes]'
+
+#: The settings and the fields that carry them; nothing else is changed.
+#: ``train_pipeline`` and ``test_pipeline`` are MMSeg's top-level copies
+#: (``mmseg.apis.inference_model`` reads ``test_pipeline``).
+SPIKE_SETTINGS = (
+    SpikeSetting(
+        'num_steps', NUM_STEPS, agree=True, hint='T',
+        fields=('model.data_preprocessor.num_steps',
+                # the enhancers keep T channels: a spike model's stem
+                'model.backbone.in_channels',
+                'model.num_steps',  # SpikeReconstructor
+                *_loaders('num_steps',  # SimulatedSpikeImageDataset
+                          f'{_T_STEPS}.num_steps'),
+                f'train_{_T_STEPS}.num_steps', f'test_{_T_STEPS}.num_steps'),
+        conditional={'model.backbone.in_channels':
+                     'model.data_preprocessor.num_steps'}),
+    SpikeSetting('data_root', Path(), hint='DIR',
+                 fields=_loaders('data_root')),
+    SpikeSetting(
+        'crop_size', OneOf(SIDE, FRAME_SIZE), hint='H,W',
+        fields=('model.data_preprocessor.size',  # pads training batches
+                'train_dataloader.dataset.crop_size',  # simulated images
+                'train_dataloader.dataset.pipeline[SpikeRandomCrop].'
+                'crop_size',
+                'train_pipeline[SpikeRandomCrop].crop_size')),
+)
+_BY_NAME = {setting.name: setting for setting in SPIKE_SETTINGS}
+
+
+def _same(value: Any) -> Any:
+    """``value`` with lists as tuples, so that (H, W) compares as read."""
+    return tuple(value) if isinstance(value, (list, tuple)) else value
+
+
+def check_setting(name: str, value: Any, text: bool = False) -> Any:
+    """The checked value of setting ``name``, lists as tuples.
+
+    With ``text`` (a command-line value) a string is converted first
+    (``'41'``, ``'128,256'``); ``crop_size`` also takes one side for a
+    square, as ``--cfg-options`` always has. Raises
+    :class:`SpikeSettingsError` naming the setting.
+    """
+    setting = _BY_NAME[name]
+    if text and isinstance(value, str):
+        try:
+            value = setting.kind.convert(value)
+        except (TypeError, ValueError, OverflowError):
+            pass
+    value = _same(value)
+    if not setting.kind.accepts(value):
+        raise SpikeSettingsError(
+            f'{name} must be {setting.kind.describe()} (`--cfg-options '
+            f'{name}={setting.hint}`), got {excerpt(value)}')
+    if name == 'crop_size' and SIDE.accepts(value):  # one side: a square
+        value = (value, value)
+    return value
+
+
+def _resolve(node: Any, parts: List[str], path: str,
+             found: List[Tuple[str, Any, str]]) -> None:
+    """Append ``(path, container, key)`` for ``parts`` under ``node``."""
+    if not isinstance(node, dict):
+        return
+    head, rest = parts[0], parts[1:]
+    if '[' in head:
+        key, types = head[:-1].split('[')
+        steps = node.get(key)
+        if not isinstance(steps, (list, tuple)):
+            return
+        for index, step in enumerate(steps):
+            if isinstance(step, dict) and step.get('type') in \
+                    types.split('|'):
+                _resolve(step, rest, f'{path}{key}[{index}].', found)
+    elif not rest:
+        if head in node:
+            found.append((path + head, node, head))
+    else:
+        _resolve(node.get(head), rest, f'{path}{head}.', found)
+
+
+def _find(cfg, spec: str) -> List[Tuple[str, Any, str]]:
+    """``(path, container, key)`` of every field ``spec`` names in ``cfg``."""
+    found: List[Tuple[str, Any, str]] = []
+    root = spec.split('.')[0].split('[')[0]
+    # a Config is no dict: start from a dict of the top-level entry (the
+    # same object, so the fields found are the config's own)
+    _resolve({root: cfg.get(root)}, spec.split('.'), '', found)
+    return found
+
+
+def _fields(cfg, setting: SpikeSetting) -> List[Tuple[str, Any, str]]:
+    """``(path, container, key)`` of the fields of ``setting`` in ``cfg``."""
+    found: List[Tuple[str, Any, str]] = []
+    for spec in setting.fields:
+        condition = (setting.conditional or {}).get(spec)
+        if condition is None or _find(cfg, condition):
+            found.extend(_find(cfg, spec))
+    return found
+
+
+def _reconcile(cfg, setting: SpikeSetting) -> Dict[str, Any]:
+    """Give ``cfg[setting.name]`` to its fields (module docstring)."""
+    target = check_setting(setting.name, cfg[setting.name])
+    fields = _fields(cfg, setting)
+    values = {path: _same(container[key]) for path, container, key in fields}
+    stale = {path: value for path, value in values.items()
+             if value != target}
+    if not stale:
+        return {}
+    if len(set(values.values())) > 1:
+        if not setting.agree and len(stale) < len(values):
+            return {}  # set apart on purpose
+        listing = '\n'.join(f'  {path} = {value!r}'
+                            for path, value in values.items())
+        shown = ','.join(map(str, target)) if isinstance(
+            target, tuple) else target
+        raise SpikeSettingsError(
+            f'{setting.name} = {target!r}, but the fields built from it '
+            f'disagree:\n{listing}\nSet {setting.name} once: '
+            f'`--cfg-options {setting.name}={shown}` (tools/train.py, '
+            f'tools/test.py, and MMSeg\'s tools with the configs\' runner), '
+            f'or {setting.name} = {target!r} alone in a config that inherits '
+            f'a shipped one; or make these fields agree.')
+    for path, container, key in fields:
+        container[key] = target
+    return stale
+
+
+def apply_spike_settings(cfg, overrides: Optional[Dict[str, Any]] = None
+                         ) -> Dict[str, Any]:
+    """Give each spike setting of ``cfg`` (an mmengine ``Config``) to the
+    fields that carry it, in place; then each of ``overrides`` (command-line
+    values, checked) to the fields that hold the config's value.
+
+    Returns:
+        ``{field path: old value}`` of the fields that changed.
+
+    Raises:
+        SpikeSettingsError: a value is not valid, or the fields of a setting
+            disagree among themselves and with it.
+    """
+    changed: Dict[str, Any] = {}
+    for setting in SPIKE_SETTINGS:
+        if cfg.get(setting.name) is not None:
+            changed.update(_reconcile(cfg, setting))
+    for name, value in (overrides or {}).items():
+        value = check_setting(name, value, text=True)
+        current = cfg.get(name)
+        if current is not None:
+            current = _same(current)
+            for path, container, key in _fields(cfg, _BY_NAME[name]):
+                if _same(container[key]) == current and value != current:
+                    changed.setdefault(path, container[key])
+                    container[key] = value
+        cfg[name] = value
+    return changed
