@@ -121,9 +121,10 @@ def check_setting(name: str, value: Any, text: bool = False) -> Any:
     setting = _BY_NAME[name]
     if text and isinstance(value, str):
         try:
-            value = setting.kind.convert(value)
+            converted = setting.kind.convert(value)
         except (TypeError, ValueError, OverflowError):
-            pass
+            converted = None
+        value = value if converted is None else converted
     value = _same(value)
     if not setting.kind.accepts(value):
         raise SpikeSettingsError(
