@@ -27,8 +27,8 @@ from .version import __version__
 #: the packages that register with MMSeg, as a config's ``custom_imports``
 MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
                'wgse_mmseg.evaluation', 'wgse_mmseg.models')
-_LAZY = ('apis', 'compat', 'datasets', 'engine', 'evaluation', 'models',
-         'utils')
+_LAZY = ('apis', 'benchmarks', 'compat', 'datasets', 'engine', 'evaluation',
+         'models', 'utils')
 
 
 def register_all_modules() -> None:

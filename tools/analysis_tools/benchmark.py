@@ -9,7 +9,7 @@ Prints a Markdown table, one row per config, with the device and software
 versions beneath it; ``--out`` also writes every number (and the raw timing
 samples) as JSON. Each config is measured in a fresh process; one that
 fails is reported and the others are still measured (exit status 1). What
-each column measures: docs/benchmark.md and wgse_mmseg/apis/benchmarking.py.
+each column measures: docs/benchmark.md and wgse_mmseg/benchmarks/segmentation.py.
 """
 import argparse
 import json
@@ -17,8 +17,9 @@ import sys
 
 from mmengine.config import DictAction
 
-from wgse_mmseg.apis.benchmarking import (benchmark_config, format_results,
-                                     run_isolated)
+from wgse_mmseg.benchmarks.machine import run_isolated
+from wgse_mmseg.benchmarks.segmentation import (benchmark_config,
+                                                format_results)
 from wgse_mmseg.core.io import atomic_output
 
 

@@ -30,8 +30,7 @@ import torch
 
 from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence
 from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
-from wgse_mmseg.apis.simulator_benchmark import (header, load_rows,
-                                                 simulator_rows)
+from wgse_mmseg.benchmarks.simulator import header, load_rows, simulator_rows
 from wgse_mmseg.datasets.synthetic import render_street_scene
 
 

@@ -33,9 +33,9 @@ import torch
 
 from wgse_mmseg.core.arguments import Integer
 from wgse_mmseg.core.limits import MAX_REPEAT
-from wgse_mmseg.core.wgse.benchmark import (DEFAULT_SHAPES, IMPLEMENTATIONS,
-                                            available_backends, parse_shape,
-                                            run_benchmark)
+from wgse_mmseg.benchmarks.wgse import (DEFAULT_SHAPES, IMPLEMENTATIONS,
+                                        available_backends, parse_shape,
+                                        run_benchmark)
 
 
 def _shape(text: str):
