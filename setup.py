@@ -69,8 +69,8 @@ if __name__ == '__main__':
         # Two small CPU kernels: the simulator's one-pass integrate-and-fire
         # and WGSE's band networks. Optional: without a C compiler the
         # install goes on and each falls back to its torch path (the same
-        # results, slower): see core.simulation.fixed_point.COMPILED_KERNEL
-        # and core.wgse.compiled_band_networks.COMPILED_KERNEL.
+        # results, slower): see core.simulation.fixed_point.compiled_unavailable
+        # and core.wgse.compiled_band_networks.unavailable.
         ext_modules=[
             Extension(f'wgse_mmseg.{name}', [f'wgse_mmseg/{name.replace(".", "/")}.c'],
                       extra_compile_args=['-O3'], optional=True)

@@ -29,7 +29,7 @@ wgse_mmseg.register_all_modules()
 for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.data_generation.cityscapes_conversion',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
-                'wgse_mmseg.core.exposure', 'wgse_mmseg.apis.benchmarking',
+                'wgse_mmseg.core.exposure', 'wgse_mmseg.benchmarks.timing',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
                 'wgse_mmseg.core.reconstruction_baselines'):
     importlib.import_module(_module)

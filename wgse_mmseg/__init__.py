@@ -34,8 +34,8 @@ from .version import __version__
 #: the packages that register with MMSeg
 MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
                'wgse_mmseg.evaluation', 'wgse_mmseg.models')
-_LAZY = ('apis', 'compat', 'data_generation', 'datasets', 'engine',
-         'evaluation', 'models', 'utils')
+_LAZY = ('apis', 'benchmarks', 'compat', 'data_generation', 'datasets',
+         'engine', 'evaluation', 'models', 'utils')
 
 
 def register_all_modules() -> None:

@@ -1,4 +1,6 @@
-"""tools/analysis_tools/benchmark.py and the measurements of wgse_mmseg.apis.benchmarking."""
+"""tools/analysis_tools/benchmark.py and the measurements of
+wgse_mmseg.benchmarks.segmentation, with the benchmarks' one timer and
+Markdown tables."""
 import json
 import os.path as osp
 import subprocess
@@ -9,11 +11,12 @@ import torch
 import torch.nn as nn
 
 from mmseg.registry import MODELS
-from wgse_mmseg.apis.benchmarking import (build_model, count_flops,
-                                     inference_parameters, markdown_table,
-                                     measure_enhancer_step,
-                                     measure_train_step, summarize,
-                                     time_calls)
+from wgse_mmseg.benchmarks.markdown import markdown_table
+from wgse_mmseg.benchmarks.segmentation import (build_model, count_flops,
+                                                inference_parameters,
+                                                measure_enhancer_step,
+                                                measure_train_step)
+from wgse_mmseg.benchmarks.timing import summarize, time_calls
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
@@ -89,10 +92,12 @@ def test_summarize_is_median_and_median_absolute_deviation():
 
 def test_time_calls_warms_up_then_times_each_repeat():
     calls = []
-    samples = time_calls(lambda: calls.append(1), torch.device('cpu'),
-                         repeat=3, warmup=2)
-    assert len(calls) == 5 and len(samples) == 3
-    assert all(s >= 0 for s in samples)
+    timings = time_calls(lambda: calls.append(1) or len(calls),
+                         torch.device('cpu'), repeat=3, warmup=2)
+    assert len(calls) == 5
+    assert len(timings.wall) == len(timings.cpu) == 3
+    assert all(s >= 0 for s in timings.wall + timings.cpu)
+    assert timings.result == 5  # the last call's
     with pytest.raises(ValueError, match='repeat must be an integer >= 1'):
         time_calls(lambda: None, torch.device('cpu'), repeat=0, warmup=0)
 

@@ -173,15 +173,17 @@ def test_integrator_closed_form_equals_per_step_sums(seed, steps, level):
     assert torch.equal(closed.charge, summed.charge)
 
 
-needs_kernel = pytest.mark.skipif(not fixed_point.COMPILED_KERNEL,
-                                  reason='compiled kernel not built')
+needs_kernel = pytest.mark.skipif(
+    fixed_point.compiled_unavailable() is not None,
+    reason=str(fixed_point.compiled_unavailable()))
 
 
 @pytest.mark.skipif(shutil.which('cc') is None, reason='no C compiler')
 def test_compiled_kernel_is_built_where_a_compiler_is():
     """``setup.py`` builds it as optional: a failed build must not go
     unnoticed where it could have succeeded."""
-    assert fixed_point.COMPILED_KERNEL
+    assert fixed_point.compiled_unavailable() is None
+    assert Integrator(4, 0, 'cpu').backend == 'compiled'  # what 'auto' picks
 
 
 def _integrate_both_ways(pixels, seed, run):
@@ -189,9 +191,8 @@ def _integrate_both_ways(pixels, seed, run):
     path, tiles of 16 pixels side by side on two threads: both spikes and
     both carried charges."""
     results = []
-    for compiled in (True, False):
-        integrator = Integrator(pixels, seed, 'cpu')
-        integrator.compiled = compiled
+    for backend in ('compiled', 'torch'):
+        integrator = Integrator(pixels, seed, 'cpu', backend=backend)
         integrator.tile = 16
         out = torch.full((run.steps, pixels), 7, dtype=torch.uint8)
         threads = torch.get_num_threads()
@@ -562,14 +563,33 @@ def test_same_seed_same_stream(frames, effects):
     (_video(3, (30, 41)), None),
     (_video(3, (30, 41)), _EVERYTHING),
 ], ids=['still', 'video', 'all-video'])
-def test_compiled_kernel_and_torch_path_simulate_the_same(
-        frames, effects, monkeypatch):
+def test_compiled_kernel_and_torch_path_simulate_the_same(frames, effects):
     compiled, meta = simulate_spikes(frames, 129, threshold=1 / 0.6,
-                                     effects=effects, seed=5)
-    monkeypatch.setattr(fixed_point, 'COMPILED_KERNEL', False)
+                                     effects=effects, seed=5,
+                                     backend='compiled')
     expected, expected_meta = simulate_spikes(
-        frames, 129, threshold=1 / 0.6, effects=effects, seed=5)
+        frames, 129, threshold=1 / 0.6, effects=effects, seed=5,
+        backend='torch')
     assert np.array_equal(compiled, expected) and meta == expected_meta
+    default, _ = simulate_spikes(frames, 129, threshold=1 / 0.6,
+                                 effects=effects, seed=5)  # 'auto'
+    assert np.array_equal(default, compiled)
+
+
+@pytest.mark.parametrize('backend, device, message', [
+    ('cuda', 'cpu', "one of 'auto', 'torch', 'compiled'"),
+    pytest.param('compiled', 'meta', 'runs on the CPU, not on meta',
+                 marks=needs_kernel),
+])
+def test_a_backend_that_cannot_integrate_is_a_clear_error(backend, device,
+                                                          message):
+    with pytest.raises(ValueError, match=message):
+        Integrator(4, 0, device, backend=backend)
+
+
+def test_simulate_spikes_checks_its_backend():
+    with pytest.raises(ValueError, match='backend'):
+        simulate_spikes(np.zeros((1, 2, 2)), 4, backend='triton')
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason='needs a GPU')

@@ -86,3 +86,47 @@ def test_the_wgse_benchmark_runs_without_the_stack(tmp_path):
         capture_output=True, text=True, env=_env(tmp_path), cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "WGSE, backend='torch'" in proc.stdout
+
+
+BENCHMARKS = '''
+import json, sys
+from types import SimpleNamespace
+import numpy as np
+from wgse_mmseg.benchmarks import gpu_report, machine, simulator, timing, wgse
+args = SimpleNamespace(height=6, width=8, steps=12, repeat=1, device='cpu',
+                       load_shape=(12, 6, 8))
+frames = np.random.default_rng(0).random((3, 6, 8))
+lines = (simulator.header(args) + simulator.simulator_rows(args, frames[1:2],
+                                                           frames)
+         + simulator.load_rows(args, frames[1:2]))
+record = machine.machine_record('cpu')
+correctness = gpu_report.check_correctness((1, 12, 3, 5), 'cpu')
+print(json.dumps(dict(
+    lines=lines, record=record, rows=correctness['rows'],
+    backends=wgse.available_backends('cpu'),
+    loaded=sorted({m.split('.')[0] for m in sys.modules
+                   if m.split('.')[0] in ('mmengine', 'mmseg', 'mmcv')}))))
+'''
+
+
+def test_the_benchmarks_run_without_the_stack(tmp_path):
+    """The benchmark package's core parts (the simulator's tables, the
+    machine record, the GPU report's correctness section) import and run
+    where OpenMMLab cannot be imported."""
+    proc = subprocess.run([sys.executable, '-c', BENCHMARKS],
+                          capture_output=True, text=True, env=_env(tmp_path),
+                          cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert report['loaded'] == []
+    text = '\n'.join(report['lines'])
+    for expected in ('NumPy step loop', '+ jitter', 'load .npz',
+                     'integrate-and-fire:'):
+        assert expected in text
+    record = report['record']
+    assert record['device'] == 'cpu' and record['torch']
+    assert record['cpu_count'] >= 1 and record['torch_threads'] >= 1
+    assert 'torch' in report['backends']
+    assert 'reference' not in report['backends']
+    assert {r['backend'] for r in report['rows']} >= {'torch'}
+    assert all(r['ok'] for r in report['rows'] if r['backend'] == 'torch')

@@ -24,7 +24,7 @@ from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
 from wgse_mmseg.data_generation.views import render_trajectory
 from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
                                    gaussian_window, psnr, ssim)
-from wgse_mmseg.apis.reconstruction_benchmark import (benchmark,
+from wgse_mmseg.benchmarks.reconstruction import (benchmark,
                                                             format_table)
 from wgse_mmseg.core.io import load_spikes, save_spikes
 from wgse_mmseg.models.reconstruction import (DEFAULT_WEIGHTS,

@@ -38,7 +38,7 @@ ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 #: the scripts under tools/, and the package's modules with a command line
 TOOL_FILES = sorted(osp.relpath(p, ROOT) for p in glob.glob(
     osp.join(ROOT, 'tools', '**', '*.py'), recursive=True))
-TOOL_MODULES = ['wgse_mmseg.apis.reconstruction_benchmark',
+TOOL_MODULES = ['wgse_mmseg.benchmarks.reconstruction',
                 'wgse_mmseg.core.wgse.triton_resources']
 TOOLS = TOOL_FILES + TOOL_MODULES
 
@@ -104,7 +104,7 @@ def test_every_command_line_is_declared():
         osp.join(ROOT, 'wgse_mmseg', '**', '*.py'), recursive=True)
         if 'ArgumentParser(' in open(p).read()}
     listed = {m.replace('.', '/') + '.py' for m in TOOL_MODULES}
-    assert building - listed == {'wgse_mmseg/core/wgse/benchmark.py'}
+    assert building - listed == {'wgse_mmseg/benchmarks/wgse.py'}
 
 
 # ---- an independent reading of what each declaration accepts as a word ----

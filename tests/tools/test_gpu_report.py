@@ -9,7 +9,8 @@ import sys
 
 import pytest
 
-from wgse_mmseg.core.wgse import gpu_report, triton_band_networks
+from wgse_mmseg.benchmarks import gpu_report
+from wgse_mmseg.core.wgse import triton_band_networks
 
 pytest.importorskip('pytorch_wavelets')
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))

@@ -194,11 +194,11 @@ REVIEWED = {
     ('wgse_mmseg/models/data_preprocessor.py',
      'SpikeSegDataPreProcessor.__init__', 'MODELS.build'):
         'its enhancer argument, from the user\'s config file',
-    ('wgse_mmseg/apis/benchmarking.py', 'build_model', 'MODELS.build'):
+    ('wgse_mmseg/benchmarks/segmentation.py', 'build_model', 'MODELS.build'):
         'the user\'s config file',
-    ('wgse_mmseg/apis/benchmarking.py', 'validation_cost', 'DATASETS.build'):
+    ('wgse_mmseg/benchmarks/segmentation.py', 'validation_cost', 'DATASETS.build'):
         'the user\'s config file',
-    ('wgse_mmseg/apis/benchmarking.py', 'validation_cost',
+    ('wgse_mmseg/benchmarks/segmentation.py', 'validation_cost',
      'init_default_scope'):
         'the user\'s config file',
     ('wgse_mmseg/apis/inferencer.py', 'SpikeSegInferencer._init_pipeline',

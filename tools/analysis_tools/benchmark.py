@@ -9,7 +9,7 @@ Prints a Markdown table, one row per config, with the device and software
 versions beneath it; ``--out`` also writes every number (and the raw timing
 samples) as JSON. Each config is measured in a fresh process; one that
 fails is reported and the others are still measured (exit status 1). What
-each column measures: docs/benchmark.md and wgse_mmseg/apis/benchmarking.py.
+each column measures: docs/benchmark.md and wgse_mmseg/benchmarks/segmentation.py.
 """
 import argparse
 import json
@@ -17,8 +17,10 @@ import sys
 
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.apis.benchmarking import (benchmark_config, format_results,
-                                          run_isolated, time_calls)
+from wgse_mmseg.benchmarks.machine import run_isolated  # noqa: E402
+from wgse_mmseg.benchmarks.segmentation import (  # noqa: E402
+    benchmark_config, format_results)
+from wgse_mmseg.benchmarks.timing import time_calls  # noqa: E402
 from wgse_mmseg.core.arguments import SIDE, Integer, Path, Text
 from wgse_mmseg.core.io import atomic_output
 from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS

@@ -28,13 +28,10 @@ import argparse
 import numpy as np
 import torch
 
-import wgse_mmseg
-wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence, Text
 from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
-from wgse_mmseg.apis.simulator_benchmark import (header, load_rows,
-                                                 simulator_rows)
-from wgse_mmseg.data_generation.synthetic import render_street_scene  # noqa: E402
+from wgse_mmseg.benchmarks.simulator import header, load_rows, simulator_rows
+from wgse_mmseg.data_generation.synthetic import render_street_scene
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -33,9 +33,9 @@ import torch
 
 from wgse_mmseg.core.arguments import Choice, Integer, Path
 from wgse_mmseg.core.limits import MAX_REPEAT
-from wgse_mmseg.core.wgse.benchmark import (DEFAULT_SHAPES, IMPLEMENTATIONS,
-                                            SHAPE, available_backends,
-                                            run_benchmark)
+from wgse_mmseg.benchmarks.wgse import (DEFAULT_SHAPES, IMPLEMENTATIONS,
+                                        SHAPE, available_backends,
+                                        run_benchmark)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -8,7 +8,7 @@ issue's targets; writes gpu.md and gpu.json (device, driver, versions).
 
 On a GPU machine with torch alone: ``bash tools/gpu_report.sh`` (installs
 ``tools/gpu_bundle.sh``'s wheels, then runs this). What each section
-measures: ``wgse_mmseg/core/wgse/gpu_report.py``. A section that fails is
+measures: ``wgse_mmseg/benchmarks/gpu_report.py``. A section that fails is
 recorded with its error and the others still run; the exit status is 1 then.
 """
 import argparse
@@ -40,7 +40,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     import torch
 
-    from wgse_mmseg.core.wgse import gpu_report
+    from wgse_mmseg.benchmarks import gpu_report
     if not args.smoke and not torch.cuda.is_available():
         print('gpu_report.py: torch sees no CUDA device here (--smoke runs '
               'the CPU check)', file=sys.stderr)

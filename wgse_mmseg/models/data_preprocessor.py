@@ -37,7 +37,7 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
     parameter the loss depends on), so the loss backpropagates into it.
     What measures only the model's forward (mmengine's
     ``get_model_complexity_info``) leaves the enhancer out; the project's
-    benchmark (:func:`wgse_mmseg.apis.benchmarking.count_flops`) counts it
+    benchmark (:func:`wgse_mmseg.benchmarks.segmentation.count_flops`) counts it
     on its own and adds it.
 
     Args:

@@ -46,18 +46,14 @@ def _run(model, spikes, input_grad):
 
 
 def _reference(model, spikes, input_grad):
-    """The same model in float64 with the band networks as ``nn.Conv1d``
-    modules, one signal per pixel (``torch.jit``-free, chunk-free)."""
+    """The same model in float64 on the ``'reference'`` backend: the band
+    networks as ``nn.Conv1d`` modules, one signal per pixel
+    (``torch.jit``-free, chunk-free)."""
     double = copy.deepcopy(model).double()
-    double.backend = 'torch'
-    original = band_network_backends.TorchBackend.run
-    band_network_backends.TorchBackend.run = \
-        lambda self, nets, coeffs, lengths, spatial: \
-        band_network_backends._module_bands(nets, coeffs, lengths, spatial)
-    try:
-        return _run(double, spikes.double(), input_grad)
-    finally:
-        band_network_backends.TorchBackend.run = original
+    double.backend = 'reference'
+    result = _run(double, spikes.double(), input_grad)
+    assert double.backend_in_use == 'reference'
+    return result
 
 
 def _assert_close(got, want, tol, what):
@@ -85,7 +81,7 @@ def _spikes(batch, steps, height, width, seed=1):
 def test_unknown_backend_lists_the_choices():
     with pytest.raises(ValueError) as error:
         WGSE(backend='cuda')
-    for name in ('auto', 'torch', 'compiled', 'triton', "'cuda'"):
+    for name in ('auto', 'torch', 'compiled', 'triton', 'reference', "'cuda'"):
         assert name in str(error.value)
 
 

@@ -10,7 +10,7 @@ from torch.func import functional_call
 
 from mmseg.registry import MODELS
 from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
-    fused_band_networks
+    torch_band_networks
 from wgse_mmseg.core.representations import TFP
 from wgse_mmseg.core.wgse.wgse import LOWPASS_DETAIL_BIAS, BandNetwork
 
@@ -145,15 +145,14 @@ def test_matches_pywt_reference(dim, wavelet, mode, level, steps):
 def test_spatial_variants_recompute_without_changing_results(monkeypatch,
                                                              dim):
     """``dim`` 2 and 3 recompute each sample's band activations in the
-    backward pass: same output and gradients as keeping them."""
+    backward pass (the 'torch' backend): same output and gradients as
+    keeping them (the 'reference' backend)."""
     model = _seeded(dim=dim, hidden_channels=8)
     x = (torch.rand(2, 19, 4, 5) < 0.5).float().requires_grad_()
     outs, grads, calls = [], [], []
+    original = band_network_backends.checkpoint
     for recompute in (True, False):
-        if not recompute:
-            monkeypatch.setattr(band_network_backends, 'checkpoint',
-                                lambda fn, arg, use_reentrant: fn(arg))
-        original = band_network_backends.checkpoint
+        model.backend = 'torch' if recompute else 'reference'
         monkeypatch.setattr(
             band_network_backends, 'checkpoint',
             lambda *a, **k: calls.append(recompute) or original(*a, **k))
@@ -164,8 +163,8 @@ def test_spatial_variants_recompute_without_changing_results(monkeypatch,
         outs.append(y.detach())
         grads.append([x.grad.clone()] + [p.grad.clone()
                                          for p in model.parameters()])
-    # one call per band and sample
-    assert calls.count(True) == 2 * len(model.band_networks)
+    # one call per band and sample, none without recomputing
+    assert calls == [True] * 2 * len(model.band_networks)
     torch.testing.assert_close(outs[0], outs[1], rtol=1e-6, atol=1e-6)
     for a, b in zip(*grads):
         torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-6)
@@ -182,21 +181,19 @@ def test_fused_kernel_equals_conv_modules(monkeypatch, kwargs,
     """The torch backend's kernel against the same band networks run as
     nn.Conv1d modules, outputs and all gradients, for chunks from one pixel
     to all."""
-    monkeypatch.setattr(fused_band_networks, 'ROWS_PER_CHUNK', rows_per_chunk)
-    model = _seeded(hidden_channels=8, backend='torch', **kwargs).double()
+    monkeypatch.setattr(torch_band_networks, 'ROWS_PER_CHUNK', rows_per_chunk)
+    model = _seeded(hidden_channels=8, **kwargs).double()
     x = (torch.rand(2, 23, 3, 5, dtype=torch.float64) < 0.5).double()
     x = (x + 0.1 * torch.rand_like(x)).requires_grad_()
     results = []
-    for use_modules in (False, True):
-        if use_modules:
-            monkeypatch.setattr(band_network_backends.TorchBackend, 'run',
-                                lambda self, *args:
-                                band_network_backends._module_bands(*args))
+    for backend in ('torch', 'reference'):
+        model.backend = backend
         model.zero_grad()
         x.grad = None
         y = model(x)
         (y * torch.linspace(-1, 1, y.numel(), dtype=y.dtype).view_as(y)
          ).sum().backward()
+        assert model.backend_in_use == backend
         results.append([y.detach(), x.grad.clone()] +
                        [p.grad.clone() for p in model.parameters()])
     for fused, modules in zip(*results):
@@ -209,7 +206,7 @@ def test_fused_kernel_on_threads_is_deterministic(monkeypatch, kwargs):
     """With several torch threads the chunks run side by side: every run
     gives the same bits, outputs equal the one-thread run's exactly, the
     gradients up to summation order, and the thread count is restored."""
-    monkeypatch.setattr(fused_band_networks, 'ROWS_PER_CHUNK', 64)
+    monkeypatch.setattr(torch_band_networks, 'ROWS_PER_CHUNK', 64)
     model = _seeded(hidden_channels=8, **kwargs).double()
     x = torch.rand(2, 23, 6, 7, dtype=torch.float64, requires_grad=True)
     weights = torch.linspace(-1, 1, x.numel(), dtype=x.dtype).view_as(x)
@@ -227,7 +224,7 @@ def test_fused_kernel_on_threads_is_deterministic(monkeypatch, kwargs):
     try:
         first, second, single = run(2), run(2), run(1)
         # More threads (8) than chunks (6 bands): the count is restored.
-        monkeypatch.setattr(fused_band_networks, 'ROWS_PER_CHUNK', 10**6)
+        monkeypatch.setattr(torch_band_networks, 'ROWS_PER_CHUNK', 10**6)
         run(8)
     finally:
         torch.set_num_threads(1)
@@ -251,17 +248,15 @@ def test_zero_sized_input(shape):
         assert torch.equal(p.grad, torch.zeros_like(p))
 
 
-@pytest.mark.parametrize('recompute', [False, True])
-def test_fused_kernel_without_pixels(recompute):
-    """No pixels, no chunks: an empty output and zero gradients, whether
-    the kernel keeps activations or recomputes them."""
+def test_fused_kernel_without_pixels():
+    """No pixels, no chunks: an empty output and zero gradients."""
     networks = [BandNetwork(1, 3, 4, 1) for _ in range(2)]
     residuals = [residual for _, residual in networks[0].layers()]
     weights = [[(conv.weight, conv.bias) for conv, _ in net.layers()]
                for net in networks]
     coeffs = torch.zeros(0, 4 + 6, requires_grad=True)
-    out = fused_band_networks.fused_band_networks(
-        coeffs, [4, 6], weights, residuals, recompute=recompute)
+    out = torch_band_networks.torch_band_networks(
+        coeffs, [4, 6], weights, residuals)
     out.sum().backward()
     assert out.shape == (0, 10)
     for net in networks:
@@ -272,7 +267,7 @@ def test_fused_kernel_without_pixels(recompute):
 def test_fused_kernel_gradcheck(monkeypatch):
     """Hand-written backward of the fused kernel, long variant with a
     5-tap kernel, across chunk boundaries, in float64."""
-    monkeypatch.setattr(fused_band_networks, 'ROWS_PER_CHUNK', 30)
+    monkeypatch.setattr(torch_band_networks, 'ROWS_PER_CHUNK', 30)
     torch.manual_seed(0)
     networks = [BandNetwork(1, 5, 3, 2).double() for _ in range(2)]
     plan = networks[0].layers()
@@ -285,7 +280,7 @@ def test_fused_kernel_gradcheck(monkeypatch):
     def fn(inp, *ps):
         weights = [[(ps[b * per_band + 2 * i], ps[b * per_band + 2 * i + 1])
                     for i in range(len(plan))] for b in range(2)]
-        return fused_band_networks.fused_band_networks(
+        return torch_band_networks.torch_band_networks(
             inp, [4, 6], weights, residuals)
 
     # Seeded Gaussian inputs keep every ReLU pre-activation well away from

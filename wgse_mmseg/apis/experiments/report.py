@@ -12,7 +12,7 @@ from typing import Any, Dict, List
 
 from mmengine.config import Config
 
-from ..benchmarking import markdown_table
+from ...benchmarks.markdown import markdown_table
 from ...core.io import atomic_output
 from .aggregate import aggregate
 from .grid import Entry
@@ -133,7 +133,7 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
         'had become; mean ± standard deviation over seeds.',
         '- GFLOPs (one stream, batch 1), train step (ms) and train memory '
         '(peak, MB): the package\'s benchmark '
-        '(`wgse_mmseg.apis.benchmarking.benchmark_config`, as '
+        '(`wgse_mmseg.benchmarks.segmentation.benchmark_config`, as '
         '`tools/analysis_tools/benchmark.py`) of each entry at the training '
         'crop and batch size, measured once per entry (`--benchmark`) '
         'with nothing else running; `-`: not measured.', '',

@@ -21,7 +21,8 @@ from typing import Any, Dict, List, NamedTuple, Optional
 
 from mmengine.config import Config
 
-from ..benchmarking import benchmark_config, run_isolated, validation_cost
+from ...benchmarks.machine import run_isolated
+from ...benchmarks.segmentation import benchmark_config, validation_cost
 from ...core.io import atomic_output
 from .grid import (PROJECT_ROOT, Entry, as_cli, enhancer_options,
                    schedule_options)
@@ -226,7 +227,7 @@ def benchmark_entry(entry: Entry, model_options: Dict[str, Any],
                     work_dir: str, repeat: int,
                     warmup: int) -> Dict[str, Any]:
     """Measure the entry once with the package's benchmark
-    (:func:`~wgse_mmseg.apis.benchmarking.benchmark_config`: FLOPs,
+    (:func:`~wgse_mmseg.benchmarks.segmentation.benchmark_config`: FLOPs,
     training-step time and peak memory at the grid's crop and batch size,
     in a fresh process) unless ``WORK_DIR/<entry>/benchmark.json`` exists;
     returns (and writes) it. The result belongs to the entry, not to a

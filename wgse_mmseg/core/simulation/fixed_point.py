@@ -27,13 +27,19 @@ Steps are integrated in blocks short enough that ``x`` stays below
 closed-form block) and, on CPU, in tiles of pixels, which run side by side
 on torch's threads, one thread each.
 
-On the CPU a compiled kernel (``_integrate_and_fire.c``, built by
-``setup.py``) integrates a tile in one pass instead of the torch path's four
-(sums, counts, narrowing, difference): step by step it adds the step's
-charge, reads the spike and keeps the fraction, which gives the same spikes
-and carried charge bit for bit. Where it was not built (no C compiler)
-:data:`COMPILED_KERNEL` is ``False`` and the torch path runs, as it does on
-the GPU.
+Two backends integrate, chosen by ``backend`` (:data:`CHOICES`), as WGSE's
+band networks are:
+
+* ``'torch'``: torch operations, on any device: per tile, the running sums,
+  the counts, their narrowing and difference (four passes);
+* ``'compiled'``: on the CPU, a compiled kernel (``_integrate_and_fire.c``,
+  built by ``setup.py``) integrates a tile in one pass: step by step it adds
+  the step's charge, reads the spike and keeps the fraction, which gives
+  the same spikes and carried charge bit for bit.
+
+``'auto'`` runs the compiled kernel on the CPU where it was built
+(:func:`compiled_unavailable`) and the torch path elsewhere (no C
+compiler, the GPU); naming a backend that cannot run is an error.
 """
 from typing import Callable, Iterator, List, NamedTuple, Optional, Tuple
 
@@ -48,11 +54,14 @@ except ImportError:  # installed without a C compiler: the torch path runs
     _integrate_and_fire = None
 
 __all__ = ['FRACTION_BITS', 'ONE', 'MAX_STEP_CHARGE', 'MAX_BLOCK_STEPS',
-           'MAX_LINEAR_BLOCK_STEPS', 'COMPILED_KERNEL', 'initial_charge',
+           'MAX_LINEAR_BLOCK_STEPS', 'BACKENDS', 'CHOICES',
+           'compiled_unavailable', 'resolve_backend', 'initial_charge',
            'quantise', 'LinearCharge', 'Integrator']
 
-#: Whether the compiled CPU kernel is installed (see the module docstring).
-COMPILED_KERNEL = _integrate_and_fire is not None
+#: the backends that integrate (see the module docstring)
+BACKENDS = ('torch', 'compiled')
+#: what ``backend`` accepts
+CHOICES = ('auto', ) + BACKENDS
 
 FRACTION_BITS = 24
 ONE = 1 << FRACTION_BITS
@@ -60,6 +69,42 @@ MAX_STEP_CHARGE = 64
 MAX_BLOCK_STEPS = 32  # steps of up to 2 thresholds each: x < 2**31
 MAX_LINEAR_BLOCK_STEPS = 120  # steps below 1 threshold each: x < 2**31
 _CPU_TILE = 1 << 14  # pixels per tile: larger ops beat cache-sized ones
+
+
+def compiled_unavailable() -> Optional[str]:
+    """Why this installation cannot run the compiled kernel at all, or
+    ``None``."""
+    if _integrate_and_fire is None:
+        return ('the compiled extension was not built (installed without a '
+                'C compiler)')
+    return None
+
+
+def resolve_backend(backend: str, device) -> str:
+    """The backend (``'torch'`` or ``'compiled'``) that integrates on
+    ``device`` for the configured ``backend`` (one of :data:`CHOICES`).
+
+    Raises:
+        ValueError: an unknown name, or ``'compiled'`` where it cannot run
+            (not built, or not on the CPU), with the reason and the
+            choices.
+    """
+    device = torch.device(device)
+    reason = compiled_unavailable() or (
+        None if device.type == 'cpu' else
+        f'it runs on the CPU, not on {device}')
+    if backend == 'auto':
+        return 'torch' if reason else 'compiled'
+    choices = ', '.join(map(repr, CHOICES)) + (
+        f' (unavailable here: {compiled_unavailable()})'
+        if compiled_unavailable() else '')
+    if backend not in BACKENDS:
+        raise ValueError(f'backend must be one of {choices}; got '
+                         f'{backend!r}')
+    if backend == 'compiled' and reason:
+        raise ValueError(f"backend='compiled' cannot integrate: {reason}. "
+                         f'Choices: {choices}')
+    return backend
 
 
 def initial_charge(num_pixels: int, seed: int) -> torch.Tensor:
@@ -133,18 +178,19 @@ class Integrator:
         device: where the charge lives and the arithmetic runs.
         block_steps: steps its buffers hold; longer blocks (and blocks
             longer than the overflow bounds) are integrated in parts.
+        backend: one of :data:`CHOICES` (:func:`resolve_backend`).
 
     Each call takes the charge of the next ``K`` steps and writes their
-    ``(K, P)`` uint8 0/1 spikes into ``out``. On the CPU the compiled kernel
-    does the work when :data:`COMPILED_KERNEL` is true when the integrator is
-    made.
+    ``(K, P)`` uint8 0/1 spikes into ``out``; both backends give the same
+    spikes and carried charge bit for bit.
     """
 
     def __init__(self, num_pixels: int, seed: int, device,
-                 block_steps: int = MAX_BLOCK_STEPS):
+                 block_steps: int = MAX_BLOCK_STEPS, backend: str = 'auto'):
         device = torch.device(device)
+        #: the backend that integrates: ``'torch'`` or ``'compiled'``
+        self.backend = resolve_backend(backend, device)
         self.charge = initial_charge(num_pixels, seed).to(device)
-        self.compiled = COMPILED_KERNEL and device.type == 'cpu'
         self.tile = num_pixels if device.type == 'cuda' else min(
             num_pixels, _CPU_TILE)
         self.block_steps = block_steps
@@ -163,7 +209,7 @@ class Integrator:
         spare = iter(self._buffers)
 
         def make_buffers() -> Optional[_TileBuffers]:
-            if self.compiled:
+            if self.backend == 'compiled':
                 return None
             buffers = next(spare, None)
             if buffers is None:
@@ -224,7 +270,7 @@ class Integrator:
 
     def _linear(self, charge: LinearCharge, weights: np.ndarray,
                 out: torch.Tensor) -> None:
-        if self.compiled:
+        if self.backend == 'compiled':
             self._linear_compiled(charge, weights, out)
             return
         steps = len(weights)
@@ -280,7 +326,8 @@ class Integrator:
     def _per_step(self, charge: torch.Tensor, saturated: bool,
                   out: torch.Tensor) -> None:
         steps = charge.shape[0]
-        if self.compiled:  # saturation needs nothing: one spike at most
+        if self.backend == 'compiled':
+            # saturation needs nothing: one spike at most
             charge = charge.to(torch.int32).contiguous()
             _check_spike_rows(out, steps, self.charge.numel())
             self._for_each_tile(

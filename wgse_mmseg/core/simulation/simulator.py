@@ -4,10 +4,10 @@ from typing import Any, Dict, Tuple
 import numpy as np
 import torch
 
-from ..arguments import NUM_STEPS, SEED, Number, declare
+from ..arguments import NUM_STEPS, SEED, Choice, Number, declare
 from ..constants import READOUT_HZ
 from .effect import SimulationContext
-from .fixed_point import MAX_BLOCK_STEPS, Integrator, quantise
+from .fixed_point import CHOICES, MAX_BLOCK_STEPS, Integrator, quantise
 from .intensity import frames_to_intensity
 from .light import LinearLight
 from .scene import parse_effects
@@ -35,11 +35,12 @@ def _output(context: SimulationContext) -> torch.Tensor:
 
 @declare(num_steps=NUM_STEPS,
          threshold=Number(0, strict_minimum=True), gain=Number(0),
-         seed=SEED, readout_hz=Number(0, strict_minimum=True))
+         seed=SEED, readout_hz=Number(0, strict_minimum=True),
+         backend=Choice(CHOICES))
 def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
                     gain: float = 1.0, effects=None, seed: int = 0,
                     device='cpu',
-                    readout_hz: float = READOUT_HZ
+                    readout_hz: float = READOUT_HZ, backend: str = 'auto'
                     ) -> Tuple[np.ndarray, Dict[str, Any]]:
     """Simulate a spike-camera stream from frames.
 
@@ -67,6 +68,9 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
         device: torch device that runs the simulation.
         readout_hz: readout rate, converting rates in Hz (dark current, hot
             pixels, ``camera_motion`` per second) to steps.
+        backend: what integrates: ``'auto'``, ``'torch'`` or
+            ``'compiled'`` (:mod:`.fixed_point`); every backend gives the
+            same spikes bit for bit.
 
     Returns:
         ``(spikes, meta)``: ``(T, H, W)`` ``uint8`` 0/1 spikes (NumPy) and a
@@ -98,7 +102,7 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
     closed_form = light.linear and not noises
     block = _LINEAR_BLOCK if closed_form else max(1, min(
         MAX_BLOCK_STEPS, _BLOCK_BYTES // (4 * context.num_pixels)))
-    integrator = Integrator(context.num_pixels, seed, device, block)
+    integrator = Integrator(context.num_pixels, seed, device, block, backend)
     spikes = _output(context)
     segment = linear = None
     for start, stop in light.blocks(block):

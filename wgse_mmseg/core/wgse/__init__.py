@@ -3,8 +3,9 @@
 * :mod:`.wgse`: the module, :class:`WGSE` ``(B, T, H, W) -> (B, T, H, W)``,
   and its per-band network :class:`BandNetwork`;
 * :mod:`.band_network_backends`: the ``backend`` choice (``'auto'``,
-  ``'torch'``, ``'compiled'``, ``'triton'``), one interface;
-* the kernels behind it: :mod:`.fused_band_networks` (torch operations),
+  ``'torch'``, ``'compiled'``, ``'triton'``, and ``'reference'``, the
+  ``nn.Conv`` modules themselves, for tests), one interface;
+* the kernels behind it: :mod:`.torch_band_networks` (torch operations),
   :mod:`.compiled_band_networks` (the C extension ``_band_networks.c``),
   :mod:`.triton_band_networks` (CUDA; kernels in ``_triton_band_kernels``).
 """

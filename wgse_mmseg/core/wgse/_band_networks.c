@@ -17,7 +17,7 @@
  * the flipped, transposed weights, and the weight gradient, with the rows
  * as the reduction), each with its element-wise epilogue (bias, residual,
  * ReLU, ReLU mask) fused. Rows between pixels are computed and reset to
- * zero, as in the torch kernel (fused_band_networks.py).
+ * zero, as in the torch kernel (torch_band_networks.py).
  *
  * The backward pass recomputes a group's activations (cheap: they are in
  * cache) and accumulates the parameter gradients of the call in double.

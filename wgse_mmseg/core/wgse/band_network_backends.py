@@ -8,13 +8,18 @@ differ in where they run and how fast:
 
 * ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
   every variant. ``dim=1`` runs the chunked kernel of
-  :mod:`~wgse_mmseg.core.wgse.fused_band_networks`; ``dim`` 2 and 3 run the
+  :mod:`~wgse_mmseg.core.wgse.torch_band_networks`; ``dim`` 2 and 3 run the
   ``nn.Conv3d`` modules one band and sample at a time.
 * ``'compiled'``: the C kernel of
   :mod:`~wgse_mmseg.core.wgse.compiled_band_networks`: CPU with AVX2/FMA,
   where the extension was built; float32, the paper's width and kernel.
 * ``'triton'``: the kernel of :mod:`~wgse_mmseg.core.wgse.triton_band_networks`:
   CUDA, where triton imports; the paper's network shape.
+* ``'reference'``: the band networks' own ``nn.Conv`` modules, the
+  definition the others are tested against: any variant, device and dtype,
+  following autocast; it keeps every activation for the backward pass
+  (``dim=1``: ``B*H*W`` signals at once), so it is for tests and small
+  inputs, and ``'auto'`` never picks it.
 
 ``'auto'`` picks ``triton`` for CUDA tensors and ``compiled`` for CPU
 tensors where they can run the call, and ``torch`` otherwise (and while
@@ -22,9 +27,10 @@ tensors where they can run the call, and ``torch`` otherwise (and while
 backend that cannot run a call is an error that says why and lists the
 choices; nothing falls back silently then.
 
-Every backend keeps training memory ``O(B*T*H*W)``: hidden activations are
-recomputed in the backward pass, chunk by chunk (``torch``, ``compiled``) or
-tile by tile (``triton``), never kept for all pixels at once.
+Every backend but ``'reference'`` keeps training memory ``O(B*T*H*W)``:
+hidden activations are recomputed in the backward pass, chunk by chunk
+(``torch``, ``compiled``) or tile by tile (``triton``), never kept for all
+pixels at once.
 """
 from typing import List, Optional, Sequence, Tuple
 
@@ -33,7 +39,7 @@ from torch import Tensor, nn
 from torch.utils.checkpoint import checkpoint
 
 from . import compiled_band_networks, triton_band_networks
-from .fused_band_networks import fused_band_networks
+from .torch_band_networks import torch_band_networks
 
 __all__ = ['BACKENDS', 'CHOICES', 'BandNetworkBackend', 'get_backend',
            'resolve_backend']
@@ -98,28 +104,40 @@ class TorchBackend(BandNetworkBackend):
             weights, residuals = _weights(networks)
             rows = coeffs.reshape(-1, coeffs.shape[2])
             with torch.autocast(coeffs.device.type, enabled=False):
-                out = fused_band_networks(rows, lengths, weights, residuals,
-                                          recompute=True)
+                out = torch_band_networks(rows, lengths, weights, residuals)
             return out.view(coeffs.shape)
         # nn.Conv modules: dim 2 and 3, and under tracing (FLOP counters,
         # jit.trace see the convolutions). They follow autocast.
-        return _module_bands(networks, coeffs, lengths, spatial)
+        return _module_bands(networks, coeffs, lengths, spatial,
+                             recompute=True)
+
+
+class ReferenceBackend(BandNetworkBackend):
+    """The ``nn.Conv`` modules as they are, every activation kept: what
+    tests compare the kernels with."""
+
+    name = 'reference'
+
+    def run(self, networks, coeffs, lengths, spatial):
+        return _module_bands(networks, coeffs, lengths, spatial,
+                             recompute=False)
 
 
 def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
-                  lengths: Sequence[int],
-                  spatial: Tuple[int, int]) -> Tensor:
+                  lengths: Sequence[int], spatial: Tuple[int, int],
+                  recompute: bool) -> Tensor:
     """The networks as ``nn.Conv`` modules on ``(B, P, C)`` coefficients.
 
     ``dim=1`` runs every pixel as a ``(1, L)`` signal; ``dim`` 2 and 3 run
-    one sample's band as a ``(1, 1, L, H, W)`` volume at a time and, when
-    gradients are wanted, recompute its activations in the backward pass
-    (``torch.utils.checkpoint``), so only one sample's band activations
-    exist at once.
+    one sample's band as a ``(1, 1, L, H, W)`` volume at a time and, with
+    ``recompute`` when gradients are wanted, recompute its activations in
+    the backward pass (``torch.utils.checkpoint``), so only one sample's
+    band activations exist at once.
     """
     batch, pixels, _ = coeffs.shape
-    train = torch.is_grad_enabled() and (coeffs.requires_grad or any(
-        p.requires_grad for net in networks for p in net.parameters()))
+    train = recompute and torch.is_grad_enabled() and (
+        coeffs.requires_grad or any(p.requires_grad for net in networks
+                                    for p in net.parameters()))
     outs = []
     for network, band in zip(networks, coeffs.split(list(lengths), dim=2)):
         length = band.shape[2]
@@ -193,9 +211,9 @@ class TritonBackend(BandNetworkBackend):
         return out.view(coeffs.shape)
 
 
-#: name -> backend, in the order ``'auto'`` prefers them last to first
+#: name -> backend
 BACKENDS = {backend.name: backend for backend in (
-    TorchBackend(), CompiledBackend(), TritonBackend())}
+    TorchBackend(), CompiledBackend(), TritonBackend(), ReferenceBackend())}
 #: what ``WGSE(backend=...)`` accepts
 CHOICES = ('auto', ) + tuple(BACKENDS)
 #: ``'auto'``'s first choice per device type; ``torch`` where it cannot run

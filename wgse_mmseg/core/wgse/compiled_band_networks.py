@@ -10,7 +10,7 @@ coefficients: WGSE's input is spike data.
 
 :func:`unsupported` says why a call cannot use it; WGSE's ``'auto'``
 backend (:mod:`~wgse_mmseg.core.wgse.band_network_backends`) then runs
-:func:`~wgse_mmseg.core.wgse.fused_band_networks.fused_band_networks` (torch
+:func:`~wgse_mmseg.core.wgse.torch_band_networks.torch_band_networks` (torch
 operations, any width, kernel, dtype, device, and the input gradient).
 Both compute the function of :class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`;
 tests compare them.
@@ -34,12 +34,12 @@ try:
 except ImportError:  # installed without a C compiler
     _band_networks = None
 
-__all__ = ['COMPILED_KERNEL', 'ROWS_PER_CALL', 'unavailable', 'unsupported',
+__all__ = ['NOT_BUILT', 'ROWS_PER_CALL', 'unavailable', 'unsupported',
            'compiled_band_networks']
 
-#: Whether the extension was built (it runs where :func:`unsupported`
-#: finds nothing against it).
-COMPILED_KERNEL = _band_networks is not None
+#: :func:`unavailable`'s reason where the extension was not built
+NOT_BUILT = ('the compiled extension was not built (installed without a C '
+             'compiler)')
 #: Rows (pixel coefficients plus two padding rows per pixel) per call: the
 #: kernel works through them in cache-sized groups itself.
 ROWS_PER_CALL = 16384
@@ -49,9 +49,8 @@ CHANNELS = 32
 
 def unavailable() -> Optional[str]:
     """Why this installation cannot run the kernel at all, or ``None``."""
-    if not COMPILED_KERNEL:
-        return ('the compiled extension was not built (installed without a '
-                'C compiler)')
+    if _band_networks is None:
+        return NOT_BUILT
     if not _band_networks.supported():
         return 'this CPU lacks AVX2/FMA'
     return None
@@ -215,7 +214,7 @@ def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
     """Run one temporal CNN per band over every pixel's coefficients.
 
     Arguments and result as
-    :func:`~wgse_mmseg.core.wgse.fused_band_networks.fused_band_networks`
+    :func:`~wgse_mmseg.core.wgse.torch_band_networks.torch_band_networks`
     (``coeffs`` ``(N, C)``, bands side by side); only where
     :func:`unsupported` returns ``None``. Gradients flow to the parameters, not to ``coeffs``.
     """

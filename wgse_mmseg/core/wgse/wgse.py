@@ -158,7 +158,7 @@ class BandNetwork(nn.Module):
         """The convolutions in order, each with the index of the activation
         added before its ReLU (0: the input, ``i``: the output of the
         ``i``-th convolution) or ``None``: the description
-        :func:`~wgse_mmseg.core.wgse.fused_band_networks.fused_band_networks`
+        :func:`~wgse_mmseg.core.wgse.torch_band_networks.torch_band_networks`
         runs."""
         plan = []
         for block in self.residual_layers:
@@ -184,12 +184,13 @@ class WGSE(nn.Module):
         num_blocks: residual layers (and output convolutions) per band;
             2 is the paper's "long" variant.
         backend: what runs the band networks: ``'auto'``, ``'torch'``,
-            ``'compiled'`` or ``'triton'``
+            ``'compiled'``, ``'triton'`` or ``'reference'``
             (:mod:`~wgse_mmseg.core.wgse.band_network_backends`). ``'auto'``
             picks the Triton kernel for CUDA inputs and the compiled kernel
             for CPU inputs where they can run, else ``'torch'``; a named
-            backend that cannot run is an error. Every backend recomputes
-            hidden activations in the backward pass.
+            backend that cannot run is an error. Every backend but
+            ``'reference'`` (the ``nn.Conv`` modules as they are, for
+            tests) recomputes hidden activations in the backward pass.
         init: ``'default'`` or ``'lowpass'`` (:meth:`init_lowpass`).
         output_norm: standardise the output ``(B, T, H, W)`` with one
             batch-norm channel over all its values (batch statistics in

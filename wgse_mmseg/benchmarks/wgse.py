@@ -4,27 +4,29 @@ What ``tools/analysis_tools/benchmark_wgse.py`` runs; its docstring says
 what is compared and how (docs/wgse_speed.md has the tables). Needs torch
 and, for the reference row, ``pytorch_wavelets``; nothing of OpenMMLab, so
 it runs on a GPU machine that has torch alone. Every measurement runs in a
-fresh process (``python -m wgse_mmseg.core.wgse.benchmark --worker ...``).
+fresh process (``python -m wgse_mmseg.benchmarks.wgse --worker ...``).
+
+Its ``'reference'`` row is the public implementation's design
+(:class:`ReferenceWGSE`), the baseline of the speed-ups; WGSE's own
+``backend='reference'`` (the band networks' ``nn.Conv`` modules, for
+tests) is not a row.
 """
 import argparse
 import json
-import os
-import platform
 import resource
 import statistics
 import subprocess
 import sys
-import time
 from typing import Dict, List, Optional
 
 import torch
 
-from ..arguments import NUM_STEPS, SIDE, Integer, Sequence
-from ..io import atomic_output
-from ..limits import MAX_BATCH_SIZE
-from ..machine import cpu_model
-from . import band_network_backends, triton_band_networks
-from .wgse import WGSE
+from ..core.arguments import NUM_STEPS, SIDE, Integer, Sequence
+from ..core.io import atomic_output
+from ..core.limits import MAX_BATCH_SIZE
+from ..core.wgse import WGSE, band_network_backends, triton_band_networks
+from .machine import machine_record
+from .timing import time_calls
 
 IMPLEMENTATIONS = {
     'reference': 'pytorch_wavelets + per-pixel nn.Conv1d',
@@ -67,11 +69,13 @@ class ReferenceWGSE(torch.nn.Module):
 
 
 def available_backends(device: str) -> List[str]:
-    """The backends that can run WGSE's default network on ``device``."""
+    """The backends of :data:`IMPLEMENTATIONS` that can run WGSE's default
+    network on ``device``."""
     networks = WGSE().band_networks
     probe = torch.zeros(1, 1, sum(1 for _ in networks), device=device)
     return [name for name, backend in band_network_backends.BACKENDS.items()
-            if backend.cannot_run(networks, probe) is None]
+            if name in IMPLEMENTATIONS and name != 'reference'
+            and backend.cannot_run(networks, probe) is None]
 
 
 def _build(impl: str, shape: List[int], device: str):
@@ -85,11 +89,6 @@ def _build(impl: str, shape: List[int], device: str):
     return model, spikes
 
 
-def _synchronize(device: str) -> None:
-    if device == 'cuda':
-        torch.cuda.synchronize()
-
-
 def _step(model, spikes) -> torch.Tensor:
     out = model(spikes)
     out.square().mean().backward()
@@ -100,7 +99,7 @@ def worker(impl: str, shape: List[int], repeat: int, device: str) -> Dict:
     """Measure one implementation at one shape (run in a fresh process)."""
     model, spikes = _build(impl, shape, device)
     if device == 'cuda':
-        _synchronize(device)
+        torch.cuda.synchronize()
         torch.cuda.reset_peak_memory_stats()
         before = torch.cuda.memory_allocated()
         _step(model, spikes)
@@ -110,14 +109,10 @@ def worker(impl: str, shape: List[int], repeat: int, device: str) -> Dict:
         _step(model, spikes)
         peak_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss -
                     before) / 1024
-    times = []
-    for _ in range(repeat):
-        model.zero_grad(set_to_none=True)
-        _synchronize(device)
-        start = time.perf_counter()
-        _step(model, spikes)
-        _synchronize(device)
-        times.append(time.perf_counter() - start)
+    # the first step above was the warm-up
+    times = time_calls(lambda: (model.zero_grad(set_to_none=True),
+                                _step(model, spikes)),
+                       device, repeat, warmup=0).wall
     pixels = shape[0] * shape[2] * shape[3]
     return dict(impl=impl, backend=getattr(model, 'backend_in_use', None),
                 shape=shape, device=device, peak_mib=peak_mib,
@@ -157,24 +152,12 @@ def run_worker(args: List[str]) -> Dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def machine(device: str) -> Dict:
-    import pytorch_wavelets
-    gpu = {} if device == 'cpu' else dict(
-        gpu=torch.cuda.get_device_name(), cuda=torch.version.cuda)
-    return dict(device=device, **gpu, cpu=cpu_model(), cores=os.cpu_count(),
-                torch=torch.__version__,
-                threads=torch.get_num_threads(),
-                pytorch_wavelets=getattr(pytorch_wavelets, '__version__', '?'),
-                python=platform.python_version(),
-                load_average=os.getloadavg()[0])
-
-
 def run_benchmark(shapes: List[List[int]], impls: List[str], repeat: int,
                   device: str, out: Optional[str] = None) -> Dict:
     """Measure ``impls`` (``'reference'`` and backend names) at every shape,
     printing the table as rows come in; returns (and writes to ``out`` as
     JSON) ``{'machine', 'results', 'agreement'}``."""
-    info = machine(device)
+    info = machine_record(device)
     print('WGSE forward+backward (db8, 5 levels, zero mode, kernel 3, '
           '32 channels)')
     print(' | '.join(f'{k}: {v}' for k, v in info.items()))

@@ -5,24 +5,21 @@ says what the two tables hold; docs/simulator.md has the figures).
 :func:`simulator_rows` and :func:`load_rows` take the tool's parsed
 arguments (``height``, ``width``, ``steps``, ``frames``, ``repeat``,
 ``device``, ``threads``, ``load_shape``) and return the table's lines.
+Needs the core alone, nothing of OpenMMLab.
 """
-import contextlib
-import os
 import os.path as osp
-import platform
 import statistics
 import tempfile
-import time
-from typing import Callable, Iterator, List, NamedTuple
+from typing import Callable, List, NamedTuple
 
 import cv2
 import numpy as np
-import torch
 
 from ..core.constants import REDS_THRESHOLD
 from ..core.io import SPIKE_EXTENSIONS, load_spikes, save_spikes
-from ..core.machine import cpu_model
 from ..core.simulation import fixed_point, simulate_spikes
+from .machine import machine_record
+from .timing import time_calls
 
 
 def numpy_step_loop(frames: np.ndarray, num_steps: int, threshold: float,
@@ -59,44 +56,32 @@ class Timing(NamedTuple):
     result: object  # the last call's
 
 
-def median_time(run: Callable[[], object], repeat: int) -> Timing:
-    """Median wall and CPU time of ``repeat`` calls after a warm-up.
-
-    On a machine shared with other work the CPU time is the steadier
-    figure; on an idle one, with one thread, the two agree.
-    """
-    result = run()
-    walls, cpus = [], []
-    for _ in range(repeat):
-        wall, cpu = time.perf_counter(), time.process_time()
-        result = run()
-        walls.append(time.perf_counter() - wall)
-        cpus.append(time.process_time() - cpu)
-    return Timing(statistics.median(walls), statistics.median(cpus), result)
+def median_time(run: Callable[[], object], repeat: int,
+                device: str) -> Timing:
+    """Median wall and CPU time of ``repeat`` calls after a warm-up
+    (:func:`~wgse_mmseg.benchmarks.timing.time_calls`)."""
+    timings = time_calls(run, device, repeat, warmup=1)
+    return Timing(statistics.median(timings.wall),
+                  statistics.median(timings.cpu), timings.result)
 
 
-@contextlib.contextmanager
-def torch_path(enabled: bool) -> Iterator[None]:
-    """Integrate with the torch path even where the compiled kernel is
-    built (as an install without a C compiler does), for comparison."""
-    built = fixed_point.COMPILED_KERNEL
-    fixed_point.COMPILED_KERNEL = built and not enabled
-    try:
-        yield
-    finally:
-        fixed_point.COMPILED_KERNEL = built
+def _compiled_runs(device: str) -> bool:
+    """Whether ``'auto'`` integrates with the compiled kernel on
+    ``device``."""
+    return fixed_point.resolve_backend('auto', device) == 'compiled'
 
 
 def header(args) -> List[str]:
-    kernel = ('compiled CPU kernel' if fixed_point.COMPILED_KERNEL and
-              args.device == 'cpu' else 'torch path')
+    kernel = ('compiled CPU kernel' if _compiled_runs(args.device) else
+              'torch path')
+    machine = machine_record(args.device)
     return [
-        f'machine: {platform.machine()}, {cpu_model()}, '
-        f'{os.cpu_count()} logical CPUs, {platform.system()} '
-        f'{platform.release()}',
-        f'python {platform.python_version()}, torch {torch.__version__}, '
-        f'numpy {np.__version__}, opencv {cv2.__version__}; torch threads '
-        f'{torch.get_num_threads()}; device {args.device}',
+        f"machine: {machine['cpu']}, {machine['cpu_count']} logical CPUs, "
+        f"{machine['platform']}" + (f", {machine['gpu']}"
+                                    if 'gpu' in machine else ''),
+        f"python {machine['python']}, torch {machine['torch']}, "
+        f"numpy {machine['numpy']}, opencv {machine['opencv']}; torch "
+        f"threads {machine['torch_threads']}; device {args.device}",
         f'sample {args.height}x{args.width}, T={args.steps}, threshold '
         f'1/0.6; median of {args.repeat} runs; integrate-and-fire: '
         f'{kernel}',
@@ -111,14 +96,14 @@ def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
     for name, frames in inputs.items():
         timing = median_time(
             lambda: numpy_step_loop(frames, args.steps, REDS_THRESHOLD, 0),
-            args.repeat)
+            args.repeat, 'cpu')
         reference[name] = timing.wall
         rows.append(('NumPy step loop', name, timing, timing.result))
     cases = [
         ('base model', 'still', None),
         ('base model', 'video', None),
     ]
-    if fixed_point.COMPILED_KERNEL and args.device == 'cpu':
+    if _compiled_runs(args.device):
         cases += [('base model, torch path', 'still', None),
                   ('base model, torch path', 'video', None)]
     cases += [
@@ -135,11 +120,12 @@ def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
               hot_pixels={}, jitter={})),
     ]
     for case, name, effects in cases:
-        with torch_path(case.endswith('torch path')):
-            timing = median_time(
-                lambda: simulate_spikes(inputs[name], args.steps, REDS_THRESHOLD,
-                                        effects=effects, seed=0,
-                                        device=args.device), args.repeat)
+        backend = 'torch' if case.endswith('torch path') else 'auto'
+        timing = median_time(
+            lambda: simulate_spikes(inputs[name], args.steps, REDS_THRESHOLD,
+                                    effects=effects, seed=0,
+                                    device=args.device, backend=backend),
+            args.repeat, args.device)
         rows.append((case, name, timing, timing.result[0]))
     base = {name: spikes for case, name, _, spikes in rows
             if case == 'base model'}
@@ -169,7 +155,8 @@ def load_rows(args, still: np.ndarray) -> List[str]:
                        interpolation=cv2.INTER_LINEAR)[None]
     simulated = median_time(
         lambda: simulate_spikes(frame, steps, REDS_THRESHOLD, seed=0,
-                                device=args.device), args.repeat)
+                                device=args.device), args.repeat,
+        args.device)
     spikes = simulated.result[0]
     lines = [f'{"T x H x W = " + "x".join(map(str, args.load_shape)):29s} '
              f'{"MB":>6s} {"wall ms":>9s} {"cpu ms":>9s} '
@@ -182,7 +169,7 @@ def load_rows(args, still: np.ndarray) -> List[str]:
             path = osp.join(tmp, 'sample' + ext)
             save_spikes(path, spikes)
             load = median_time(lambda: load_spikes(path, height, width),
-                               args.repeat)
+                               args.repeat, 'cpu')
             if not np.array_equal(load.result, spikes):
                 raise RuntimeError(f'{ext}: the loaded sample differs')
             lines.append(f'load {ext:24s} {osp.getsize(path) / 1e6:6.1f} '

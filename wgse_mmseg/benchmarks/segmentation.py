@@ -48,13 +48,11 @@ absolute deviation (MAD) of the repeats, and the raw samples are kept.
 """
 from .._openmmlab import check_mmseg_layer
 
-check_mmseg_layer('wgse_mmseg.apis.benchmarking')  # before MMSeg is imported
+check_mmseg_layer('wgse_mmseg.benchmarks.segmentation')  # before MMSeg is imported
 
 import os
 import platform
 import resource
-import statistics
-import time
 from collections import Counter
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
@@ -69,52 +67,19 @@ from mmengine.structures import PixelData
 from mmseg.registry import DATASETS, MODELS
 from mmseg.structures import SegDataSample
 from ..utils.config import load_config
-from ..core.arguments import Integer, declare
-from ..core.limits import MAX_REPEAT
-from ..core.machine import cpu_model, package_version, run_isolated
-from ..core.markdown import markdown_table
+from .machine import machine_record
+from .markdown import markdown_table
+from .timing import summarize, time_calls
 
 __all__ = [
-    'summarize', 'time_calls', 'make_spike_batch', 'build_model',
-    'inference_parameters', 'count_flops', 'measure_latency',
-    'measure_throughput', 'measure_train_step', 'measure_enhancer_step',
-    'package_version', 'environment', 'benchmark_config', 'validation_cost',
-    'run_isolated', 'markdown_table', 'format_results'
+    'make_spike_batch', 'build_model', 'inference_parameters', 'count_flops',
+    'measure_latency', 'measure_throughput', 'measure_train_step',
+    'measure_enhancer_step', 'benchmark_config', 'validation_cost',
+    'format_results'
 ]
 
 SPIKE_PROBABILITY = 0.3
 NUM_CLASSES = 19
-
-
-def summarize(samples: Sequence[float]) -> Dict[str, Any]:
-    """``{'median', 'mad', 'samples'}`` of ``samples`` (same unit)."""
-    if not samples:
-        raise ValueError('no samples to summarize (repeat must be >= 1)')
-    median = statistics.median(samples)
-    mad = statistics.median(abs(s - median) for s in samples)
-    return dict(median=median, mad=mad, samples=list(samples))
-
-
-def _synchronize(device: torch.device) -> None:
-    if device.type == 'cuda':
-        torch.cuda.synchronize(device)
-
-
-@declare(repeat=Integer(1, MAX_REPEAT), warmup=Integer(0, MAX_REPEAT))
-def time_calls(fn: Callable[[], Any], device: torch.device, repeat: int,
-               warmup: int) -> List[float]:
-    """Seconds taken by each of ``repeat`` calls of ``fn`` after ``warmup``
-    untimed ones."""
-    for _ in range(warmup):
-        fn()
-    samples = []
-    for _ in range(repeat):
-        _synchronize(device)
-        start = time.perf_counter()
-        fn()
-        _synchronize(device)
-        samples.append(time.perf_counter() - start)
-    return samples
 
 
 def make_spike_batch(num_steps: int, height: int, width: int,
@@ -236,7 +201,7 @@ def _predict_seconds(model: nn.Module, num_steps: int, size: Tuple[int, int],
     model.eval()
     with torch.no_grad():
         return time_calls(lambda: model.test_step(batch), device, repeat,
-                          warmup)
+                          warmup).wall
 
 
 def measure_latency(model: nn.Module, num_steps: int, size: Tuple[int, int],
@@ -328,7 +293,7 @@ def measure_train_step(model: nn.Module, optim_wrapper_cfg: dict,
         model.train_step(batch, optim_wrapper)
     with _PeakMemory(device) as memory:
         seconds = time_calls(lambda: model.train_step(batch, optim_wrapper),
-                             device, repeat, 0)
+                             device, repeat, 0).wall
     return dict(step_ms=summarize([1e3 * s for s in seconds]),
                 memory=memory.as_dict())
 
@@ -353,31 +318,9 @@ def measure_enhancer_step(model: nn.Module, num_steps: int,
         if out.requires_grad:
             out.backward(torch.ones_like(out))
 
-    seconds = time_calls(step, device, repeat, warmup)
+    seconds = time_calls(step, device, repeat, warmup).wall
     enhancer.zero_grad(set_to_none=True)
     return summarize([1e3 * s for s in seconds])
-
-
-def environment(device: str = 'cpu') -> Dict[str, Any]:
-    """Device and software versions a benchmark ran with."""
-    env = dict(
-        device=device,
-        cpu=cpu_model(),
-        cpu_count=os.cpu_count(),
-        torch_threads=torch.get_num_threads(),
-        python=platform.python_version(),
-        platform=platform.platform(),
-        torch=torch.__version__,
-        mmcv=package_version('mmcv', 'mmcv-lite'),
-        mmengine=package_version('mmengine'),
-        mmsegmentation=package_version('mmsegmentation'),
-        wgse_mmseg=package_version('wgse_mmseg'),
-    )
-    if device.startswith('cuda'):
-        env.update(gpu=torch.cuda.get_device_name(torch.device(device)),
-                   cuda=torch.version.cuda,
-                   cudnn=torch.backends.cudnn.version())
-    return env
 
 
 def benchmark_config(config: str, device: str = 'cpu',
@@ -429,7 +372,7 @@ def benchmark_config(config: str, device: str = 'cpu',
         latency_ms=latency,
         throughput_img_s=throughput, train_step_ms=train['step_ms'],
         enhancer_step_ms=enhancer, enhancer_share=share,
-        memory=train['memory'], environment=environment(device))
+        memory=train['memory'], environment=machine_record(device))
 
 
 def validation_cost(config: str, cfg_options: Optional[dict],
@@ -451,7 +394,7 @@ def validation_cost(config: str, cfg_options: Optional[dict],
                 image_size=[height, width],
                 latency_ms=measure_latency(model, num_steps, (height, width),
                                            repeat, warmup),
-                environment=environment())
+                environment=machine_record())
 
 
 def _giga(flops: Optional[int]) -> str:
@@ -499,7 +442,8 @@ def format_results(results: Sequence[Dict[str, Any]]) -> str:
         f"wgse_mmseg {env['wgse_mmseg']}; {env['platform']}",
         'times: median ± median absolute deviation over the repeats, after '
         'warm-up; FLOPs: one multiply-add = 1 FLOP, batch 1, auxiliary head '
-        'excluded (see wgse_mmseg/apis/benchmarking.py for what is counted); '
+        'excluded (see wgse_mmseg/benchmarks/segmentation.py for what is '
+        'counted); '
         f"peak memory: {', '.join(memory_kinds)} during the training steps",
     ]
     notes += list(dict.fromkeys(r['flops_note'] for r in results

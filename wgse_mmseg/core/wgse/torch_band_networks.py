@@ -23,13 +23,10 @@ convolution is a few matrix products on a "padded rows" layout instead:
   device busy, and run one after the other, so the memory of a chunk's
   activations is bounded whatever the batch.
 
-The backward pass is written out by hand on the same layout. It keeps only
-the input and the outputs of the wide (32 -> 32) convolutions between
-forward and backward and recomputes the cheap ones (the 1 -> 32 input and
-32 -> 1 output layers), which halves the memory of keeping all;
-``recompute=True`` keeps nothing and recomputes each chunk in the backward
-pass (activation checkpointing at chunk granularity: no activation of size
-``B*H*W*C*32`` outlives the forward pass, for a third more arithmetic).
+The backward pass is written out by hand on the same layout. It keeps no
+activation: each chunk's are recomputed in the backward pass (activation
+checkpointing at chunk granularity: no activation of size ``B*H*W*C*32``
+outlives the forward pass, for about a third more arithmetic).
 
 The result equals ``BandNetwork`` applied per pixel (tests compare both, and
 ``gradcheck`` the gradients in float64), and does not depend on timing: a
@@ -42,7 +39,7 @@ from torch import Tensor
 
 from ..parallel import for_each_on_threads
 
-__all__ = ['fused_band_networks', 'ROWS_PER_CHUNK', 'DEVICE_ROWS_PER_CHUNK']
+__all__ = ['torch_band_networks', 'ROWS_PER_CHUNK', 'DEVICE_ROWS_PER_CHUNK']
 
 #: Rows (pixel-coefficients) per chunk: 16384 rows x 32 channels x 4 bytes
 #: is 2 MiB per activation, so a chunk's layers stay in the L2/L3 caches
@@ -83,11 +80,6 @@ class Layer(NamedTuple):
         return cls(weight.permute(2, 1, 0).contiguous(),
                    weight.flip(2).permute(2, 0, 1).contiguous(), bias,
                    residual)
-
-    @property
-    def wide(self) -> bool:
-        """``C_in, C_out > 1``: a full GEMM to recompute."""
-        return min(self.taps.shape[1:]) > 1
 
 
 class _Workspace:
@@ -211,20 +203,12 @@ def _padded_rows(signals: Tensor, pad: int, out: Tensor) -> Tensor:
 
 
 def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
-                   scratch: _Workspace,
-                   acts: Optional[List[Optional[Tensor]]] = None,
-                   stores: Optional[Dict[int, Tensor]] = None
-                   ) -> List[Tensor]:
-    """All activations of one chunk.
+                   scratch: _Workspace) -> List[Tensor]:
+    """All activations of one chunk, in ``scratch``'s buffers (valid until
+    the next chunk).
 
     Args:
         signals: ``(n, L)`` coefficients of ``n`` pixels.
-        scratch: where activations without a store are written; they are
-            valid until the next chunk.
-        acts: activations kept from an earlier pass, ``None`` where dropped;
-            only the dropped ones are computed again.
-        stores: activation index -> ``(n * S, C)`` buffer to write that
-            activation into, for activations kept beyond the chunk.
 
     Returns:
         ``[input, act_1, ..., act_m]``, each ``(n * S, C)`` with zero padding.
@@ -232,20 +216,9 @@ def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
     count, length = signals.shape
     seg_len = length + 2 * pad
     rows = count * seg_len
-    stores = stores or {}
-
-    def buffer(index: int, channels: int) -> Tensor:
-        if index in stores:
-            return stores[index]
-        return scratch(('act', index), rows, channels)
-
-    if acts is None:
-        acts = [_padded_rows(signals, pad, buffer(0, 1))] + [None] * len(
-            layers)
+    acts = [_padded_rows(signals, pad, scratch(('act', 0), rows, 1))]
     for index, layer in enumerate(layers, 1):
-        if acts[index] is not None:
-            continue
-        out = buffer(index, layer.taps.shape[2])
+        out = scratch(('act', index), rows, layer.taps.shape[2])
         interior = out[pad:rows - pad]
         _conv_rows(acts[index - 1], layer.taps, interior, scratch,
                    layer.bias)
@@ -253,15 +226,8 @@ def _chunk_forward(signals: Tensor, layers: Sequence[Layer], pad: int,
             interior += acts[layer.residual][pad:rows - pad]
         out.relu_()
         _zero_padding(out, seg_len, pad)
-        acts[index] = out
+        acts.append(out)
     return acts
-
-
-def _drop_cheap(acts: List[Tensor], layers: Sequence[Layer]) -> List:
-    """Keep the input and the outputs of wide layers; the rest cost one
-    narrow product to recompute, not a full GEMM."""
-    return [act if index == 0 or layers[index - 1].wide else None
-            for index, act in enumerate(acts)]
 
 
 def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
@@ -318,48 +284,25 @@ def _zero_grads(params: Sequence[Tensor]) -> List[Tensor]:
             else torch.zeros_like(p) for p in params]
 
 
-class _FusedBandNetworks(torch.autograd.Function):
-    """Autograd wrapper; see :func:`fused_band_networks`."""
+class _TorchBandNetworks(torch.autograd.Function):
+    """Autograd wrapper; see :func:`torch_band_networks`."""
 
     @staticmethod
     def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
                 residuals: Tuple[Optional[int], ...], pad: int,
-                recompute: bool, *params: Tensor) -> Tensor:
+                *params: Tensor) -> Tensor:
         out = torch.empty_like(coeffs)
         chunks = list(_chunks(coeffs, lengths, residuals, pad, params))
-        saved = None if recompute else [None] * len(chunks)
-        if saved:  # chunks to keep activations of
-            # One buffer per kept activation (the input and the wide layers'
-            # outputs) and band, filled chunk by chunk: no heap fragmented
-            # by thousands of kept pieces.
-            layers = chunks[0][3]
-            kept = [index for index in range(len(layers) + 1)
-                    if index == 0 or layers[index - 1].wide]
-            band_stores = [{
-                index: coeffs.new_empty(
-                    coeffs.shape[0] * (length + 2 * pad),
-                    1 if index == 0 else layers[index - 1].taps.shape[2])
-                for index in kept} for length in lengths]
 
         def forward_chunk(chunk: int, scratch: _Workspace) -> None:
             band, columns, rows, layers = chunks[chunk]
             seg_len = band.length + 2 * pad
-            stores = None
-            if saved is not None:
-                first, last = rows.start * seg_len, min(
-                    rows.stop, coeffs.shape[0]) * seg_len
-                stores = {index: store[first:last] for index, store in
-                          band_stores[band.index].items()}
-            acts = _chunk_forward(columns[rows], layers, pad, scratch,
-                                  stores=stores)
+            acts = _chunk_forward(columns[rows], layers, pad, scratch)
             out[rows, band.offset] = acts[-1].view(
                 -1, seg_len)[:, pad:pad + band.length]
-            if saved is not None:
-                saved[chunk] = _drop_cheap(acts, layers)
 
         _for_each_chunk(forward_chunk, len(chunks), coeffs)
         ctx.lengths, ctx.residuals, ctx.pad = lengths, residuals, pad
-        ctx.saved_acts = saved
         ctx.save_for_backward(coeffs, *params)
         return out
 
@@ -370,7 +313,6 @@ class _FusedBandNetworks(torch.autograd.Function):
         grad_coeffs = torch.zeros_like(coeffs) if need_input_grad else None
         grad_out = grad_out.contiguous()
         per_band = 2 * len(ctx.residuals)
-        saved, ctx.saved_acts = ctx.saved_acts, None
         chunks = list(_chunks(coeffs, ctx.lengths, ctx.residuals, ctx.pad,
                               params))
 
@@ -378,10 +320,7 @@ class _FusedBandNetworks(torch.autograd.Function):
             band, columns, rows, layers = chunks[chunk]
             if scratch.param_grads is None:
                 scratch.param_grads = _zero_grads(params)
-            acts = _chunk_forward(columns[rows], layers, ctx.pad, scratch,
-                                  saved[chunk] if saved else None)
-            if saved:
-                saved[chunk] = None  # free the chunk once used
+            acts = _chunk_forward(columns[rows], layers, ctx.pad, scratch)
             first = band.index * per_band
             grad_in = _chunk_backward(
                 acts, grad_out[rows, band.offset], layers,
@@ -397,7 +336,7 @@ class _FusedBandNetworks(torch.autograd.Function):
                        else grads[0] for grads in zip(*sums)]
         param_grads = [g.permute(2, 1, 0) if g.dim() == 3 else g
                        for g in param_grads]
-        return (grad_coeffs, None, None, None, None, *param_grads)
+        return (grad_coeffs, None, None, None, *param_grads)
 
 
 class _Band(NamedTuple):
@@ -430,10 +369,9 @@ def _chunks(coeffs: Tensor, lengths: Tuple[int, ...],
         start += length
 
 
-def fused_band_networks(coeffs: Tensor, lengths: Sequence[int],
+def torch_band_networks(coeffs: Tensor, lengths: Sequence[int],
                         weights: Sequence[Sequence[Tuple[Tensor, Tensor]]],
-                        residuals: Sequence[Optional[int]],
-                        recompute: bool = False) -> Tensor:
+                        residuals: Sequence[Optional[int]]) -> Tensor:
     """Run one temporal CNN per band over every pixel's coefficients.
 
     Args:
@@ -447,8 +385,6 @@ def fused_band_networks(coeffs: Tensor, lengths: Sequence[int],
         residuals: per layer, the index of the activation added before its
             ReLU (0 is the band's input, ``i`` the output of layer ``i``;
             a 1-channel activation broadcasts), or ``None``.
-        recompute: keep no activations; recompute them chunk by chunk in
-            the backward pass (less memory, about a third more time).
 
     Returns:
         ``(N, C)``: each band's network output, in place of its input.
@@ -459,6 +395,6 @@ def fused_band_networks(coeffs: Tensor, lengths: Sequence[int],
             f'do not fit coefficients shaped {tuple(coeffs.shape)}')
     kernel_size = weights[0][0][0].shape[2]
     params = [t for band in weights for layer in band for t in layer]
-    return _FusedBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
+    return _TorchBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
                                     tuple(residuals), kernel_size // 2,
-                                    recompute, *params)
+                                    *params)

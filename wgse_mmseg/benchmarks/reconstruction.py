@@ -1,6 +1,6 @@
 """Score reconstruction methods on a REDS-layout folder.
 
-    python -m wgse_mmseg.apis.reconstruction_benchmark DATA_ROOT
+    python -m wgse_mmseg.benchmarks.reconstruction DATA_ROOT
         [--methods wgse,tfp,tfi] [--checkpoint CKPT] [--num-steps 41]
 
 ``DATA_ROOT`` holds ``spike/<name>.dat`` beside ``gt/<name>.png``

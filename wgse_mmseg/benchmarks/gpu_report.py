@@ -11,35 +11,34 @@ Sections:
   full float32 (``'ieee'``: TF32 off), TF32 and bf16 autocast: the largest
   error of the output and of each parameter gradient relative to the
   largest magnitude of that tensor (or a hundredth of the largest of all),
-  against :data:`~.triton_band_networks.TOLERANCES`.
+  against :data:`~wgse_mmseg.core.wgse.triton_band_networks.TOLERANCES`.
 * ``wgse``: forward+backward of the reference design and of every backend
-  that runs on the device (:mod:`.benchmark`'s worker, a fresh process
+  that runs on the device (:mod:`.wgse`'s worker, a fresh process
   each): median time and peak memory, and both over the reference's.
 * ``segmentation`` and ``latency``: PSPNet and SegFormer-B0 training steps,
-  raw spikes and WGSE (:func:`wgse_mmseg.apis.benchmarking.measure_train_step`:
+  raw spikes and WGSE
+  (:func:`wgse_mmseg.benchmarks.segmentation.measure_train_step`:
   time, peak memory; WGSE's over raw), and inference at batch 1
   (``measure_latency``: WGSE's added milliseconds).
 * ``paper``: the PSPNet step, raw and with WGSE, at the paper's shape
   (2 x 129 x 512 x 1024): time and peak memory.
 * ``autotune``: the launch entries the Triton kernels chose
-  (:func:`~.triton_band_networks.tuned_configs` of every process).
+  (:func:`~wgse_mmseg.core.wgse.triton_band_networks.tuned_configs` of
+  every process).
 * ``targets``: issue 24's targets for one H100 against those figures.
 
 A measurement that fails (out of memory, a missing package) is recorded
 with its error and the report goes on; the segmentation sections import
 the MMSeg layer in their own jobs, so without OpenMMLab they fail and the
 WGSE sections still run. On CUDA every segmentation job runs in a fresh
-process (:func:`~wgse_mmseg.core.machine.run_isolated`), so an out-of-memory
-error or a broken CUDA context ends that job alone. :data:`SMOKE` runs the
-same code on the CPU at tiny shapes (Triton in its interpreter), which CI
-runs.
+process (:func:`~wgse_mmseg.benchmarks.machine.run_isolated`), so an
+out-of-memory error or a broken CUDA context ends that job alone.
+:data:`SMOKE` runs the same code on the CPU at tiny shapes (Triton in its
+interpreter), which CI runs.
 """
 import copy
 import json
 import os
-import platform
-import shutil
-import subprocess
 import time
 from contextlib import contextmanager
 from typing import (Any, Callable, Dict, Iterator, List, NamedTuple,
@@ -47,11 +46,11 @@ from typing import (Any, Callable, Dict, Iterator, List, NamedTuple,
 
 import torch
 
-from ..io import atomic_output
-from ..machine import cpu_model, package_version, run_isolated
-from ..markdown import markdown_table
-from . import benchmark, triton_band_networks
-from .wgse import WGSE
+from ..core.io import atomic_output
+from ..core.wgse import WGSE, triton_band_networks
+from . import wgse as wgse_benchmark
+from .machine import machine_record, run_isolated
+from .markdown import markdown_table
 
 __all__ = ['Plan', 'GPU', 'SMOKE', 'PRECISIONS', 'MODELS', 'TARGETS',
            'environment', 'check_correctness', 'segmentation_step',
@@ -107,39 +106,12 @@ def _shape_text(shape: Sequence[int]) -> str:
     return 'x'.join(map(str, shape))
 
 
-def _driver() -> str:
-    smi = shutil.which('nvidia-smi')
-    if smi is None:
-        return 'unknown (no nvidia-smi)'
-    proc = subprocess.run([smi, '--query-gpu=driver_version',
-                           '--format=csv,noheader'], capture_output=True,
-                          text=True)
-    return proc.stdout.strip().splitlines()[0] if proc.returncode == 0 and \
-        proc.stdout.strip() else f'unknown (nvidia-smi: {proc.stderr.strip()})'
-
-
 def environment(device: str) -> Dict[str, Any]:
-    """The device, driver and software versions of a report."""
-    env = dict(
-        device=device, python=platform.python_version(),
-        platform=platform.platform(), cpu=cpu_model(),
-        cpu_count=os.cpu_count(), torch=torch.__version__,
-        triton=package_version('triton'), numpy=package_version('numpy'),
-        pytorch_wavelets=package_version('pytorch_wavelets'),
-        mmcv=package_version('mmcv', 'mmcv-lite'),
-        mmengine=package_version('mmengine'),
-        mmsegmentation=package_version('mmsegmentation'),
-        wgse_mmseg=package_version('wgse_mmseg'),
-        triton_interpreter=triton_band_networks.interpreting())
-    if device.startswith('cuda'):
-        props = torch.cuda.get_device_properties(torch.device(device))
-        env.update(gpu=props.name, capability=f'sm_{props.major}'
-                   f'{props.minor}', gpu_memory_gib=round(
-                       props.total_memory / 2**30, 1),
-                   sms=props.multi_processor_count, driver=_driver(),
-                   cuda=torch.version.cuda,
-                   cudnn=torch.backends.cudnn.version())
-    return env
+    """The device, driver and software versions of a report: the machine
+    record (:func:`~wgse_mmseg.benchmarks.machine.machine_record`) and
+    whether Triton runs in its interpreter."""
+    return dict(machine_record(device),
+                triton_interpreter=triton_band_networks.interpreting())
 
 
 @contextmanager
@@ -195,7 +167,7 @@ def check_correctness(shape: Shape, device: str) -> Dict[str, Any]:
     largest = max(w.abs().max().item() for w in want)
     names = ['output'] + [name for name, _ in model.named_parameters()]
     backends = [b for b in ('triton', 'torch')
-                if b in benchmark.available_backends(device)]
+                if b in wgse_benchmark.available_backends(device)]
     rows = []
     for backend in backends:
         model.backend = backend
@@ -225,18 +197,18 @@ def segmentation_step(config: str, shape: Shape, repeat: int, warmup: int,
                       device: str, latency: bool = True) -> Dict[str, Any]:
     """A config's training step on a ``(B, T, H, W)`` batch (and, if
     ``latency``, its batch-1 inference), as
-    :mod:`wgse_mmseg.apis.benchmarking` measures them. Imports the MMSeg
-    layer."""
-    from ...apis import benchmarking
+    :mod:`wgse_mmseg.benchmarks.segmentation` measures them. Imports the
+    MMSeg layer."""
+    from . import segmentation
     batch, steps, height, width = shape
-    cfg, model = benchmarking.build_model(
+    cfg, model = segmentation.build_model(
         config, dict(num_steps=steps, crop_size=f'{height},{width}'),
         device=device)
     result = {}
     if latency:
-        result['latency_ms'] = benchmarking.measure_latency(
+        result['latency_ms'] = segmentation.measure_latency(
             model, steps, (height, width), repeat, warmup)
-    train = benchmarking.measure_train_step(model, cfg.optim_wrapper, steps,
+    train = segmentation.measure_train_step(model, cfg.optim_wrapper, steps,
                                             (height, width), batch, repeat,
                                             warmup)
     enhancer = getattr(model.data_preprocessor, 'enhancer', None)
@@ -288,9 +260,10 @@ def _ratio(value: Optional[float], base: Optional[float]) -> Optional[float]:
 def _wgse_section(plan: Plan, clock: _Clock) -> Dict[str, Any]:
     text = _shape_text(plan.wgse_shape)
     rows = []
-    for impl in ['reference'] + benchmark.available_backends(plan.device):
+    for impl in ['reference'] + wgse_benchmark.available_backends(plan.device):
         row = clock.attempt(
-            f'WGSE forward+backward, {impl}, {text}', benchmark.run_worker,
+            f'WGSE forward+backward, {impl}, {text}',
+            wgse_benchmark.run_worker,
             [impl, text, str(plan.wgse_repeat), '--device', plan.device])
         rows.append(dict(row, impl=impl))
     base = rows[0] if rows[0]['status'] == 'ok' else {}
@@ -497,7 +470,7 @@ def format_report(report: Dict[str, Any], command: str) -> str:
             markdown_table(
                 ['implementation', 'median ms', 'min-max ms', 'peak MiB',
                  'time / reference', 'memory / reference', 'status'],
-                [[benchmark.IMPLEMENTATIONS[r['impl']],
+                [[wgse_benchmark.IMPLEMENTATIONS[r['impl']],
                   _num(1e3 * r['median_s'], 1) if 'median_s' in r else '-',
                   f"{1e3 * r['min_s']:.1f}-{1e3 * r['max_s']:.1f}"
                   if 'min_s' in r else '-',
