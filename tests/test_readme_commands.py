@@ -105,7 +105,7 @@ HOW = {
     '--out recon/': RUN,
     'python tools/misc/reconstruct.py clip.npy --out recon/ --method tfp':
         RUN,
-    'python -m wgse_mmseg.benchmarks.reconstruction '
+    'python -m wgse_mmseg.apis.reconstruction_benchmark '
     '../shared/data/reds_sample': RUN,
 }
 
@@ -118,7 +118,7 @@ PRINTS = {
                     r'.*left as it is',
     'python tools/misc/reconstruct.py clip.npy --out recon/ --method tfp':
         r'recon/clip_20\.png',
-    'python -m wgse_mmseg.benchmarks.reconstruction '
+    'python -m wgse_mmseg.apis.reconstruction_benchmark '
     '../shared/data/reds_sample': r'\| WGSE \| \d\d\.\d\d \|',
 }
 
