@@ -3,7 +3,7 @@ forward+backward per backend, PSPNet and SegFormer-B0 training steps raw and
 with WGSE, latency at batch 1, the paper's shape, the autotune choice and the
 issue's targets; writes gpu.md and gpu.json (device, driver, versions).
 
-    python tools/analysis_tools/gpu_report.py                       # CUDA: docs/gpu.md, docs/gpu.json
+    python tools/analysis_tools/gpu_report.py                       # CUDA: docs/gpu.md and gpu.json
     python tools/analysis_tools/gpu_report.py --smoke --out-dir DIR  # CPU, tiny shapes, Triton interpreted
 
 On a GPU machine with torch alone: ``bash tools/gpu_report.sh`` (installs

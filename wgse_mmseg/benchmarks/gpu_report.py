@@ -1,5 +1,5 @@
 """Everything about WGSE on a GPU, measured in one run: docs/gpu.md and
-docs/gpu.json.
+gpu.json beside it.
 
 What ``tools/analysis_tools/gpu_report.py`` runs (on a GPU machine that has
 torch and triton but nothing of OpenMMLab: ``bash tools/gpu_report.sh``).
