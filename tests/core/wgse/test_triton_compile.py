@@ -115,11 +115,10 @@ def test_default_forward_fits_four_programs_per_sm_on_sm_90(rows):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    'issue 24: the backward at 16 and 32 channels uses 230-255 registers '
-    'a thread at 4 warps (2 programs per SM): its (16, H) tiles take about '
-    '128, and tl.dot operands, parameter-gradient sums and ptxas\'s '
-    'scheduling the rest (docs/wgse_speed.md); no GPU has yet measured '
-    'whether fewer programs are slower'))
+    'issue 24: the backward at 16 and 32 channels uses 234-255 registers '
+    'a thread at 4 warps (2 programs per SM): its loop state, tl.dot '
+    'operands and parameter-gradient sums (docs/wgse_speed.md, what was '
+    'tried); no GPU has yet measured whether fewer programs are slower'))
 def test_default_backward_fits_four_programs_per_sm_on_sm_90(rows):
     small = [r for r in rows if r['default'] and r['arch'] == 'sm_90' and
              r['kernel'] == 'band_backward' and r['programs_per_sm'] < 4]

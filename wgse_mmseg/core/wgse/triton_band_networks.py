@@ -66,7 +66,7 @@ class LaunchConfig(NamedTuple):
 #: GPUs": on sm_90 the forward at 16 pixels and 4 warps uses 112 registers
 #: a thread at 32 channels, 4 programs per SM; the backward, which carries
 #: the gradient's windows and three ``H x H`` parameter-gradient sums
-#: besides, 230-255, 2 programs). 64 pixels at 8 warps fitted one program
+#: besides, 234-255, 2 programs). 64 pixels at 8 warps fitted one program
 #: per SM.
 FORWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(32, 4))
 BACKWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(32, 4))
