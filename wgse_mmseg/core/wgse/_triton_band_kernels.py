@@ -250,7 +250,7 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
         g_w2t_1 += _dot(d2t_3, h1_3, PRECISION)
         g_w2t_2 += _dot(d2t_3, h1_2, PRECISION)
         g_b2 += tl.sum(d2_3, axis=0)
-        # d1[s - 4]; d2[s - 3] reaches d1[s - 4 + k] through tap 2 - k
+        # d1[s - 4]; d2[s - 3] reaches d1[s - 4 + k] through tap k
         d1_4 = tl.where(h1_4 > 0, e1_4 + _dot(d2_3, w2t_0, PRECISION), 0.0)
         e1_4 = e1_3 + _dot(d2_3, w2t_1, PRECISION)
         e1_3 = _dot(d2_3, w2t_2, PRECISION)
