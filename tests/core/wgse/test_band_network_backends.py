@@ -90,6 +90,7 @@ def test_unknown_backend_lists_the_choices():
     ('triton', dict(dim=3), 'dim=1'),
     ('triton', dict(num_blocks=2), 'num_blocks=1'),
     ('triton', dict(hidden_channels=8), 'hidden_channels'),
+    ('triton', dict(hidden_channels=64), 'hidden_channels'),
 ])
 def test_a_backend_that_cannot_run_the_variant_fails_when_built(
         backend, kwargs, reason):

@@ -3,40 +3,39 @@ GPU: every variant the dispatcher can launch, and the default ones use no
 local memory and leave room for several programs per SM
 (``wgse_mmseg.core.wgse.triton_resources``; the table is in
 docs/wgse_speed.md)."""
+import ast
+import inspect
+import textwrap
+
 import pytest
 
 from wgse_mmseg.core.wgse import triton_band_networks, triton_resources
+
+_triton_band_kernels = pytest.importorskip(
+    'wgse_mmseg.core.wgse._triton_band_kernels')
 
 pytestmark = pytest.mark.skipif(
     triton_band_networks.unavailable() is not None,
     reason=str(triton_band_networks.unavailable()))
 
 
-@pytest.fixture(scope='module')
+@pytest.fixture(scope='session')
 def rows():
-    # a fresh process without TRITON_INTERPRET, two compiles side by side
-    # (CI's two cores); every variant for sm_90, a covering set for the
-    # others (`python -m wgse_mmseg.core.wgse.triton_resources` compiles
-    # every variant for every target)
-    return triton_resources.compile_all(jobs=2, scope='ci')
+    # once per session, in a fresh process without TRITON_INTERPRET, two
+    # compiles side by side (CI's two cores)
+    return triton_resources.compile_all(jobs=2)
 
 
-def _key(arch, variant):
-    return (arch, *variant)
-
-
-def test_every_launchable_variant_compiles(rows):
-    compiled = {(r['arch'], r['kernel'], r['hidden'], r['precision'],
-                 r['input_grad'], r['block'], r['num_warps']) for r in rows}
-    expected = {_key(a, v) for v, a in triton_resources.jobs_for(
-        triton_resources.ARCHITECTURES, 'ci')}
-    assert compiled == expected
-    # every variant for sm_90: forward and backward (with and without the
-    # input gradient) at every width, precision and launch entry
-    every = {_key(triton_resources.FULL_ARCH, v)
-             for v in triton_resources.variants()}
-    assert every <= compiled
-    assert len(every) == len(triton_band_networks.HIDDEN_CHANNELS) * \
+def test_every_launchable_variant_compiles_for_every_target(rows):
+    """Forward and backward (with and without the input gradient) at every
+    width, precision and launch entry, for sm_80, sm_89 and sm_90."""
+    compiled = [(r['arch'], r['kernel'], r['hidden'], r['precision'],
+                 r['input_grad'], r['block'], r['num_warps']) for r in rows]
+    expected = {(a, *v) for v, a in triton_resources.jobs_for(
+        triton_resources.ARCHITECTURES)}
+    assert len(compiled) == len(set(compiled)) and set(compiled) == expected
+    assert {a for a, *_ in compiled} == {'sm_80', 'sm_89', 'sm_90'}
+    assert len(expected) == 3 * len(triton_band_networks.HIDDEN_CHANNELS) * \
         len(triton_band_networks.TOLERANCES) * (
             len(triton_band_networks.FORWARD_CONFIGS) +
             2 * len(triton_band_networks.BACKWARD_CONFIGS))
@@ -44,39 +43,60 @@ def test_every_launchable_variant_compiles(rows):
                for r in rows)
 
 
-def test_every_entry_precision_and_width_compiles_for_each_target(rows):
-    """On sm_80 and sm_89 too, each kernel (forward, backward with and
-    without the input gradient) compiles at every launch entry, every
-    precision and every width, and every default variant compiles."""
-    for arch in triton_resources.ARCHITECTURES:
-        mine = [r for r in rows if r['arch'] == arch]
-        for kernel, grad in (('band_forward', None), ('band_backward',
-                                                      False),
-                             ('band_backward', True)):
-            these = [r for r in mine if r['kernel'] == kernel and
-                     r['input_grad'] == grad]
-            configs = (triton_band_networks.FORWARD_CONFIGS if grad is None
-                       else triton_band_networks.BACKWARD_CONFIGS)
-            assert {(r['block'], r['num_warps']) for r in these} == \
-                {tuple(c) for c in configs}, (arch, kernel, grad)
-            assert {r['precision'] for r in these} == \
-                set(triton_band_networks.TOLERANCES), (arch, kernel, grad)
-            assert {r['hidden'] for r in these} == \
-                set(triton_band_networks.HIDDEN_CHANNELS), (arch, kernel)
-        assert sum(r['default'] for r in mine) == 2 * 3 * 3
+def _names_assigned(statements, input_grad):
+    """Names assigned by ``statements`` (the branches under ``if
+    INPUT_GRAD:`` only when ``input_grad``)."""
+    names = set()
+    for statement in statements:
+        if isinstance(statement, ast.If) and \
+                getattr(statement.test, 'id', None) == 'INPUT_GRAD':
+            if input_grad:
+                names |= _names_assigned(statement.body, input_grad)
+            continue
+        for node in ast.walk(statement):
+            targets = (node.targets if isinstance(node, ast.Assign) else
+                       [node.target] if isinstance(node, ast.AugAssign)
+                       else [])
+            names |= {n.id for t in targets for n in ast.walk(t)
+                      if isinstance(n, ast.Name)}
+    return names
 
 
-@pytest.mark.parametrize('fields, expected', [
-    (('band_forward', 32, 'tf32', None, 16, 4), False),   # the default
-    (('band_forward', 32, 'tf32', None, 32, 4), True),    # other entry
-    (('band_backward', 32, 'ieee', True, 16, 4), True),   # float32
-    (('band_backward', 64, 'tf32', False, 16, 4), True),  # 64 channels
-    (('band_backward', 64, 'ieee', False, 16, 4), False),  # two changes
-    (('band_forward', 16, 'fp16', None, 32, 4), False),   # from fp16
+def _loop_variables(kernel, input_grad):
+    """Names a kernel assigns before its ``for`` loop and again in it: what
+    the loop must carry from one step to the next."""
+    source = textwrap.dedent(inspect.getsource(
+        getattr(_triton_band_kernels, kernel).fn))
+    body = ast.parse(source).body[0].body
+    loop = next(i for i, s in enumerate(body) if isinstance(s, ast.For))
+    return _names_assigned(body[:loop], True) & _names_assigned(
+        body[loop].body, bool(input_grad))
+
+
+def test_every_loop_variable_is_carried_into_the_next_step(rows):
+    """Triton carries a name into the next iteration only if one pass over
+    the body changes it: windows that start as one shared tensor
+    (``h1_2 = h1_1 = zeros``, then ``h1_2, h1_1 = h1_1, h1_0``) compile to
+    a loop in which ``h1_2`` stays zero, which the interpreter never
+    shows. Every name the loop reassigns must be carried."""
+    for r in rows:
+        expected = _loop_variables(r['kernel'], r['input_grad'])
+        assert r['loop_carried'] == len(expected), (r, sorted(expected))
+
+
+@pytest.mark.parametrize('ttir, carried', [
+    ('%r:2 = scf.for %s = %c0 to %c9 step %c1 iter_args(%a = %x, %b = %y)'
+     ' -> (f32, f32)  : i32 {', 2),
+    ('%r = scf.for %s = %c0 to %c9 step %c1 iter_args(%a = %x) -> (f32)',
+     1),
 ])
-def test_one_step_from_default_by_hand(fields, expected):
-    variant = triton_resources.Variant(*fields)
-    assert triton_resources.one_step_from_default(variant) is expected
+def test_loop_carried_by_hand(ttir, carried):
+    assert triton_resources.loop_carried(ttir) == carried
+
+
+def test_loop_carried_needs_one_loop():
+    with pytest.raises(ValueError, match='found 0'):
+        triton_resources.loop_carried('tt.func @k() { tt.return }')
 
 
 def test_default_variants_use_no_local_memory(rows):
@@ -95,9 +115,10 @@ def test_default_forward_fits_four_programs_per_sm_on_sm_90(rows):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    'issue 24: the backward at 32 channels holds three 32x32 parameter-'
-    'gradient sums and needs about 220 registers a thread (2 programs per '
-    'SM); no GPU has yet measured whether fewer programs are slower'))
+    'issue 24: the backward at 16 and 32 channels uses 234-255 registers '
+    'a thread at 4 warps (2 programs per SM): its loop state, tl.dot '
+    'operands and parameter-gradient sums (docs/wgse_speed.md, what was '
+    'tried); no GPU has yet measured whether fewer programs are slower'))
 def test_default_backward_fits_four_programs_per_sm_on_sm_90(rows):
     small = [r for r in rows if r['default'] and r['arch'] == 'sm_90' and
              r['kernel'] == 'band_backward' and r['programs_per_sm'] < 4]

@@ -63,6 +63,14 @@ def _wide_offsets(HIDDEN: tl.constexpr):
 
 
 @triton.jit
+def _transposed_wide_offsets(HIDDEN: tl.constexpr):
+    """``(H_out, H_in)`` offsets of tap 0 in an ``(H_out, H_in, 3)``
+    weight: element ``[o, i]`` is ``o * 3H + i * 3``."""
+    channels = tl.arange(0, HIDDEN)
+    return channels[:, None] * (HIDDEN * 3) + channels[None, :] * 3
+
+
+@triton.jit
 def _wide_taps(ptr, HIDDEN: tl.constexpr):
     """The three taps of the ``(H_out, H_in, 3)`` weight, each as the
     ``(H_in, H_out)`` matrix that multiplies a ``(BLOCK, H_in)`` tile."""
@@ -87,15 +95,22 @@ def _load_weights(w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
 
 
 @triton.jit
+def _h1(t, x_p, x_c, x_n, w1_0, w1_1, w1_2, b1, LENGTH: tl.constexpr):
+    """``h1[t]`` ``(BLOCK, H)`` from ``x[t - 1]``, ``x[t]``, ``x[t + 1]``;
+    zero outside the band."""
+    h1 = tl.maximum(b1 + w1_0 * x_p[:, None] + w1_1 * x_c[:, None] +
+                    w1_2 * x_n[:, None], 0.0)
+    return tl.where((t >= 0) & (t < LENGTH), h1, 0.0)
+
+
+@triton.jit
 def _hidden_step(s, x_1, x_0, x_n, h1_2, h1_1, w1_0, w1_1, w1_2, b1, w2_0,
                  w2_1, w2_2, b2, LENGTH: tl.constexpr,
                  PRECISION: tl.constexpr):
     """``h1[s]`` and ``h2[s - 1]``, each ``(BLOCK, H)`` and zero outside
     the band, from ``x[s - 1]``, ``x[s]``, ``x[s + 1]`` and ``h1[s - 2]``,
     ``h1[s - 1]``."""
-    h1_0 = tl.maximum(b1 + w1_0 * x_1[:, None] + w1_1 * x_0[:, None] +
-                      w1_2 * x_n[:, None], 0.0)
-    h1_0 = tl.where(s < LENGTH, h1_0, 0.0)
+    h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, LENGTH)
     h2_1 = (b2 + _dot(h1_2, w2_0, PRECISION) + _dot(h1_1, w2_1, PRECISION) +
             _dot(h1_0, w2_2, PRECISION) + x_1[:, None])
     h2_1 = tl.where((s >= 1) & (s <= LENGTH), tl.maximum(h2_1, 0.0), 0.0)
@@ -117,13 +132,16 @@ def band_forward(x_ptr, y_ptr, stride, offset, pixels,
      b3) = _load_weights(w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
                          HIDDEN)
 
-    zeros = tl.zeros((BLOCK, HIDDEN), tl.float32)
+    # Each window value starts as its own tensor: triton carries a variable
+    # into the next iteration only if the loop body changes its value, so
+    # two names starting as one tensor (h1_2 = h1_1 = zeros) would leave
+    # h1_2 = h1_1 looking unchanged and h1[s - 2] zero in every step.
     x_1 = tl.zeros((BLOCK, ), tl.float32)  # x[s - 1]
     x_0 = tl.load(x_row, mask=valid, other=0.0)  # x[s]
-    h1_2 = zeros  # h1[s - 2]
-    h1_1 = zeros  # h1[s - 1]
-    h2_3 = zeros  # h2[s - 3]
-    h2_2 = zeros  # h2[s - 2]
+    h1_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # h1[s - 2]
+    h1_1 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # h1[s - 1]
+    h2_3 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # h2[s - 3]
+    h2_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # h2[s - 2]
     for s in range(0, LENGTH + 2):
         x_n = tl.load(x_row + s + 1, mask=valid & (s + 1 < LENGTH),
                       other=0.0)
@@ -148,7 +166,15 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
     """Gradients of ``sum(y * gy)``: the input's into ``gx`` (when
     ``INPUT_GRAD``; same layout as ``x``), and this program's parameter
     sums into row ``program_id`` of ``partial_ptr``, laid out as
-    ``[dW1 (H, 1, 3), db1, dW2 (H, H, 3), db2, dW3 (1, H, 3), db3]``."""
+    ``[dW1 (H, 1, 3), db1, dW2 (H, H, 3), db2, dW3 (1, H, 3), db3]``.
+
+    Registers are what limits this kernel, so it carries as few
+    ``(BLOCK, H)`` tiles between steps as it can: ``h1`` is recomputed
+    from the window of ``x`` wherever it is needed (three multiply-adds a
+    value), and each ``tl.dot`` of the two ``H x H`` layers scatters one
+    new tile into its three neighbours' partial sums (``a2_*`` for ``h2``'s
+    pre-activation, ``e1_*`` for ``d1``), so that tile is converted to a
+    ``tl.dot`` operand once per step instead of once per tap."""
     pid = tl.program_id(0)
     rows = pid * BLOCK + tl.arange(0, BLOCK)
     valid = rows < pixels
@@ -158,53 +184,54 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
     (w1_0, w1_1, w1_2, b1, w2_0, w2_1, w2_2, b2, w3_0, w3_1, w3_2,
      b3) = _load_weights(w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
                          HIDDEN)
+    w2t_0 = tl.trans(w2_0)
+    w2t_1 = tl.trans(w2_1)
+    w2t_2 = tl.trans(w2_2)
 
-    zeros = tl.zeros((BLOCK, HIDDEN), tl.float32)
-    zero = tl.zeros((BLOCK, ), tl.float32)
-    # the forward window (names: x_k is x[s - k])
-    x_5 = zero
-    x_4 = zero
-    x_3 = zero
-    x_2 = zero
-    x_1 = zero
+    # windows (names: x_k is x[s - k]), each its own tensor (see
+    # band_forward); 'part of' sums still miss the taps of later steps
+    x_5 = tl.zeros((BLOCK, ), tl.float32)
+    x_4 = tl.zeros((BLOCK, ), tl.float32)
+    x_3 = tl.zeros((BLOCK, ), tl.float32)
+    x_2 = tl.zeros((BLOCK, ), tl.float32)
+    x_1 = tl.zeros((BLOCK, ), tl.float32)
     x_0 = tl.load(x_row, mask=valid, other=0.0)
-    h1_4 = zeros
-    h1_3 = zeros
-    h1_2 = zeros
-    h1_1 = zeros
-    h2_3 = zeros
-    h2_2 = zeros
-    # the gradient window: d3 at y's, d2 at h2's, d1 at h1's pre-activation
-    d3_4 = zero
-    d3_3 = zero
-    d2_5 = zeros
-    d2_4 = zeros
-    d1_6 = zeros
-    d1_5 = zeros
-    # parameter-gradient sums
+    a2_1 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # part of a2[s - 1]
+    a2_0 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # part of a2[s]
+    h2_3 = tl.zeros((BLOCK, HIDDEN), tl.float32)
+    h2_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)
+    d3_4 = tl.zeros((BLOCK, ), tl.float32)
+    d3_3 = tl.zeros((BLOCK, ), tl.float32)
+    e1_4 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # part of d1[s - 4]
+    e1_3 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # part of d1[s - 3]
+    gx_5 = tl.zeros((BLOCK, ), tl.float32)  # part of gx[s - 5]
+    gx_4 = tl.zeros((BLOCK, ), tl.float32)  # part of gx[s - 4]
+    # parameter-gradient sums; conv2's transposed, (H_out, H_in) per tap
     g_w1_0 = tl.zeros((HIDDEN, ), tl.float32)
     g_w1_1 = tl.zeros((HIDDEN, ), tl.float32)
     g_w1_2 = tl.zeros((HIDDEN, ), tl.float32)
     g_b1 = tl.zeros((HIDDEN, ), tl.float32)
-    g_w2_0 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
-    g_w2_1 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
-    g_w2_2 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
+    g_w2t_0 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
+    g_w2t_1 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
+    g_w2t_2 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
     g_b2 = tl.zeros((HIDDEN, ), tl.float32)
     g_w3_0 = tl.zeros((HIDDEN, ), tl.float32)
     g_w3_1 = tl.zeros((HIDDEN, ), tl.float32)
     g_w3_2 = tl.zeros((HIDDEN, ), tl.float32)
     g_b3 = tl.zeros((BLOCK, ), tl.float32)
     for s in range(0, LENGTH + 5):
-        # forward: h1[s], h2[s - 1], y[s - 2]
         x_n = tl.load(x_row + s + 1, mask=valid & (s + 1 < LENGTH),
                       other=0.0)
-        h1_0, h2_1 = _hidden_step(s, x_1, x_0, x_n, h1_2, h1_1, w1_0, w1_1,
-                                  w1_2, b1, w2_0, w2_1, w2_2, b2, LENGTH,
-                                  PRECISION)
+        # forward: h1[s], h2[s - 1], y[s - 2]
+        h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, LENGTH)
+        h2_1 = _dot(h1_0, w2_2, PRECISION) + a2_1 + b2 + x_1[:, None]
+        h2_1 = tl.where((s >= 1) & (s <= LENGTH), tl.maximum(h2_1, 0.0), 0.0)
+        a2_1 = a2_0 + _dot(h1_0, w2_1, PRECISION)
+        a2_0 = _dot(h1_0, w2_0, PRECISION)
         y = b3 + tl.sum(h2_3 * w3_0 + h2_2 * w3_1 + h2_1 * w3_2, axis=1)
-        # d3[s - 2]: gy is zero outside the band and the rows
         gy = tl.load(gy_row + s - 2,
                      mask=valid & (s >= 2) & (s - 2 < LENGTH), other=0.0)
+        # d3[s - 2]: gy is zero outside the band and the rows
         d3_2 = tl.where(y > 0, gy, 0.0)
         g_w3_0 += tl.sum(h2_3 * d3_2[:, None], axis=0)
         g_w3_1 += tl.sum(h2_2 * d3_2[:, None], axis=0)
@@ -214,30 +241,33 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
         d2_3 = d3_2[:, None] * w3_0 + d3_3[:, None] * w3_1 + \
             d3_4[:, None] * w3_2
         d2_3 = tl.where(h2_3 > 0, d2_3, 0.0)
-        g_w2_0 += _dot(tl.trans(h1_4), d2_3, PRECISION)
-        g_w2_1 += _dot(tl.trans(h1_3), d2_3, PRECISION)
-        g_w2_2 += _dot(tl.trans(h1_2), d2_3, PRECISION)
+        # dW2[:, :, k]^T += d2[t]^T h1[t - 1 + k], t = s - 3
+        d2t_3 = tl.trans(d2_3)
+        h1_4 = _h1(s - 4, x_5, x_4, x_3, w1_0, w1_1, w1_2, b1, LENGTH)
+        h1_3 = _h1(s - 3, x_4, x_3, x_2, w1_0, w1_1, w1_2, b1, LENGTH)
+        h1_2 = _h1(s - 2, x_3, x_2, x_1, w1_0, w1_1, w1_2, b1, LENGTH)
+        g_w2t_0 += _dot(d2t_3, h1_4, PRECISION)
+        g_w2t_1 += _dot(d2t_3, h1_3, PRECISION)
+        g_w2t_2 += _dot(d2t_3, h1_2, PRECISION)
         g_b2 += tl.sum(d2_3, axis=0)
-        # d1[s - 4]
-        d1_4 = (_dot(d2_3, tl.trans(w2_0), PRECISION) +
-                _dot(d2_4, tl.trans(w2_1), PRECISION) +
-                _dot(d2_5, tl.trans(w2_2), PRECISION))
-        d1_4 = tl.where(h1_4 > 0, d1_4, 0.0)
+        # d1[s - 4]; d2[s - 3] reaches d1[s - 4 + k] through tap k
+        d1_4 = tl.where(h1_4 > 0, e1_4 + _dot(d2_3, w2t_0, PRECISION), 0.0)
+        e1_4 = e1_3 + _dot(d2_3, w2t_1, PRECISION)
+        e1_3 = _dot(d2_3, w2t_2, PRECISION)
         g_w1_0 += tl.sum(x_5[:, None] * d1_4, axis=0)
         g_w1_1 += tl.sum(x_4[:, None] * d1_4, axis=0)
         g_w1_2 += tl.sum(x_3[:, None] * d1_4, axis=0)
         g_b1 += tl.sum(d1_4, axis=0)
         if INPUT_GRAD:
-            # x[s - 5] reaches h1 through conv1 and h2 through the residual
-            gx = tl.sum(d1_4 * w1_0 + d1_5 * w1_1 + d1_6 * w1_2 + d2_5,
-                        axis=1)
+            # gx[s - 5]: x[t] reaches h1[t + 1 - k] through conv1's tap k
+            # and h2[t] through the residual
+            gx = gx_5 + tl.sum(d1_4 * w1_0, axis=1)
             tl.store(gx_row + s - 5, gx, mask=valid & (s >= 5))
+            gx_5 = gx_4 + tl.sum(d1_4 * w1_1, axis=1)
+            gx_4 = tl.sum(d1_4 * w1_2 + d2_3, axis=1)
         x_5, x_4, x_3, x_2, x_1, x_0 = x_4, x_3, x_2, x_1, x_0, x_n
-        h1_4, h1_3, h1_2, h1_1 = h1_3, h1_2, h1_1, h1_0
         h2_3, h2_2 = h2_2, h2_1
         d3_4, d3_3 = d3_3, d3_2
-        d2_5, d2_4 = d2_4, d2_3
-        d1_6, d1_5 = d1_5, d1_4
 
     channels = tl.arange(0, HIDDEN)
     part = partial_ptr + pid.to(tl.int64) * (8 * HIDDEN +
@@ -248,10 +278,10 @@ def band_backward(x_ptr, gy_ptr, gx_ptr, partial_ptr, stride, offset,
     part += 3 * HIDDEN
     tl.store(part + channels, g_b1)
     part += HIDDEN
-    wide = _wide_offsets(HIDDEN)
-    tl.store(part + wide, g_w2_0)
-    tl.store(part + wide + 1, g_w2_1)
-    tl.store(part + wide + 2, g_w2_2)
+    wide = _transposed_wide_offsets(HIDDEN)
+    tl.store(part + wide, g_w2t_0)
+    tl.store(part + wide + 1, g_w2t_1)
+    tl.store(part + wide + 2, g_w2t_2)
     part += 3 * HIDDEN * HIDDEN
     tl.store(part + channels, g_b2)
     part += HIDDEN

@@ -6,7 +6,10 @@ driver; ``cuobjdump --dump-resource-usage`` (also in the wheel) then reads
 each cubin's registers per thread, spill stack and static shared memory.
 From those, the dynamic shared memory triton asks for and the launch's warps,
 :func:`programs_per_sm` says how many programs of a variant an SM holds at
-once (its occupancy).
+once (its occupancy). Each row also counts the values the kernel's streaming
+loop carries from one step to the next in triton's IR
+(:func:`loop_carried`): triton carries a name only if one pass over the
+loop body changes its value, which the interpreter does not model.
 
 Every variant the dispatcher can launch is compiled: forward and backward
 (with and without the input gradient), each precision of
@@ -35,9 +38,8 @@ from ..arguments import Choice, Integer
 from ..limits import MAX_WORKERS
 
 __all__ = ['ARCHITECTURES', 'BAND_LENGTH', 'Variant', 'Resources',
-           'FULL_ARCH', 'variants', 'one_step_from_default', 'jobs_for',
-           'programs_per_sm', 'compile_variant', 'compile_all',
-           'format_table']
+           'variants', 'jobs_for', 'programs_per_sm', 'loop_carried',
+           'compile_variant', 'compile_all', 'format_table']
 
 #: target name -> (compute capability, registers per SM, most warps per SM,
 #: most programs per SM, shared memory per SM in bytes, most per program)
@@ -89,6 +91,7 @@ class Resources(NamedTuple):
     local_bytes: int
     shared_bytes: int  # static + dynamic, per program
     programs_per_sm: int
+    loop_carried: int  # values the loop carries to its next step
 
 
 def variants() -> List[Variant]:
@@ -105,35 +108,9 @@ def variants() -> List[Variant]:
     return found
 
 
-#: The target that compiles every variant in CI (``scope='ci'``).
-FULL_ARCH = 'sm_90'
-
-
-def one_step_from_default(variant: Variant) -> bool:
-    """Whether ``variant`` is the 32-channel TF32 default of its kernel with
-    exactly one thing changed: another launch entry, full float32, or 64
-    channels. With the defaults they take, on a target, every launch entry,
-    precision and width through each kernel."""
-    if variant.default:
-        return False
-    from .triton_band_networks import BACKWARD_CONFIGS, FORWARD_CONFIGS
-    first = (FORWARD_CONFIGS if variant.kernel == 'band_forward' else
-             BACKWARD_CONFIGS)[0]
-    changes = [(variant.block, variant.num_warps) != tuple(first),
-               variant.hidden != 32, variant.precision != 'tf32']
-    return sum(changes) == 1
-
-
-def jobs_for(archs: Sequence[str], scope: str) -> List[tuple]:
-    """``(variant, arch)`` pairs to compile: ``scope='all'`` every variant
-    for every target; ``'ci'`` every variant for :data:`FULL_ARCH` and, for
-    the other targets, the defaults and the variants
-    :func:`one_step_from_default` (CI's two cores: 126 compiles, not 216)."""
-    if scope not in ('all', 'ci'):
-        raise ValueError(f"scope must be 'all' or 'ci', got {scope!r}")
-    return [(v, a) for a in archs for v in variants()
-            if scope == 'all' or a == FULL_ARCH or v.default or
-            one_step_from_default(v)]
+def jobs_for(archs: Sequence[str]) -> List[tuple]:
+    """``(variant, arch)``: every variant for each target of ``archs``."""
+    return [(v, a) for a in archs for v in variants()]
 
 
 def programs_per_sm(registers: int, num_warps: int, shared_bytes: int,
@@ -146,6 +123,16 @@ def programs_per_sm(registers: int, num_warps: int, shared_bytes: int,
     by_registers = (sm_registers // per_warp) // num_warps
     by_shared = sm_shared // (shared_bytes + _RESERVED_SHARED)
     return min(by_registers, sm_warps // num_warps, sm_programs, by_shared)
+
+
+def loop_carried(ttir: str) -> int:
+    """The number of values the ``scf.for`` loop in a kernel's triton IR
+    (``compiled.asm['ttir']``) carries from one iteration to the next."""
+    loops = re.findall(r'scf\.for .*? iter_args\((.*?)\) ->', ttir)
+    if len(loops) != 1:
+        raise ValueError(f'expected one scf.for loop in the kernel, found '
+                         f'{len(loops)}')
+    return loops[0].count('=')
 
 
 def _cuobjdump() -> str:
@@ -194,7 +181,8 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     shared = static + compiled.metadata.shared
     return Resources(registers, stack, local, shared,
                      programs_per_sm(registers, variant.num_warps, shared,
-                                     arch))
+                                     arch),
+                     loop_carried(compiled.asm['ttir']))
 
 
 def _compile_row(job) -> Dict:
@@ -203,24 +191,20 @@ def _compile_row(job) -> Dict:
                 **compile_variant(variant, arch)._asdict())
 
 
-def _compile_here(archs: Sequence[str], jobs: int,
-                  scope: str) -> List[Dict]:
-    work = jobs_for(archs, scope)
+def _compile_here(archs: Sequence[str], jobs: int) -> List[Dict]:
     with concurrent.futures.ProcessPoolExecutor(jobs) as pool:
-        return list(pool.map(_compile_row, work))
+        return list(pool.map(_compile_row, jobs_for(archs)))
 
 
 def compile_all(archs: Sequence[str] = tuple(ARCHITECTURES),
-                jobs: Optional[int] = None,
-                scope: str = 'all') -> List[Dict]:
-    """One row per variant and target: the variant's fields, ``arch``,
-    ``default`` and the :class:`Resources`. Runs in a fresh process with
-    ``TRITON_INTERPRET`` unset, ``jobs`` compiles side by side (default:
-    the CPUs); ``scope`` as in :func:`jobs_for`."""
+                jobs: Optional[int] = None) -> List[Dict]:
+    """One row per variant and target (:func:`jobs_for`): the variant's
+    fields, ``arch``, ``default`` and the :class:`Resources`. Runs in a
+    fresh process with ``TRITON_INTERPRET`` unset, ``jobs`` compiles side by
+    side (default: the CPUs)."""
     env = {k: v for k, v in os.environ.items() if k != 'TRITON_INTERPRET'}
     command = [sys.executable, '-m', __name__, '--json', '--jobs',
-               str(jobs or os.cpu_count() or 1), '--scope', scope,
-               '--archs', *archs]
+               str(jobs or os.cpu_count() or 1), '--archs', *archs]
     proc = subprocess.run(command, capture_output=True, text=True, env=env)
     if proc.returncode != 0:
         raise RuntimeError(f'compiling the Triton kernels failed:\n'
@@ -254,10 +238,6 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f'of {list(ARCHITECTURES)} (default: all)')
     parser.add_argument('--jobs', type=Integer(1, MAX_WORKERS),
                         default=min(os.cpu_count() or 1, MAX_WORKERS))
-    parser.add_argument('--scope', type=Choice(['all', 'ci']), default='all',
-                        help="'all': every variant for every target (the "
-                        "default); 'ci': every variant for %s, defaults and "
-                        "one step from them for the others" % FULL_ARCH)
     parser.add_argument('--json', action='store_true',
                         help='print the rows as JSON instead of a table')
     return parser
@@ -269,7 +249,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
         parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
                      'cannot be compiled')
-    rows = _compile_here(args.archs, args.jobs, args.scope)
+    rows = _compile_here(args.archs, args.jobs)
     print(json.dumps(rows) if args.json else format_table(rows))
     return 0
 
