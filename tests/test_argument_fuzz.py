@@ -226,3 +226,15 @@ def _traceback_files(err):
         files.append(tb.tb_frame.f_code.co_filename.replace('\\', '/'))
         tb = tb.tb_next
     return files
+
+
+def test_an_argument_error_crosses_a_process_boundary():
+    """Pickled (as a spawned worker returns it) it keeps its class, message
+    and parts; unpicklable, it used to break the benchmark's process pool."""
+    import pickle
+    from wgse_mmseg.core.arguments import ArgumentError
+    error = ArgumentError('WGSE', 'level', 'an integer >= 1', 10**6)
+    copy = pickle.loads(pickle.dumps(error))
+    assert type(copy) is ArgumentError and str(copy) == str(error)
+    assert (copy.entry, copy.argument, copy.expected) == (
+        'WGSE', 'level', 'an integer >= 1')

@@ -6,6 +6,7 @@ import os
 import platform
 import shutil
 import subprocess
+import sys
 from importlib import metadata
 from typing import Any, Callable, Dict
 
@@ -96,9 +97,22 @@ def machine_record(device: str = 'cpu') -> Dict[str, Any]:
     return record
 
 
+def _set_up_like_the_parent(mmseg_layer: bool) -> None:
+    """A fresh worker's first step: the MMSeg layer's explicit set-up where
+    the parent process had made it (a function of the layer cannot even be
+    unpickled before it, under mmcv-lite)."""
+    if mmseg_layer:
+        from .. import register_all_modules
+        register_all_modules()
+
+
 def run_isolated(fn: Callable, *args, **kwargs):
     """``fn(*args, **kwargs)`` in a fresh (spawned) process, so that memory
-    and allocator state of earlier work do not leak into measurements."""
+    and allocator state of earlier work do not leak into measurements. The
+    process sets the MMSeg layer up first where this one has."""
     context = multiprocessing.get_context('spawn')
-    with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
+    layer = 'wgse_mmseg.models' in sys.modules
+    with concurrent.futures.ProcessPoolExecutor(
+            1, mp_context=context, initializer=_set_up_like_the_parent,
+            initargs=(layer, )) as pool:
         return pool.submit(fn, *args, **kwargs).result()

@@ -52,6 +52,19 @@ class ArgumentError(ValueError, TypeError):
         super().__init__(f'{entry}: {argument} must be {expected}, got '
                          f'{excerpt(value)}')
 
+    def __reduce__(self):
+        # picklable with its message as it is, so that it crosses from a
+        # worker process (the benchmarks' spawned measurements) intact
+        return _rebuilt, (type(self), self.args, self.__dict__)
+
+
+def _rebuilt(cls, args, state):
+    """An :class:`ArgumentError` from its pickled parts."""
+    error = Exception.__new__(cls)
+    error.args = args
+    error.__dict__.update(state)
+    return error
+
 
 class Argument:
     """One declared argument: what it accepts and how that reads.

@@ -306,8 +306,10 @@ class WGSE(nn.Module):
             if self.wavelet is None:
                 coeffs, lengths = signal, [num_steps]
             else:
+                # int(): under a tracer (the FLOP count) a shape is a
+                # tensor; the matrices are constants of T either way
                 analysis, synthesis, lengths = self._matrices(
-                    num_steps, spikes.device, dtype)
+                    int(num_steps), spikes.device, dtype)
                 coeffs = torch.matmul(signal, analysis.t())  # (B, P, C)
         backend = resolve_backend(self.backend, self.band_networks, coeffs)
         self.backend_in_use = backend.name
