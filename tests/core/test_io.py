@@ -773,12 +773,12 @@ def test_any_window_arguments_read_or_name_the_problem(ext, start, length):
 
 # ------------------------------------------------------ the format registry
 def test_the_registry_is_the_one_list_of_formats():
-    from wgse_mmseg.apis import simulator_benchmark
+    from wgse_mmseg.benchmarks import simulator
     assert spike_io.SPIKE_EXTENSIONS == tuple(spike_io.SPIKE_FORMATS) == (
         '.dat', '.spk', '.npy', '.npz')
     for ext, fmt in spike_io.SPIKE_FORMATS.items():
         assert fmt.extension == ext == ext.lower()
-    assert simulator_benchmark.SPIKE_EXTENSIONS is spike_io.SPIKE_EXTENSIONS
+    assert simulator.SPIKE_EXTENSIONS is spike_io.SPIKE_EXTENSIONS
 
 
 @pytest.mark.parametrize('ext', sorted(spike_io.SPIKE_FORMATS))
