@@ -102,3 +102,29 @@ def tiny_run_options():
                 'default_hooks.logger.interval=1', *loaders, *extra]
 
     return options
+
+
+#: a ``sitecustomize`` that refuses to import OpenMMLab, as on a GPU machine
+#: with torch alone
+_HIDE_OPENMMLAB = '''
+import importlib.abc, sys
+class _HideOpenMMLab(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split('.')[0] in ('mmengine', 'mmseg', 'mmcv'):
+            raise ModuleNotFoundError(f'No module named {name!r} (hidden)',
+                                      name=name)
+sys.meta_path.insert(0, _HideOpenMMLab())
+'''
+
+
+@pytest.fixture
+def without_openmmlab(tmp_path):
+    """The environment of a subprocess (every process it starts too) in
+    which mmengine, mmsegmentation and mmcv cannot be imported: a
+    ``sitecustomize`` in ``tmp_path`` refuses them; the checkout first on
+    the path, one thread, Triton compiled rather than interpreted."""
+    (tmp_path / 'sitecustomize.py').write_text(_HIDE_OPENMMLAB)
+    env = dict(os.environ, PYTHONPATH=f'{tmp_path}{os.pathsep}{REPO_ROOT}',
+               OMP_NUM_THREADS='1')
+    env.pop('TRITON_INTERPRET', None)
+    return env

@@ -4,21 +4,11 @@ then says what to install. The stack is hidden from a fresh interpreter by
 a ``sitecustomize`` that refuses to import it, so every process of a tool
 (the WGSE benchmark spawns workers) sees the same."""
 import json
-import os
 import os.path as osp
 import subprocess
 import sys
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-BLOCKER = '''
-import importlib.abc, sys
-class _HideOpenMMLab(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path=None, target=None):
-        if name.split('.')[0] in ('mmengine', 'mmseg', 'mmcv'):
-            raise ModuleNotFoundError(f'No module named {name!r} (hidden)',
-                                      name=name)
-sys.meta_path.insert(0, _HideOpenMMLab())
-'''
 SCRIPT = '''
 import json, sys
 import numpy as np, torch
@@ -47,18 +37,11 @@ print(json.dumps(dict(
 '''
 
 
-def _env(tmp_path):
-    (tmp_path / 'sitecustomize.py').write_text(BLOCKER)
-    env = dict(os.environ, PYTHONPATH=f'{tmp_path}{os.pathsep}{ROOT}',
-               OMP_NUM_THREADS='1')
-    env.pop('TRITON_INTERPRET', None)
-    return env
-
-
-def test_core_runs_and_the_mmseg_layer_says_what_to_install(tmp_path):
+def test_core_runs_and_the_mmseg_layer_says_what_to_install(without_openmmlab,
+                                                            tmp_path):
     proc = subprocess.run(
         [sys.executable, '-c', SCRIPT, str(tmp_path / 'clip.spk')],
-        capture_output=True, text=True, env=_env(tmp_path), cwd=tmp_path)
+        capture_output=True, text=True, env=without_openmmlab, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     report = json.loads(proc.stdout.strip().splitlines()[-1])
     assert report['shape'] == [1, 41, 6, 8] and report['finite']
@@ -71,19 +54,21 @@ def test_core_runs_and_the_mmseg_layer_says_what_to_install(tmp_path):
         assert name in report['error']
 
 
-def test_importing_a_layer_module_directly_names_what_is_missing(tmp_path):
+def test_importing_a_layer_module_directly_names_what_is_missing(without_openmmlab,
+                                                                 tmp_path):
     proc = subprocess.run(
         [sys.executable, '-c', 'import wgse_mmseg.datasets'],
-        capture_output=True, text=True, env=_env(tmp_path), cwd=tmp_path)
+        capture_output=True, text=True, env=without_openmmlab, cwd=tmp_path)
     assert proc.returncode != 0
     assert 'ImportError: wgse_mmseg.datasets needs' in proc.stderr
 
 
-def test_the_wgse_benchmark_runs_without_the_stack(tmp_path):
+def test_the_wgse_benchmark_runs_without_the_stack(without_openmmlab,
+                                                   tmp_path):
     proc = subprocess.run(
         [sys.executable, osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark_wgse.py'),
          '--impls', 'torch', '--shapes', '1x12x3x4', '--repeat', '1'],
-        capture_output=True, text=True, env=_env(tmp_path), cwd=tmp_path)
+        capture_output=True, text=True, env=without_openmmlab, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "WGSE, backend='torch'" in proc.stdout
 
@@ -109,12 +94,12 @@ print(json.dumps(dict(
 '''
 
 
-def test_the_benchmarks_run_without_the_stack(tmp_path):
+def test_the_benchmarks_run_without_the_stack(without_openmmlab, tmp_path):
     """The benchmark package's core parts (the simulator's tables, the
     machine record, the GPU report's correctness section) import and run
     where OpenMMLab cannot be imported."""
     proc = subprocess.run([sys.executable, '-c', BENCHMARKS],
-                          capture_output=True, text=True, env=_env(tmp_path),
+                          capture_output=True, text=True, env=without_openmmlab,
                           cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     report = json.loads(proc.stdout.strip().splitlines()[-1])

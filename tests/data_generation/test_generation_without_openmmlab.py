@@ -1,8 +1,8 @@
 """Data generation (the Cityscapes converter, the synthetic scenes, REDS-style
 views) and its two tools import and run where mmengine, mmsegmentation and
 mmcv cannot be imported, as the core does
-(tests/core/test_without_openmmlab.py: the same blocker, a ``sitecustomize``
-every process of the run loads)."""
+(tests/core/test_without_openmmlab.py; the blocker is conftest's
+``without_openmmlab``, a ``sitecustomize`` every process of the run loads)."""
 import json
 import os
 import os.path as osp
@@ -13,15 +13,6 @@ import cv2
 import numpy as np
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-BLOCKER = '''
-import importlib.abc, sys
-class _HideOpenMMLab(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path=None, target=None):
-        if name.split('.')[0] in ('mmengine', 'mmseg', 'mmcv'):
-            raise ModuleNotFoundError(f'No module named {name!r} (hidden)',
-                                      name=name)
-sys.meta_path.insert(0, _HideOpenMMLab())
-'''
 SCRIPT = '''
 import json, sys
 import numpy as np
@@ -43,14 +34,6 @@ print(json.dumps(dict(
 '''
 
 
-def _env(tmp_path):
-    (tmp_path / 'sitecustomize.py').write_text(BLOCKER)
-    env = dict(os.environ, PYTHONPATH=f'{tmp_path}{os.pathsep}{ROOT}',
-               OMP_NUM_THREADS='1')
-    env.pop('TRITON_INTERPRET', None)
-    return env
-
-
 def _cityscapes(root):
     """One annotated frame, no sequence: the static model."""
     rng = np.random.default_rng(0)
@@ -65,10 +48,10 @@ def _cityscapes(root):
             osp.join(folder, f'bonn_000000_000019_{suffix}.png'), image)
 
 
-def test_generators_run_without_openmmlab(tmp_path):
+def test_generators_run_without_openmmlab(without_openmmlab, tmp_path):
     root = str(tmp_path / 'cityscapes')
     _cityscapes(root)
-    env = _env(tmp_path)
+    env = without_openmmlab
     hidden = subprocess.run([sys.executable, '-c', 'import mmseg'],
                             capture_output=True, text=True, env=env)
     assert 'hidden' in hidden.stderr  # the blocker is in force
@@ -84,7 +67,7 @@ def test_generators_run_without_openmmlab(tmp_path):
                        'bonn' / 'bonn_000000_000019_spike.spk') > 0
 
 
-def test_the_tools_run_without_openmmlab(tmp_path):
+def test_the_tools_run_without_openmmlab(without_openmmlab, tmp_path):
     root = str(tmp_path / 'cityscapes')
     _cityscapes(root)
     tools = osp.join(ROOT, 'tools', 'dataset_converters')
@@ -97,7 +80,7 @@ def test_the_tools_run_without_openmmlab(tmp_path):
              '--width', '32', '--num-steps', '5']):
         proc = subprocess.run(
             [sys.executable, osp.join(tools, command[0])] + command[1:],
-            capture_output=True, text=True, env=_env(tmp_path),
+            capture_output=True, text=True, env=without_openmmlab,
             cwd=tmp_path, timeout=600)
         assert proc.returncode == 0, proc.stderr[-3000:]
         assert 'error' not in proc.stderr.lower()
