@@ -1,6 +1,9 @@
 """Shared test configuration for wgse_mmseg."""
+import contextlib
 import os
 import os.path as osp
+import resource
+import time
 
 # Triton kernels run in triton's CPU interpreter here (CI has no GPU); it is
 # chosen when a kernel is defined, so before anything imports triton.
@@ -128,3 +131,24 @@ def without_openmmlab(tmp_path):
                OMP_NUM_THREADS='1')
     env.pop('TRITON_INTERPRET', None)
     return env
+
+
+@contextlib.contextmanager
+def _bounded(seconds: float, memory_bytes: int):
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    start = time.perf_counter()
+    try:
+        yield
+    finally:  # an error the block raises counts against the bounds too
+        assert time.perf_counter() - start < seconds
+        grown = resource.getrusage(
+            resource.RUSAGE_SELF).ru_maxrss * 1024 - peak
+        assert grown < memory_bytes, f'{grown} bytes more at the peak'
+
+
+@pytest.fixture
+def bounded():
+    """``with bounded(seconds, memory_bytes): ...``: the block must end
+    within ``seconds`` and raise this process's peak memory by less than
+    ``memory_bytes`` (safety bounds for fuzzed input, not timings)."""
+    return _bounded

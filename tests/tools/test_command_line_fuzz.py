@@ -21,8 +21,6 @@ import importlib.util
 import io
 import math
 import os.path as osp
-import resource
-import time
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -265,16 +263,6 @@ def _parse(parser, argv):
             return None, (exit.code, err.getvalue())
 
 
-def _within_bounds(run):
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    start = time.perf_counter()
-    result = run()
-    assert time.perf_counter() - start < TIME_BOUND_S
-    grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - peak
-    assert grown < MEMORY_BOUND, f'{grown} bytes more at the peak'
-    return result
-
-
 def _refusal(parser, failure, action):
     """Assert ``failure`` is argparse's one-line error naming ``action``."""
     code, stderr = failure
@@ -294,7 +282,7 @@ def _declared_options():
 
 
 @pytest.mark.parametrize('tool, dest', list(_declared_options()))
-def test_bad_words(tool, dest):
+def test_bad_words(tool, dest, bounded):
     parser = _parser(tool)
     action, = [a for a in _valued(parser) if a.dest == dest]
     count = action.nargs if isinstance(action.nargs, int) else 1
@@ -304,7 +292,8 @@ def test_bad_words(tool, dest):
     @given(word=_words(action.type))
     def check(word):
         argv = _argv(parser, action, [word] * count)
-        args, failure = _within_bounds(lambda: _parse(parser, argv))
+        with bounded(TIME_BOUND_S, MEMORY_BOUND):
+            args, failure = _parse(parser, argv)
         should, value = _accepted(action.type, word)
         if failure is not None:
             last = _refusal(parser, failure, action)
@@ -331,7 +320,7 @@ def _config_options():
 
 
 @pytest.mark.parametrize('tool, dest, key', list(_config_options()))
-def test_bad_spike_settings(tool, dest, key):
+def test_bad_spike_settings(tool, dest, key, bounded):
     """``--cfg-options KEY=WORD``: refused naming the option and the key,
     or read as a setting within its declaration and the stated limits."""
     parser = _parser(tool)
@@ -346,7 +335,8 @@ def test_bad_spike_settings(tool, dest, key):
     @given(word=words)
     def check(word):
         argv = _argv(parser, action, [f'{key}={word}'])
-        args, failure = _within_bounds(lambda: _parse(parser, argv))
+        with bounded(TIME_BOUND_S, MEMORY_BOUND):
+            args, failure = _parse(parser, argv)
         if failure is not None:
             last = _refusal(parser, failure, action)
             assert key in last
