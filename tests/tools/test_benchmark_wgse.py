@@ -64,7 +64,7 @@ def test_torch_backend_memory_per_pixel_on_cpu(tmp_path):
 
 
 @pytest.mark.parametrize('args, message', [
-    (['--shapes', '4x41x128'], 'BxTxHxW'),
+    (['--shapes', '4x41x128'], 'argument --shapes: must be (B, T, H, W)'),
     (['--impls', 'triton'], 'cannot run on cpu'),
     pytest.param(['--device', 'cuda'], 'no CUDA device',
                  marks=pytest.mark.skipif(torch.cuda.is_available(),

@@ -197,8 +197,10 @@ def segmentation_step(config: str, shape: Shape, repeat: int, warmup: int,
                       device: str, latency: bool = True) -> Dict[str, Any]:
     """A config's training step on a ``(B, T, H, W)`` batch (and, if
     ``latency``, its batch-1 inference), as
-    :mod:`wgse_mmseg.benchmarks.segmentation` measures them. Imports the
-    MMSeg layer."""
+    :mod:`wgse_mmseg.benchmarks.segmentation` measures them. Sets the
+    MMSeg layer up (explicitly, as the tools do) and imports it."""
+    from .. import register_all_modules
+    register_all_modules()
     from . import segmentation
     batch, steps, height, width = shape
     cfg, model = segmentation.build_model(
