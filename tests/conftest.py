@@ -152,3 +152,16 @@ def bounded():
     within ``seconds`` and raise this process's peak memory by less than
     ``memory_bytes`` (safety bounds for fuzzed input, not timings)."""
     return _bounded
+
+
+@pytest.fixture(scope='session')
+def wrong_file_kinds(tmp_path_factory):
+    """Paths of each wrong kind a path argument is fuzzed with:
+    ``directory``, ``empty`` (an empty ``.npy``), ``text`` (quotes and a
+    backslash in a ``.spk``) and ``missing``."""
+    root = tmp_path_factory.mktemp('wrong_file_kinds')
+    (root / 'empty.npy').write_bytes(b'')
+    (root / 'text.spk').write_text('it\'s "quoted" \\ text')
+    return dict(directory=str(root), empty=str(root / 'empty.npy'),
+                text=str(root / 'text.spk'),
+                missing=str(root / 'missing.npy'))

@@ -43,7 +43,7 @@ FIXTURE_FILES = {}
 
 
 @pytest.fixture(scope='module', autouse=True)
-def _files(tmp_path_factory):
+def _files(tmp_path_factory, wrong_file_kinds):
     import cv2
     from wgse_mmseg.core.io import save_spikes
     root = tmp_path_factory.mktemp('fuzz')
@@ -51,8 +51,6 @@ def _files(tmp_path_factory):
     cv2.imwrite(str(root / 'images' / 'a.png'),
                 np.full((12, 16), 128, np.uint8))
     save_spikes(str(root / 'clip.npy'), np.zeros((9, 4, 6), np.uint8))
-    (root / 'empty.npy').write_bytes(b'')
-    (root / 'text.spk').write_text('it\'s "quoted" \\ text')
     # a Cityscapes root of one annotated frame
     for tree, suffix, value in [('leftImg8bit', 'leftImg8bit', 128),
                                 ('gtFine', 'gtFine_labelIds', 7)]:
@@ -60,13 +58,10 @@ def _files(tmp_path_factory):
         city.mkdir(parents=True)
         cv2.imwrite(str(city / f'aachen_000000_000019_{suffix}.png'),
                     np.full((16, 32), value, np.uint8))
-    FIXTURE_FILES.update(root=root, images=str(root / 'images'),
+    FIXTURE_FILES.update(wrong_file_kinds, root=root,
+                         images=str(root / 'images'),
                          clip=str(root / 'clip.npy'),
-                         empty=str(root / 'empty.npy'),
-                         text=str(root / 'text.spk'),
-                         missing=str(root / 'missing.npy'),
-                         cityscapes=str(root / 'cityscapes'),
-                         directory=str(root))
+                         cityscapes=str(root / 'cityscapes'))
     yield
 
 

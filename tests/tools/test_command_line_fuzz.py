@@ -49,13 +49,8 @@ FILES = {}
 
 
 @pytest.fixture(scope='module', autouse=True)
-def _files(tmp_path_factory):
-    root = tmp_path_factory.mktemp('command_lines')
-    (root / 'empty.npy').write_bytes(b'')
-    (root / 'text.spk').write_text('it\'s "quoted" \\ text')
-    FILES.update(directory=str(root), empty=str(root / 'empty.npy'),
-                 text=str(root / 'text.spk'),
-                 missing=str(root / 'missing.npy'))
+def _files(wrong_file_kinds):
+    FILES.update(wrong_file_kinds)
     yield
 
 
