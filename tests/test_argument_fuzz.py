@@ -29,7 +29,8 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
                 'wgse_mmseg.core.exposure', 'wgse_mmseg.benchmarks.timing',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
-                'wgse_mmseg.core.reconstruction_baselines'):
+                'wgse_mmseg.core.reconstruction_baselines',
+                'wgse_mmseg.data_generation.training_images'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -111,6 +112,10 @@ def _required(entry):
         'waverec': dict(coeffs=[torch.zeros(2, 8)] * 2, wavelet='haar'),
         'tfp': dict(spikes=np.zeros((3, 4, 5))),
         'tfi': dict(spikes=np.zeros((3, 4, 5))),
+        'tfi_spatial_mean': dict(spikes=np.zeros((3, 4, 5))),
+        'tfi_temporal_mean': dict(spikes=np.zeros((3, 4, 5))),
+        'export_training_images': dict(out_dir=str(files['root'] / 'images'),
+                                       sources=('matplotlib',)),
     }.get(entry, {})
 
 
@@ -138,6 +143,7 @@ def test_the_public_entry_points_are_declared():
         'SpikeCityscapesDataset', 'auto_exposure', 'apply_exposure',
         'time_calls', 'schedule_options', 'wavedec', 'waverec',
         'analysis_matrix', 'band_lengths', 'synthesis_matrix', 'tfp', 'tfi',
+        'tfi_spatial_mean', 'tfi_temporal_mean', 'export_training_images',
         'ExperimentSettings'
     } <= entries
     for declaration in DECLARATIONS.values():

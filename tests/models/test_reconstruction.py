@@ -27,11 +27,13 @@ from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
 from wgse_mmseg.benchmarks.reconstruction import (benchmark,
                                                             format_table)
 from wgse_mmseg.core.io import load_spikes, save_spikes
-from wgse_mmseg.models.reconstruction import (DEFAULT_WEIGHTS,
+from wgse_mmseg.models.reconstruction import (CLASSICAL_METHODS, DEFAULT_WEIGHTS,
+                                              METHODS, reconstruction_method,
                                               SpikeReconstructor,
                                               export_weights,
                                               load_reconstructor)
-from wgse_mmseg.core.reconstruction_baselines import tfi, tfp
+from wgse_mmseg.core.reconstruction_baselines import (tfi, tfi_spatial_mean,
+                                                     tfi_temporal_mean, tfp)
 from wgse_mmseg.core.representations import TFI
 from wgse_mmseg.utils.config_data import ConfigDataError
 
@@ -144,6 +146,7 @@ def test_model_batches_packed_uint8_inputs():
     ('wgse_resnet_reds', WGSE_PARAMS, 256),
     ('wgse_resnet_cpu', WGSE_PARAMS, 64),
     ('wgse_resnet_cpu_anneal', WGSE_PARAMS, 64),
+    ('wgse_resnet_cpu_finetune', WGSE_PARAMS, 64),
 ])
 def test_configs_build_with_paper_sizes(name, enhancer_params, channels):
     cfg = load_config(osp.join(CONFIGS, name + '.py'))
@@ -319,6 +322,37 @@ def test_an_exported_config_loads_and_round_trips(tmp_path):
     for name, value in model.state_dict().items():
         torch.testing.assert_close(loaded.state_dict()[name], value)
 
+
+
+def test_the_initialisation_a_run_began_from_is_never_followed(tmp_path):
+    """A fine-tuning run's config names the weights it began from
+    (``init_cfg``, Pretrained); its checkpoint's own weights replace them,
+    so loading and exporting drop that entry unread, whatever it holds."""
+    model = _tiny_model()
+    marker = tmp_path / 'ran'
+    config = dict(_exported_model_config(), init_cfg=dict(
+        type='os.system', checkpoint=f'touch {marker}'))
+    source = tmp_path / 'iter_1.pth'
+    torch.save(dict(state_dict=model.state_dict(), meta=dict(
+        cfg=f'model = {config!r}\n')), source)
+    out = tmp_path / 'exported.pth'
+    export_weights(str(source), str(out))
+    assert torch.load(out, weights_only=True)['meta']['model'] == \
+        _exported_model_config()
+    for path in (source, out):
+        loaded = load_reconstructor(str(path))
+        for name, value in model.state_dict().items():
+            torch.testing.assert_close(loaded.state_dict()[name], value)
+    assert not marker.exists()
+    # below the top level it is a key like any other: refused
+    nested = dict(_exported_model_config())
+    nested['enhancer'] = dict(nested['enhancer'], init_cfg=dict(
+        type='os.system', checkpoint=f'touch {marker}'))
+    torch.save(dict(state_dict=model.state_dict(), meta=dict(
+        cfg=f'model = {nested!r}\n')), source)
+    with pytest.raises(ConfigDataError, match='init_cfg'):
+        load_reconstructor(str(source))
+    assert not marker.exists()
 
 def test_cpu_config_trains_a_few_iterations(tmp_path):
     from mmengine.runner import Runner
@@ -691,3 +725,44 @@ def test_reconstruct_cli_on_the_real_dat_is_upright(shared_dir, tmp_path):
     assert image.dtype == np.uint8 and image.shape == gt.shape
     assert np.corrcoef(image.ravel(), gt.ravel())[0, 1] > 0.9
     assert np.corrcoef(image[::-1].ravel(), gt.ravel())[0, 1] < 0.6
+
+
+def _box_mean(image, k):
+    """Mean over the k x k pixels around each pixel, those inside only."""
+    h, w = image.shape
+    out = np.zeros_like(image)
+    for i in range(h):
+        for j in range(w):
+            out[i, j] = image[max(i - k // 2, 0):i + k // 2 + 1,
+                              max(j - k // 2, 0):j + k // 2 + 1].mean()
+    return out
+
+
+def test_tfi_mean_filters_denoise_tfi_at_the_centre():
+    rng = np.random.default_rng(0)
+    spikes = (rng.random((11, 5, 6)) < 0.3).astype(np.uint8)
+    # the rates of TFI at every step (its definition is tested above)
+    rates = TFI()(torch.from_numpy(spikes).double()[None])[0].numpy()
+    np.testing.assert_allclose(tfi_spatial_mean(spikes, 3),
+                               np.clip(_box_mean(rates[5], 3) / 0.6, 0, 1))
+    np.testing.assert_allclose(tfi_temporal_mean(spikes, 5),
+                               np.clip(rates[3:8].mean(0) / 0.6, 0, 1))
+    # a window longer than the stream is cut to it
+    short = TFI()(torch.from_numpy(spikes[:3]).double()[None])[0].numpy()
+    np.testing.assert_allclose(tfi_temporal_mean(spikes[:3], 9),
+                               np.clip(short.mean(0) / 0.6, 0, 1))
+    # a pixel firing every other step: 1 / 2 per step whatever the filter
+    steady = np.zeros((9, 3, 3), np.uint8)
+    steady[::2] = 1
+    for method in (tfi_spatial_mean, tfi_temporal_mean):
+        np.testing.assert_allclose(method(steady), np.full((3, 3), 0.5 / 0.6))
+    with pytest.raises(ValueError, match='kernel_size'):
+        tfi_temporal_mean(spikes, 4)
+
+
+def test_every_classical_method_is_a_reconstruction_method():
+    spikes = np.zeros((5, 2, 3), np.uint8)
+    for name, function in CLASSICAL_METHODS.items():
+        assert reconstruction_method(name) is function
+        assert function(spikes).shape == (2, 3)
+    assert set(METHODS) == {'wgse'} | set(CLASSICAL_METHODS)

@@ -28,7 +28,8 @@ from ..core.arguments import (NUM_STEPS, Integer, check_parameter_count,
                               declare)
 from ..core.io import atomic_output
 from ..core.limits import MAX_CHANNELS, MAX_NUM_BLOCKS
-from ..core.reconstruction_baselines import tfi, tfp
+from ..core.reconstruction_baselines import (tfi, tfi_spatial_mean,
+                                             tfi_temporal_mean, tfp)
 from ..utils.checkpoint import CheckpointError, read_checkpoint
 from ..utils.config_data import ConfigDataError, read_config_data
 from ..utils.safe_build import build_from_file_config, check_file_config
@@ -36,14 +37,19 @@ from .enhancers import ENHANCERS
 
 __all__ = ['SpikeReconstructor', 'ResidualBlock', 'DEFAULT_WEIGHTS',
            'load_reconstructor', 'export_weights', 'reconstruction_method',
-           'METHODS', 'RECONSTRUCTION_BUILDS']
+           'METHODS', 'CLASSICAL_METHODS', 'RECONSTRUCTION_BUILDS']
 
 #: Weights shipped with the package (see docs/reconstruction.md).
 DEFAULT_WEIGHTS = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),
                            'weights', 'wgse_reconstruction_cpu.pth')
 
+#: The classical reconstructions by name
+#: (:mod:`wgse_mmseg.core.reconstruction_baselines`, REDS scale).
+CLASSICAL_METHODS = {'tfp': tfp, 'tfi': tfi,
+                     'tfi_spatial_mean': tfi_spatial_mean,
+                     'tfi_temporal_mean': tfi_temporal_mean}
 #: Names accepted by :func:`reconstruction_method`.
-METHODS = ('wgse', 'tfp', 'tfi')
+METHODS = ('wgse',) + tuple(CLASSICAL_METHODS)
 
 
 def _conv3x3(in_channels: int, out_channels: int) -> nn.Conv2d:
@@ -178,19 +184,30 @@ RECONSTRUCTION_BUILDS = {
 
 def _model_config(checkpoint: dict, path: str) -> Tuple[Any, str]:
     """The checkpoint's model config, as read (unchecked), and where in the
-    file it lies (for errors)."""
+    file it lies (for errors).
+
+    Its top-level ``init_cfg`` is dropped, never checked, built or followed:
+    it says how the training run began (``Pretrained`` weights a fine-tuning
+    started from, ``configs/reconstruction/wgse_resnet_cpu_finetune.py``),
+    and the checkpoint's own weights replace whatever it made.
+    """
     meta = checkpoint.get('meta') or {}
     if not isinstance(meta, dict):
         raise ConfigDataError(f'{path}: meta is a {type(meta).__name__}, '
                               f'not a dict')
     if 'model' in meta:  # exported by export_weights
-        return meta['model'], "meta['model']"
-    if 'cfg' in meta:  # an mmengine Runner checkpoint
-        return read_config_data(meta['cfg'], f'{path} (meta["cfg"])').get(
-            'model'), "meta['cfg'] model"
-    raise ValueError(
-        f'{path}: holds no model config (neither meta["model"] of '
-        f'export_weights nor meta["cfg"] of an mmengine checkpoint)')
+        config, where = meta['model'], "meta['model']"
+    elif 'cfg' in meta:  # an mmengine Runner checkpoint
+        config = read_config_data(meta['cfg'], f'{path} (meta["cfg"])').get(
+            'model')
+        where = "meta['cfg'] model"
+    else:
+        raise ValueError(
+            f'{path}: holds no model config (neither meta["model"] of '
+            f'export_weights nor meta["cfg"] of an mmengine checkpoint)')
+    if isinstance(config, dict):
+        config = {k: v for k, v in config.items() if k != 'init_cfg'}
+    return config, where
 
 
 def _read_weights(path: str) -> dict:
@@ -250,13 +267,11 @@ def reconstruction_method(method: str, checkpoint: Optional[str] = None,
     """A function ``(T, H, W)`` spike window -> ``(H, W)`` image in [0, 1].
 
     ``method``: ``'wgse'`` (the trained model of ``checkpoint``, by default
-    the shipped weights), ``'tfp'`` or ``'tfi'`` (REDS scale, see
-    :mod:`wgse_mmseg.core.reconstruction_baselines`).
+    the shipped weights) or one of :data:`CLASSICAL_METHODS` (REDS scale,
+    see :mod:`wgse_mmseg.core.reconstruction_baselines`).
     """
     if method == 'wgse':
         return load_reconstructor(checkpoint, device).reconstruct
-    if method == 'tfp':
-        return tfp
-    if method == 'tfi':
-        return tfi
+    if method in CLASSICAL_METHODS:
+        return CLASSICAL_METHODS[method]
     raise ValueError(f'unknown method {method!r}; expected one of {METHODS}')
