@@ -498,9 +498,10 @@ def test_damaged_files_read_correctly_or_fail_naming_the_file(damaged):
         path = osp.join(tmp, f'clip{ext}')
         with open(path, 'wb') as f:
             f.write(data)
-        if ext == '.dat':
+        if ext in ('.dat', '.npy'):  # their side files
             with open(path + '.json', 'w') as f:
-                json.dump(dict(height=4, width=6), f)
+                json.dump(dict(height=4, width=6) if ext == '.dat' else
+                          dict(layout='THW'), f)
         try:
             shape = spike_shape(path)
             spikes = load_spikes(path)
