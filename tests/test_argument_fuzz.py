@@ -19,7 +19,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import wgse_mmseg
-from wgse_mmseg.core.arguments import DECLARATIONS, ArgumentError, Path
+from wgse_mmseg.core.arguments import (DECLARATIONS, LAYOUT, ArgumentError,
+                                       Choice, Path)
 from wgse_mmseg.data_generation.cityscapes_conversion import ConversionSettings
 
 wgse_mmseg.register_all_modules()
@@ -154,6 +155,25 @@ def test_the_public_entry_points_are_declared():
         assert required <= set(_required(declaration.entry)), (
             f'{declaration.entry}: give the test valid values of '
             f'{sorted(required)}')
+
+
+def test_every_reader_of_a_recording_declares_the_layout():
+    """One declared kind for the layout of a recording, ``'THW'`` or
+    ``'HWT'`` or ``None`` (what the file records), on every entry point
+    that reads one."""
+    readers = {'load_spikes', 'spike_shape', 'LoadSpikeFromFile',
+               'LoadSpikeImagePair'}
+    declaring = {declaration.entry for declaration in DECLARATIONS.values()
+                 if 'layout' in declaration.arguments}
+    assert declaring == readers
+    for declaration in DECLARATIONS.values():
+        if declaration.entry in readers:
+            layout = declaration.arguments['layout']
+            assert isinstance(layout, Choice) and layout.optional
+            assert layout.choices == LAYOUT.choices == ('THW', 'HWT')
+            parameter = inspect.signature(
+                declaration.function).parameters['layout']
+            assert parameter.default is None, declaration.entry
 
 
 def _bad_values(argument):

@@ -103,8 +103,8 @@ HOW = {
     'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
     '203_part2_key_id151.dat --height 250 --width 400 --frames 100,150,200 '
     '--out recon/': RUN,
-    'python tools/misc/reconstruct.py clip.npy --out recon/ --method tfp':
-        RUN,
+    'python tools/misc/reconstruct.py clip.npy --layout THW --out recon/ '
+    '--method tfp': RUN,
     'python -m wgse_mmseg.apis.reconstruction_benchmark '
     '../shared/data/reds_sample': RUN,
 }
@@ -116,8 +116,8 @@ PRINTS = {
     '203_part2_key_id151.dat --height 250 --width 400 --frames 100,150,200 '
     '--out recon/': r'recon/203_part2_key_id151_200\.png\texposure_gain=1\t'
                     r'.*left as it is',
-    'python tools/misc/reconstruct.py clip.npy --out recon/ --method tfp':
-        r'recon/clip_20\.png',
+    'python tools/misc/reconstruct.py clip.npy --layout THW --out recon/ '
+    '--method tfp': r'recon/clip_20\.png',
     'python -m wgse_mmseg.apis.reconstruction_benchmark '
     '../shared/data/reds_sample': r'\| WGSE \| \d\d\.\d\d \|',
 }

@@ -2,7 +2,7 @@
 
     python tools/demo.py SPIKE_FILE CONFIG CHECKPOINT [--out-file PATH]
         [--device cpu] [--opacity 0.5] [--height H --width W]
-        [--cfg-options num_steps=41 ...]
+        [--layout THW|HWT] [--cfg-options num_steps=41 ...]
 
 ``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.spk``, ``.npy``,
 ``.npz``; ``.dat`` needs ``--height``/``--width`` or a ``<file>.json`` side
@@ -10,6 +10,8 @@ file). It goes through the config's test pipeline, so ``LoadSpikeFromFile``
 takes the window of ``num_steps`` frames centred on the middle frame, exactly
 as in testing; a stream shorter than ``num_steps`` is an error naming the file
 and both numbers (``--cfg-options num_steps=T`` sets the model's ``T``).
+An ``.npy``/``.npz`` that does not record its layout needs ``--layout THW``
+or ``HWT`` (or a ``layout`` in the config's ``LoadSpikeFromFile``).
 
 The prediction is painted in the dataset's palette (from the checkpoint's
 ``dataset_meta``, else Spike-Cityscapes') over a grey image of the stream's
@@ -33,8 +35,8 @@ from mmengine.dataset import Compose  # noqa: E402
 from mmengine.registry import init_default_scope  # noqa: E402
 from mmengine.runner.checkpoint import load_state_dict  # noqa: E402
 from mmseg.apis import init_model  # noqa: E402
-from wgse_mmseg.core.arguments import (PROBABILITY, SIDE, Path,  # noqa
-                                       Text)
+from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, SIDE,  # noqa
+                                       Path, Text)
 from wgse_mmseg.core.exposure import (EXPOSURE, Exposed,  # noqa: E402
                                       apply_exposure)
 from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
@@ -66,6 +68,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help='frame height of a .dat file')
     parser.add_argument('--width', type=SIDE,
                         help='frame width of a .dat file')
+    parser.add_argument(
+        '--layout', type=LAYOUT,
+        help='THW or HWT: how a .npy/.npz that does not record its '
+        'layout stores its frames, (T, H, W) or (H, W, T) (default: the '
+        'config\'s LoadSpikeFromFile layout, else what the file records; '
+        'an error where it records none)')
     add_config_options(parser)
     parser.add_argument(
         '--exposure', type=EXPOSURE, default='auto',
@@ -86,10 +94,12 @@ def parse_args():
     return args
 
 
-def build_pipeline(cfg, height=None, width=None) -> Compose:
+def build_pipeline(cfg, height=None, width=None, layout=None) -> Compose:
     """The config's test pipeline without label loading.
 
-    ``height``/``width`` are given to ``LoadSpikeFromFile`` (for ``.dat``).
+    ``height``/``width`` (for ``.dat``) and ``layout`` (for ``.npy``/``.npz``
+    files that do not record it), where given, are given to
+    ``LoadSpikeFromFile``.
     """
     pipeline = cfg.get('test_pipeline') or cfg.test_dataloader.dataset.pipeline
     transforms = []
@@ -98,6 +108,8 @@ def build_pipeline(cfg, height=None, width=None) -> Compose:
             continue
         if transform['type'] == 'LoadSpikeFromFile' and height is not None:
             transform.update(height=height, width=width)
+        if transform['type'] == 'LoadSpikeFromFile' and layout is not None:
+            transform.update(layout=layout)
         transforms.append(transform)
     if not any(t['type'] == 'LoadSpikeFromFile' for t in transforms):
         raise ValueError('the config\'s test pipeline has no '
@@ -161,7 +173,7 @@ def main():
     init_default_scope(cfg.get('default_scope', 'mmseg'))
     try:
         # The stream is read first, so a file that does not fit fails fast.
-        data = build_pipeline(cfg, args.height, args.width)(
+        data = build_pipeline(cfg, args.height, args.width, args.layout)(
             dict(img_path=args.spikes))
         model = load_model(cfg, args.checkpoint, args.device)
     except (ValueError, FileNotFoundError) as err:

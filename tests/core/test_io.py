@@ -110,14 +110,14 @@ def test_npz_keys(tmp_path):
     spikes = _random_spikes((3, 2, 2), seed=4)
     single = str(tmp_path / 'single.npz')
     np.savez(single, other=spikes)
-    np.testing.assert_array_equal(load_spikes(single), spikes)
+    np.testing.assert_array_equal(load_spikes(single, layout='THW'), spikes)
     named = str(tmp_path / 'named.npz')
     np.savez(named, spikes=spikes, extra=np.zeros(3))
-    np.testing.assert_array_equal(load_spikes(named), spikes)
+    np.testing.assert_array_equal(load_spikes(named, layout='THW'), spikes)
     ambiguous = str(tmp_path / 'ambiguous.npz')
     np.savez(ambiguous, a=spikes, b=spikes)
     with pytest.raises(SpikeFileError, match=_path_in_message(ambiguous)):
-        load_spikes(ambiguous)
+        load_spikes(ambiguous, layout='THW')
 
 
 def test_npy_bool_and_int_arrays_accepted(tmp_path):
@@ -125,7 +125,7 @@ def test_npy_bool_and_int_arrays_accepted(tmp_path):
     for dtype in (bool, np.int64, np.float32):
         path = str(tmp_path / f'x_{np.dtype(dtype).name}.npy')
         np.save(path, spikes.astype(dtype))
-        got = load_spikes(path)
+        got = load_spikes(path, layout='THW')
         assert got.dtype == np.uint8
         np.testing.assert_array_equal(got, spikes)
 
@@ -498,9 +498,10 @@ def test_damaged_files_read_correctly_or_fail_naming_the_file(damaged):
         path = osp.join(tmp, f'clip{ext}')
         with open(path, 'wb') as f:
             f.write(data)
-        if ext == '.dat':
+        if ext in ('.dat', '.npy'):  # their side files
             with open(path + '.json', 'w') as f:
-                json.dump(dict(height=4, width=6), f)
+                json.dump(dict(height=4, width=6) if ext == '.dat' else
+                          dict(layout='THW'), f)
         try:
             shape = spike_shape(path)
             spikes = load_spikes(path)
@@ -513,20 +514,21 @@ def test_damaged_files_read_correctly_or_fail_naming_the_file(damaged):
 
 
 # ------------------------------------------------- hostile sizes and values
-def _write_npz_bomb(path, shape, frames_written=None):
+def _write_npz_bomb(path, shape, frames_written=None, fortran=False):
     """An ``.npz`` whose ``spikes.npy`` member declares a ``uint8`` array
     of ``shape`` and holds zeros: each MiB of zeros deflates to ~1 kB, so a
     GiB takes ~1 MB on disk. The member is built from one compressed piece
     (a frame, at most a MiB) repeated (each piece ends with a full flush, so pieces are independent),
     not by compressing a GiB. ``frames_written`` (default ``shape[0]``)
     frames of data follow the header; the zip declares the size the header
-    says, so fewer or more frames make a member that lies."""
+    says, so fewer or more frames make a member that lies. ``fortran``:
+    the header says Fortran order (the zeros are the same)."""
     import io
     import struct
     import zlib
     header = io.BytesIO()
     np.lib.format.write_array_header_1_0(
-        header, dict(descr='|u1', fortran_order=False, shape=shape))
+        header, dict(descr='|u1', fortran_order=fortran, shape=shape))
     header = header.getvalue()
     frame = shape[1] * shape[2]
     steps = shape[0] if frames_written is None else frames_written
@@ -584,8 +586,8 @@ def test_npz_bomb_is_read_lazily_within_bounds(tmp_path):
     tracemalloc.start()
     began = time.perf_counter()
     for _ in range(3):
-        assert spike_shape(path) == (1024, 1024, 1024)
-        window = load_spikes(path, start=0, length=9)
+        assert spike_shape(path, layout='THW') == (1024, 1024, 1024)
+        window = load_spikes(path, start=0, length=9, layout='THW')
         assert window.shape == (9, 1024, 1024) and not window.any()
     seconds = time.perf_counter() - began
     peak = tracemalloc.get_traced_memory()[1]
@@ -597,12 +599,12 @@ def test_npz_member_inflates_once_up_to_the_window(tmp_path, inflated):
     path = str(tmp_path / 'clip.npz')
     _write_npz_bomb(path, (64, 256, 256))  # 4 MiB inflated
     frame = 256 * 256
-    window = load_spikes(path, start=30, length=9)
+    window = load_spikes(path, start=30, length=9, layout='THW')
     assert window.shape == (9, 256, 256) and not window.any()
     first = inflated[0]
     assert 39 * frame <= first <= 39 * frame + 1024  # the npy header
-    load_spikes(path, start=30, length=9)
-    load_spikes(path, start=30, length=9)
+    load_spikes(path, start=30, length=9, layout='THW')
+    load_spikes(path, start=30, length=9, layout='THW')
     assert inflated[0] - first < 1024  # the headers of spike_shape only
     # a rewritten file is read anew, not served from the last read
     spikes = _random_spikes((64, 4, 6), seed=1)
@@ -635,7 +637,7 @@ def test_npz_member_inflating_past_its_declared_size_is_stopped(
     _write_npz_bomb(path, shape, frames_written)
     declared = 128 + shape[0] * 256 * 256
     try:
-        spikes = load_spikes(path)
+        spikes = load_spikes(path, layout='THW')
     except SpikeFileError as error:
         assert path in str(error)
     else:  # cannot happen: the CRC or the length disagrees at the end
@@ -655,7 +657,7 @@ def test_npy_header_declaring_more_than_the_file_is_refused(tmp_path):
     for read in (spike_shape, load_spikes):
         with pytest.raises(SpikeFileError,
                            match=_path_in_message(path) + '.*header says'):
-            read(path)
+            read(path, layout='THW')
 
 
 def test_spk_header_with_an_empty_dimension_is_refused(tmp_path):
@@ -728,19 +730,24 @@ def _arrays(draw):
 
 @pytest.mark.parametrize('ext', ['.npy', '.npz'])
 @given(array=_arrays(), start=st.integers(0, 9),
-       length=st.one_of(st.none(), st.integers(1, 9)))
-def test_array_windows_equal_slicing(ext, array, start, length):
-    """Any dtype and memory order NumPy writes: the window is the slice, as
-    uint8, or the window does not fit and the error names the file."""
+       length=st.one_of(st.none(), st.integers(1, 9)),
+       layout=st.sampled_from(['THW', 'HWT']))
+def test_array_windows_equal_slicing(ext, array, start, length, layout):
+    """Any dtype and memory order NumPy writes, stored ``(T, H, W)`` or
+    ``(H, W, T)``: with its layout given, the window is the slice of the
+    ``(T, H, W)`` clip, as uint8, or the window does not fit and the error
+    names the file."""
+    stored = array if layout == 'THW' else np.moveaxis(array, 0, -1)
     with tempfile.TemporaryDirectory() as tmp:
         path = osp.join(tmp, 'a' + ext)
-        (np.save if ext == '.npy' else np.savez)(path, array)
+        (np.save if ext == '.npy' else np.savez)(path, stored)
         stop = len(array) if length is None else start + length
         if start >= len(array) or stop > len(array):
             with pytest.raises(SpikeFileError, match=_path_in_message(path)):
-                load_spikes(path, start=start, length=length)
+                load_spikes(path, start=start, length=length, layout=layout)
             return
-        window = load_spikes(path, start=start, length=length)
+        assert spike_shape(path, layout=layout) == array.shape
+        window = load_spikes(path, start=start, length=length, layout=layout)
         assert window.dtype == np.uint8
         np.testing.assert_array_equal(window, array[start:stop])
 
@@ -799,16 +806,19 @@ def test_every_registered_format_round_trips_a_window(tmp_path, ext):
 
 
 def test_one_entry_adds_a_format(tmp_path, monkeypatch):
-    """A format is one entry: shape, read and encode of an (illustrative)
+    """A format is one entry: layout, shape, read and encode of an (illustrative)
     raw byte-per-spike format with a 3-int header; the public functions
     dispatch to it and keep their own checks."""
     header = struct.Struct('<3I')
 
-    def shape(path, height, width):
+    def layout(path, layout):
+        return 'THW'
+
+    def shape(path, height, width, layout):
         with open(path, 'rb') as f:
             return header.unpack(f.read(header.size))
 
-    def read(path, shape, start, length):
+    def read(path, shape, start, length, layout):
         start, length = spike_io._window(path, shape[0], start, length,
                                          shape[1] * shape[2])
         data = np.fromfile(path, np.uint8, offset=header.size)
@@ -817,7 +827,7 @@ def test_one_entry_adds_a_format(tmp_path, monkeypatch):
     def encode(path, spikes):
         return header.pack(*spikes.shape) + spikes.tobytes()
 
-    fmt = spike_io.SpikeFormat('.raw', shape, read, encode)
+    fmt = spike_io.SpikeFormat('.raw', layout, shape, read, encode)
     monkeypatch.setitem(spike_io.SPIKE_FORMATS, '.raw', fmt)
     spikes = _random_spikes((5, 3, 2), seed=12)
     path = str(tmp_path / 'clip.raw')
@@ -845,3 +855,220 @@ def test_a_temporary_is_named_after_its_target(tmp_path):
         assert spike_io.temporaries_of([str(tmp_path / 'no' / 'x')]) == []
     assert os.listdir(tmp_path) == ['a_spike.spk']
     assert spike_io.temporaries_of([str(target)]) == []
+
+
+# ------------------------------------------------------------ layouts
+@pytest.mark.parametrize('ext', ['.npy', '.npz'])
+@pytest.mark.parametrize('order', ['C', 'F'])
+def test_the_same_clip_written_both_ways_reads_the_same(tmp_path, ext,
+                                                        order):
+    """A clip stored (T, H, W) and (H, W, T) (as another tool writes it,
+    in either memory order) reads as the same (T, H, W) clip, whole and
+    in windows, given each file's layout."""
+    clip = _random_spikes((11, 5, 7), seed=21)
+    paths = {}
+    for layout, stored in (('THW', clip), ('HWT', clip.transpose(1, 2, 0))):
+        paths[layout] = str(tmp_path / f'{layout}{ext}')
+        stored = np.asarray(stored, order=order)
+        if ext == '.npy':
+            np.save(paths[layout], stored)
+        else:
+            np.savez(paths[layout], spikes=stored)
+    for layout, path in paths.items():
+        assert spike_shape(path, layout=layout) == (11, 5, 7)
+        np.testing.assert_array_equal(load_spikes(path, layout=layout), clip)
+        for start, length in ((0, 1), (3, 5), (10, 1), (4, None)):
+            np.testing.assert_array_equal(
+                load_spikes(path, start=start, length=length, layout=layout),
+                clip[start:None if length is None else start + length])
+    with pytest.raises(SpikeFileError, match=r'frames \[9, 12\)'):
+        load_spikes(paths['HWT'], start=9, length=3, layout='HWT')
+
+
+@pytest.mark.parametrize('ext', ['.npy', '.npz'])
+def test_an_array_that_does_not_record_its_layout_asks_for_it(tmp_path,
+                                                                ext):
+    path = str(tmp_path / ('clip' + ext))
+    array = _random_spikes((6, 4, 5), seed=22)
+    (np.save if ext == '.npy' else np.savez)(path, array)
+    for read in (spike_shape, load_spikes):
+        with pytest.raises(SpikeFileError) as error:
+            read(path)
+        message = str(error.value)
+        for part in (path, '6x4x5', 'does not record its layout',
+                     '6 frames of 4x5 (layout THW)',
+                     '5 frames of 6x4 (layout HWT)', "layout='THW'",
+                     '--layout THW', f'{path}.json',
+                     '{"layout": "THW"}'):
+            assert part in message, part
+    # what the message says to add works: the argument, or the side file
+    np.testing.assert_array_equal(load_spikes(path, layout='THW'), array)
+    with open(path + '.json', 'w') as f:
+        json.dump({'layout': 'THW'}, f)
+    np.testing.assert_array_equal(load_spikes(path), array)
+
+
+@pytest.mark.parametrize('ext', ['.npy', '.npz'])
+def test_save_spikes_records_the_layout(tmp_path, ext):
+    """.npz: a member "layout" (NumPy's own reader still reads "spikes");
+    .npy: the side file; then no layout is needed, and another is an error
+    naming the record."""
+    clip = _random_spikes((6, 4, 5), seed=23)
+    path = str(tmp_path / ('clip' + ext))
+    save_spikes(path, clip)
+    if ext == '.npz':
+        with np.load(path) as archive:
+            assert archive['layout'] == 'THW'
+            np.testing.assert_array_equal(archive['spikes'], clip)
+        where = 'its member "layout"'
+    else:
+        np.testing.assert_array_equal(np.load(path), clip)
+        with open(path + '.json') as f:
+            assert json.load(f) == {'layout': 'THW'}
+        where = f'its side file {path}.json'
+    np.testing.assert_array_equal(load_spikes(path), clip)
+    np.testing.assert_array_equal(load_spikes(path, layout='THW'), clip)
+    with pytest.raises(SpikeFileError,
+                       match=re.escape(f'{path}: {where} records layout THW,'
+                                       f' but layout HWT was given')):
+        load_spikes(path, layout='HWT')
+
+
+def test_a_recorded_hwt_layout_is_read_without_an_argument(tmp_path):
+    clip = _random_spikes((6, 4, 5), seed=24)
+    member = str(tmp_path / 'member.npz')
+    np.savez(member, spikes=clip.transpose(1, 2, 0), layout='HWT')
+    side = str(tmp_path / 'side.npy')
+    np.save(side, clip.transpose(1, 2, 0))
+    with open(side + '.json', 'w') as f:
+        json.dump({'layout': 'HWT'}, f)
+    for path in (member, side):
+        assert spike_shape(path) == (6, 4, 5)
+        np.testing.assert_array_equal(load_spikes(path, start=2, length=3),
+                                      clip[2:5])
+        with pytest.raises(SpikeFileError, match='records layout HWT'):
+            load_spikes(path, layout='THW')
+
+
+def test_the_spike_zoo_key_states_its_layout(tmp_path):
+    """Spike-Zoo's .npz convention (UHSR): key "spk", (T, H, W), beside
+    its label members."""
+    clip = _random_spikes((8, 5, 5), seed=25)
+    path = str(tmp_path / 'uhsr.npz')
+    np.savez(path, spk=clip, label=np.array(3), label_name=np.array('heli'))
+    assert spike_shape(path) == (8, 5, 5)
+    np.testing.assert_array_equal(load_spikes(path, start=1, length=4),
+                                  clip[1:5])
+    np.testing.assert_array_equal(load_spikes(path, layout='THW'), clip)
+    with pytest.raises(SpikeFileError, match='key "spk".*records layout '
+                       'THW, but layout HWT'):
+        load_spikes(path, layout='HWT')
+
+
+def test_the_real_uhsr_recording_reads_as_published(shared_dir):
+    path = osp.join(shared_dir, 'data', 'real', 'uhsr_helicopter.npz')
+    if not osp.exists(path):
+        pytest.skip(f'{path} is not here')
+    assert spike_shape(path) == (200, 250, 250)
+    with np.load(path) as archive:
+        expected = archive['spk'][40:81]
+    np.testing.assert_array_equal(load_spikes(path, start=40, length=41),
+                                  expected)
+
+
+def test_records_that_disagree_or_hold_no_layout_are_errors(tmp_path):
+    clip = _random_spikes((4, 2, 3), seed=26)
+    both = str(tmp_path / 'both.npz')
+    np.savez(both, spikes=clip, layout='THW')
+    with open(both + '.json', 'w') as f:
+        json.dump({'layout': 'HWT'}, f)
+    with pytest.raises(SpikeFileError,
+                       match='says layout HWT but its member "layout" says '
+                       'THW'):
+        load_spikes(both)
+    for name, layout in (('word', 'thw'), ('list', ['THW', 'HWT']),
+                         ('number', 1), ('bytes', b'TWH')):
+        path = str(tmp_path / f'{name}.npz')
+        np.savez(path, spikes=clip, layout=np.array(layout))
+        with pytest.raises(SpikeFileError,
+                           match=_path_in_message(path) + ': member '
+                           '"layout"'):
+            load_spikes(path)
+    side = str(tmp_path / 'side.npy')
+    np.save(side, clip)
+    with open(side + '.json', 'w') as f:
+        json.dump({'layout': 'TWH'}, f)
+    with pytest.raises(SpikeFileError, match=re.escape(
+            f'{side}: side file {side}.json says "layout": \'TWH\'; '
+            f"expected one of ['THW', 'HWT']")):
+        load_spikes(side)
+
+
+def test_a_layout_member_declaring_a_huge_string_is_refused_unread(
+        tmp_path):
+    """The member's header is checked before its data: a header declaring
+    a million-character string (or any array) allocates nothing."""
+    import io
+    import zipfile
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, dict(descr='<U1000000', fortran_order=False, shape=()))
+    path = str(tmp_path / 'huge.npz')
+    np.savez(path, spikes=_random_spikes((4, 2, 3)))
+    with zipfile.ZipFile(path, 'a') as archive:
+        archive.writestr('layout.npy', header.getvalue() + b'T\0\0\0')
+    with pytest.raises(SpikeFileError, match='member "layout" is an array '
+                       'of shape'):
+        load_spikes(path)
+
+
+@pytest.mark.parametrize('ext', ['.dat', '.spk'])
+def test_packed_formats_store_frames_first(tmp_path, ext):
+    clip = _random_spikes((5, 4, 6), seed=27)
+    path = str(tmp_path / ('clip' + ext))
+    save_spikes(path, clip)
+    size = dict(height=4, width=6)
+    np.testing.assert_array_equal(load_spikes(path, layout='THW', **size),
+                                  clip)
+    for read in (spike_shape, load_spikes):
+        with pytest.raises(SpikeFileError, match=re.escape(
+                f'{path}: a {ext} file stores frames one after another, '
+                f'(T, H, W); layout HWT does not apply')):
+            read(path, layout='HWT', **size)
+
+
+def test_layout_argument_is_declared():
+    for read in (spike_shape, load_spikes):
+        with pytest.raises(ArgumentError, match="layout must be one of "
+                           r"\['THW', 'HWT'\] or None, got 'thw'"):
+            read('clip.npy', layout='thw')
+
+
+def test_interleaved_npz_window_keeps_only_the_window(tmp_path):
+    """(H, W, T) in C order stores each pixel's steps together: the member
+    inflates whole (64 MiB of zeros, 64 kB on disk) but only the window
+    and one chunk at a time are held."""
+    import tracemalloc
+    path = str(tmp_path / 'hwt.npz')
+    _write_npz_bomb(path, (512, 512, 256))
+    tracemalloc.start()
+    window = load_spikes(path, start=100, length=9, layout='HWT')
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert window.shape == (9, 512, 512) and not window.any()
+    # the window (2.25 MiB), a chunk and zipfile's buffers of it: far
+    # from the 64 MiB member
+    assert peak < 10 << 20, peak
+
+
+def test_frame_major_fortran_hwt_npz_inflates_up_to_the_window(tmp_path,
+                                                               inflated):
+    """(H, W, T) in Fortran order stores frames one after another, as
+    (T, H, W) in C order does: only the frames up to the window's end
+    inflate."""
+    path = str(tmp_path / 'f.npz')
+    _write_npz_bomb(path, (64, 64, 256), fortran=True)  # (H, W, T)
+    window = load_spikes(path, start=30, length=9, layout='HWT')
+    assert window.shape == (9, 64, 64) and not window.any()
+    assert 39 * 64 * 64 <= inflated[0] <= 39 * 64 * 64 + 1024
+

@@ -21,13 +21,14 @@ import importlib.util
 import io
 import math
 import os.path as osp
+import re
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from wgse_mmseg.core.arguments import (Argument, Choice, Integer, Number,
-                                       OneOf, Path, Sequence, Text)
+from wgse_mmseg.core.arguments import (LAYOUT, Argument, Choice, Integer,
+                                       Number, OneOf, Path, Sequence, Text)
 from wgse_mmseg.core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
 from wgse_mmseg.data_generation.shards import Shard, ShardArgument
 from wgse_mmseg.utils.config import SPIKE_SETTING_KINDS, ConfigOptions
@@ -99,6 +100,33 @@ def test_every_command_line_is_declared():
         if 'ArgumentParser(' in open(p).read()}
     listed = {m.replace('.', '/') + '.py' for m in TOOL_MODULES}
     assert building - listed == {'wgse_mmseg/benchmarks/wgse.py'}
+
+
+def _source(tool):
+    path = (tool.replace('.', '/') + '.py' if tool in TOOL_MODULES
+            else tool)
+    return open(osp.join(ROOT, path), encoding='utf-8').read()
+
+
+#: the tools that read a user's recording: each takes ``--layout``
+RECORDING_READERS = {'tools/demo.py', 'tools/misc/reconstruct.py',
+                     'tools/misc/make_reconstruction_figure.py',
+                     'wgse_mmseg.benchmarks.reconstruction'}
+
+
+def test_every_tool_reading_a_recording_takes_the_declared_layout():
+    """``--layout`` of the one declared kind on every tool that reads a
+    spike file through the readers (the simulator benchmark reads only the
+    files it has just written, which record their layout)."""
+    reading = re.compile(r"load_spikes\(|spike_shape\(|LoadSpikeImagePair\("
+                         r"|'LoadSpikeFromFile'")
+    found = {tool for tool in TOOLS if reading.search(_source(tool))}
+    assert found == RECORDING_READERS
+    for tool in RECORDING_READERS:
+        action, = [a for a in _valued(_parser(tool))
+                   if a.option_strings == ['--layout']]
+        assert action.type is LAYOUT and action.default is None, tool
+    assert LAYOUT.choices == ('THW', 'HWT')
 
 
 # ---- an independent reading of what each declaration accepts as a word ----

@@ -2,12 +2,15 @@
 
     python tools/misc/make_reconstruction_figure.py SPIKE_FILE --out FIG.png
         [--methods wgse] [--frames 60,100,... | --count 5]
-        [--checkpoint CKPT] [--height H --width W] [--scale 1.0]
+        [--checkpoint CKPT] [--height H --width W] [--layout THW|HWT]
+        [--scale 1.0]
 
 One column per centre frame (``--frames``, or ``--count`` frames spread
 evenly over the stream), one row per method (``wgse``, ``tfp``, ``tfi``; the
 paper's figure is the ``wgse`` row), each tile labelled with its frame and
-method. ``--scale`` resizes the tiles. Written as an 8-bit grey PNG.
+method. ``--scale`` resizes the tiles. Written as an 8-bit grey PNG. An
+``.npy``/``.npz`` that does not record its layout needs ``--layout THW`` or
+``HWT``.
 """
 import argparse
 import os.path as osp
@@ -18,8 +21,8 @@ import numpy as np
 
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.core.arguments import (SIDE, Choice, Integer, Number, Path,
-                                       Sequence, Text)
+from wgse_mmseg.core.arguments import (LAYOUT, SIDE, Choice, Integer,
+                                       Number, Path, Sequence, Text)
 from wgse_mmseg.core.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
@@ -51,6 +54,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='wgse model (default: shipped)')
     parser.add_argument('--height', type=SIDE, help='frame height of a .dat')
     parser.add_argument('--width', type=SIDE, help='frame width of a .dat')
+    parser.add_argument(
+        '--layout', type=LAYOUT,
+        help='THW or HWT: how a .npy/.npz that does not record its '
+        'layout stores its frames, (T, H, W) or (H, W, T) (default: what '
+        'the file records; an error where it records none)')
     parser.add_argument('--scale', default=1.0,
                         type=Number(0, MAX_TILE_SCALE, strict_minimum=True),
                         help='tile scale factor')
@@ -88,7 +96,8 @@ def grid(rows) -> np.ndarray:
 def main(argv=None):
     args = parse_args(argv)
     try:
-        total, _, _ = spike_shape(args.spikes, args.height, args.width)
+        total, _, _ = spike_shape(args.spikes, args.height, args.width,
+                                  layout=args.layout)
         functions, length = {}, 41
         for method in args.methods:
             if method == 'wgse':
@@ -108,7 +117,7 @@ def main(argv=None):
     columns = []
     for frame, start in zip(frames, starts):
         window = load_spikes(args.spikes, args.height, args.width, start,
-                             length)
+                             length, args.layout)
         column = []
         for method, function in functions.items():
             tile = to_uint8(function(window))

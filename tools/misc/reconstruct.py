@@ -1,8 +1,9 @@
 """Reconstruct grey images from a spike stream and write them as PNGs.
 
     python tools/misc/reconstruct.py SPIKE_FILE --out DIR [--method wgse|tfp|tfi]
-        [--checkpoint CKPT] [--height H --width W] [--frames 150,...]
-        [--num-steps 41] [--exposure auto|none|GAIN] [--device cpu]
+        [--checkpoint CKPT] [--height H --width W] [--layout THW|HWT]
+        [--frames 150,...] [--num-steps 41] [--exposure auto|none|GAIN]
+        [--device cpu]
 
 ``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat``, ``.spk``,
 ``.npy``, ``.npz``; a ``.dat`` needs ``--height``/``--width`` or a
@@ -18,6 +19,10 @@ that percentile becomes white: a dark recording gives a visible image
 (:func:`wgse_mmseg.core.exposure.auto_exposure`); ``none`` keeps the
 method's intensities; a number is a fixed gain.
 
+An ``.npy``/``.npz`` that does not record its layout needs ``--layout THW``
+(stored ``(T, H, W)``) or ``HWT`` (stored ``(H, W, T)``); it is never guessed
+(:mod:`wgse_mmseg.core.io`).
+
 ``--method wgse`` (default) runs the trained model of ``--checkpoint``: an
 mmengine checkpoint of a ``configs/reconstruction`` config or a file of
 ``export_weights``; without one, the weights shipped in
@@ -31,8 +36,8 @@ import sys
 
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.core.arguments import (NUM_STEPS, SIDE, Choice, Integer,
-                                       Path, Sequence, Text)
+from wgse_mmseg.core.arguments import (LAYOUT, NUM_STEPS, SIDE, Choice,
+                                       Integer, Path, Sequence, Text)
 from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
 from wgse_mmseg.evaluation import entropy_2d  # noqa: E402
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
@@ -58,6 +63,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='frame height of a .dat file')
     parser.add_argument('--width', type=SIDE,
                         help='frame width of a .dat file')
+    parser.add_argument(
+        '--layout', type=LAYOUT,
+        help='THW or HWT: how a .npy/.npz that does not record its '
+        'layout stores its frames, (T, H, W) or (H, W, T) (default: what '
+        'the file records; an error where it records none)')
     parser.add_argument(
         '--frames', type=Sequence(Integer()),
         help='comma-separated centre frames (default: the middle frame)')
@@ -86,7 +96,8 @@ def parse_args(argv=None):
 def main(argv=None):
     args = parse_args(argv)
     try:
-        total, _, _ = spike_shape(args.spikes, args.height, args.width)
+        total, _, _ = spike_shape(args.spikes, args.height, args.width,
+                                  layout=args.layout)
         length = args.num_steps
         if args.method == 'wgse':
             model = load_reconstructor(args.checkpoint, args.device)
@@ -101,7 +112,7 @@ def main(argv=None):
     stem = osp.splitext(osp.basename(args.spikes))[0]
     for frame, start in zip(frames, starts):
         window = load_spikes(args.spikes, args.height, args.width, start,
-                             length)
+                             length, args.layout)
         exposed = apply_exposure(method(window), args.exposure)
         image = to_uint8(exposed.image)
         path = osp.join(args.out, f'{stem}_{frame}.png')

@@ -60,10 +60,13 @@ class SpikeSegInferencer(MMSegInferencer):
         pipeline = [step for step in cfg.test_dataloader.dataset.pipeline
                     if step['type'] not in ('LoadAnnotations',
                                             'LoadDepthAnnotation')]
-        if self._get_transform_idx(pipeline, 'LoadSpikeFromFile') == -1:
+        index = self._get_transform_idx(pipeline, 'LoadSpikeFromFile')
+        if index == -1:
             raise ValueError('SpikeSegInferencer needs LoadSpikeFromFile in '
                              'the test pipeline; is it a spike config?')
         self.num_steps = cfg.get('num_steps')
+        # the drawing reads each stream as the pipeline does
+        self.layout = pipeline[index].get('layout')
         return Compose([_as_results] + pipeline)
 
     def visualize(self, inputs: list, preds: List[dict],
@@ -85,7 +88,8 @@ class SpikeSegInferencer(MMSegInferencer):
         for spike_file, pred in zip(inputs, preds):
             name = f'{osp.splitext(osp.basename(spike_file))[0]}.png'
             self.visualizer.add_datasample(
-                name, spike_clip_image(spike_file, self.num_steps), pred,
+                name, spike_clip_image(spike_file, self.num_steps,
+                                       layout=self.layout), pred,
                 show=show, wait_time=wait_time, draw_gt=False,
                 draw_pred=True, with_labels=with_labels,
                 out_file=osp.join(img_out_dir, name) if img_out_dir else None)

@@ -2,9 +2,12 @@
 
     python -m wgse_mmseg.benchmarks.reconstruction DATA_ROOT
         [--methods wgse,tfp,tfi] [--checkpoint CKPT] [--num-steps 41]
+        [--spike-suffix .dat] [--layout THW|HWT]
 
 ``DATA_ROOT`` holds ``spike/<name>.dat`` beside ``gt/<name>.png``
-(:class:`~wgse_mmseg.datasets.reds.REDSSpikeDataset`). Every method sees the
+(:class:`~wgse_mmseg.datasets.reds.REDSSpikeDataset`; ``--spike-suffix``
+for ``.spk``/``.npy``/``.npz`` streams, ``--layout`` for arrays that do not
+record their layout). Every method sees the
 same ``num_steps``-frame windows centred on the ground truth's frame and is
 scored by :class:`ReconstructionMetric` (PSNR, SSIM, 2-D entropy); prints a
 Markdown table with each method's PSNR margin over TFP.
@@ -20,7 +23,7 @@ from .. import register_all_modules
 # as the tools make it, before the layer's packages are imported
 register_all_modules()
 from ..core import arguments
-from ..core.arguments import NUM_STEPS, Choice, Path, Text
+from ..core.arguments import LAYOUT, NUM_STEPS, Choice, Path, Text
 from ..datasets.reds import (LoadSpikeImagePair, PackReconstructionInputs,
                              REDSSpikeDataset)
 from ..models.reconstruction import (METHODS, load_reconstructor,
@@ -33,12 +36,14 @@ __all__ = ['benchmark', 'format_table']
 def benchmark(data_root: str, methods: Sequence[str] = METHODS,
               checkpoint: Optional[str] = None, num_steps: int = 41,
               spike_suffix: str = '.dat', device: str = 'cpu',
-              progress: bool = True) -> Dict[str, Dict[str, float]]:
+              progress: bool = True,
+              layout: Optional[str] = None) -> Dict[str, Dict[str, float]]:
     """``{method: {'PSNR', 'SSIM', 'Entropy2D'}}`` over the folder's samples
     (a progress bar on stderr unless ``progress`` is False).
 
     ``checkpoint`` is the ``wgse`` model (default: the shipped weights); its
-    ``num_steps`` must equal ``num_steps``.
+    ``num_steps`` must equal ``num_steps``. ``layout``: of ``.npy``/``.npz``
+    streams that do not record it (``LoadSpikeFromFile``'s).
     """
     functions = {}
     for method in methods:
@@ -53,7 +58,8 @@ def benchmark(data_root: str, methods: Sequence[str] = METHODS,
             functions[method] = reconstruction_method(method)
     dataset = REDSSpikeDataset(
         data_root=data_root, spike_suffix=spike_suffix,
-        pipeline=[LoadSpikeImagePair(num_steps), PackReconstructionInputs()])
+        pipeline=[LoadSpikeImagePair(num_steps, layout=layout),
+                  PackReconstructionInputs()])
     metrics = {method: ReconstructionMetric() for method in functions}
     for index in tqdm(range(len(dataset)), desc='reconstruction benchmark',
                       disable=not progress):
@@ -98,6 +104,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--spike-suffix', type=Text(empty=False),
                         default='.dat')
     parser.add_argument('--device', type=Text(empty=False), default='cpu')
+    parser.add_argument(
+        '--layout', type=LAYOUT,
+        help='THW or HWT: how a .npy/.npz that does not record its '
+        'layout stores its frames, (T, H, W) or (H, W, T) (default: what '
+        'the file records; an error where it records none)')
     return parser
 
 
@@ -105,7 +116,8 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     methods = list(dict.fromkeys(args.methods))  # in order, once each
     results = benchmark(args.data_root, methods, args.checkpoint,
-                        args.num_steps, args.spike_suffix, args.device)
+                        args.num_steps, args.spike_suffix, args.device,
+                        layout=args.layout)
     print(format_table(results))
 
 

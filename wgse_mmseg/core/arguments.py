@@ -34,7 +34,7 @@ __all__ = [
     'ArgumentError', 'Argument', 'Integer', 'Number', 'Flag', 'Text',
     'Choice', 'Path', 'Sequence', 'OneOf', 'Declaration', 'DECLARATIONS',
     'declare', 'declare_fields', 'check_parameter_count', 'NUM_STEPS', 'SIDE',
-    'FRAME_SIZE', 'SEED', 'NUM_CLASSES', 'PROBABILITY'
+    'FRAME_SIZE', 'SEED', 'NUM_CLASSES', 'PROBABILITY', 'LAYOUT'
 ]
 
 class ArgumentError(ValueError, TypeError):
@@ -456,3 +456,7 @@ SEED = Integer(0, MAX_SEED)
 NUM_CLASSES = Integer(1, MAX_CLASSES)
 #: a probability
 PROBABILITY = Number(0, 1)
+#: the axis order of a 3-D spike array on disk: ``'THW'`` (frames first,
+#: ``(T, H, W)``) or ``'HWT'`` (frames last, ``(H, W, T)``, as some
+#: simulators and viewers store them); see :mod:`.io`
+LAYOUT = Choice(('THW', 'HWT'))

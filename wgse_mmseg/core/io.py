@@ -16,13 +16,38 @@ functions):
     followed by ``T`` frames, each ``ceil(H*W/8)`` bytes packed as in
     ``.dat`` but stored upright.
 ``.npy`` / ``.npz``
-    A ``(T, H, W)`` array of 0/1 (``.npz``: key ``spikes``, or its only
-    array).
+    A 3-D array of 0/1 (``.npz``: key ``spikes``, Spike-Zoo's ``spk``, or
+    its only array) stored in either *layout*
+    (:data:`~wgse_mmseg.core.arguments.LAYOUT`): ``'THW'``, frames first,
+    ``(T, H, W)``; or ``'HWT'``, frames last, ``(H, W, T)``, as some
+    simulators and viewers store them.
+
+The layout of an ``.npy``/``.npz`` array cannot be told from its shape, so
+it is never guessed. It comes from what the file records, or else from the
+caller's ``layout`` argument:
+
+* an ``.npz`` member ``layout`` holding ``'THW'`` or ``'HWT'``
+  (:func:`save_spikes` writes ``'THW'``);
+* an ``.npz`` key ``spk``: the Spike-Zoo toolbox's published convention
+  (its UHSR recordings), whose readers take it as ``(T, H, W)``, so the key
+  itself states the layout;
+* a side file ``<file>.json`` holding ``{"layout": "THW"}`` (or
+  ``"HWT"``): ``.npy`` has no room for it that NumPy's own reader accepts,
+  so :func:`save_spikes` writes one beside every ``.npy``.
+
+Where the file records a layout, a ``layout`` argument must agree with it
+(one of the two is wrong about the file: an error naming both). Where it
+records none and no ``layout`` is given, the read is an error naming the
+file, its shape and how to give the layout. ``.dat`` and ``.spk`` store
+frames one after another: their layout is ``'THW'``, and ``'HWT'`` for them
+is an error.
 
 Every reader returns a ``(T, H, W)`` ``uint8`` array of 0/1, reads only the
 requested window of frames (memory-mapped; an ``.npz`` member inflated
-once, only up to the window's end), and names the file and the expected
-sizes when the file does not fit. The sizes a file declares (header, side
+once, only up to the window's end, or, where its frames are interleaved
+(``(H, W, T)`` stored in C order, ``(T, H, W)`` in Fortran order), inflated
+whole in chunks keeping only the window), and names the file and the
+expected sizes when the file does not fit. The sizes a file declares (header, side
 file, zip member, ``.npy`` header) are checked against the file and against
 :mod:`wgse_mmseg.core.limits` before anything is allocated. Writers write atomically: a
 temporary file beside the target, renamed into place when complete.
@@ -31,6 +56,7 @@ import contextlib
 import functools
 import hashlib
 import io
+import json
 import math
 import os
 import os.path as osp
@@ -44,7 +70,7 @@ from typing import (BinaryIO, Callable, Dict, Iterator, List, NamedTuple,
 import cv2
 import numpy as np
 
-from .arguments import Integer, Path, declare
+from .arguments import LAYOUT, Integer, Path, declare
 from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
 
@@ -266,7 +292,7 @@ def _pack(spikes: np.ndarray) -> np.ndarray:
     return np.packbits(spikes.reshape(steps, -1), axis=1, bitorder='little')
 
 
-def _npy_layout(path: str, f: BinaryIO,
+def _npy_header(path: str, f: BinaryIO,
                 size: int) -> Tuple[Tuple[int, int, int], np.dtype, bool]:
     """Shape, dtype and Fortran order of the ``.npy`` data ``f`` holds
     (read from its start, left at the first data byte), checked against
@@ -286,8 +312,8 @@ def _npy_layout(path: str, f: BinaryIO,
             f'{path}: an array of {dtype}; expected booleans or numbers')
     if len(shape) != 3 or 0 in shape:
         raise SpikeFileError(
-            f'{path}: expected a non-empty (T, H, W) array, got shape '
-            f'{shape}')
+            f'{path}: expected a non-empty (T, H, W) array (or (H, W, T), '
+            f'layout HWT), got shape {shape}')
     needed = f.tell() + math.prod(shape) * dtype.itemsize
     if needed != size:
         raise SpikeFileError(
@@ -296,16 +322,27 @@ def _npy_layout(path: str, f: BinaryIO,
     return shape, dtype, fortran
 
 
+#: the ``.npz`` keys that hold spikes, in order of preference: this
+#: package's, then the Spike-Zoo toolbox's (whose layout is ``'THW'``)
+_NPZ_KEYS = ('spikes', 'spk')
+#: the ``.npz`` key recording the array's layout
+_NPZ_LAYOUT_KEY = 'layout'
+
+
 def _npz_member(path: str, archive: zipfile.ZipFile) -> zipfile.ZipInfo:
-    """The member holding the spikes (``spikes.npy``, or the only member),
-    its declared inflated size checked against the read limit."""
+    """The member holding the spikes (``spikes.npy``, ``spk.npy``, or the
+    only array besides a ``layout``), its declared inflated size checked
+    against the read limit."""
     names = archive.namelist()
-    name = 'spikes.npy' if 'spikes.npy' in names else (
-        names[0] if len(names) == 1 and names[0].endswith('.npy') else None)
+    arrays = [n for n in names if n != f'{_NPZ_LAYOUT_KEY}.npy']
+    name = next((f'{key}.npy' for key in _NPZ_KEYS if f'{key}.npy' in names),
+                arrays[0] if len(arrays) == 1 and arrays[0].endswith('.npy')
+                else None)
     if name is None:
         raise SpikeFileError(
             f'{path}: .npz holds {excerpt([n[:-4] for n in names])}; '
-            f'expected a key "spikes" or a single array')
+            f'expected a key "spikes" (or Spike-Zoo\'s "spk") or a single '
+            f'array')
     info = archive.getinfo(name)
     if info.file_size > READ_LIMIT_BYTES:
         raise SpikeFileError(
@@ -319,7 +356,7 @@ def _npz_member(path: str, archive: zipfile.ZipFile) -> zipfile.ZipInfo:
 def _array_file(path: str) -> Iterator[
         Tuple[BinaryIO, Tuple[int, int, int], np.dtype, bool]]:
     """The ``.npy`` data of an ``.npy`` file or ``.npz`` member, open at
-    its first data byte, with its checked layout (:func:`_npy_layout`).
+    its first data byte, with its checked layout (:func:`_npy_header`).
 
     An ``.npz`` member inflates only as far as it is read, never past its
     declared size. Every failure is a :class:`SpikeFileError` naming the
@@ -335,7 +372,7 @@ def _array_file(path: str) -> Iterator[
                 info = _npz_member(path, archive)
                 f = stack.enter_context(archive.open(info))
                 size = info.file_size
-            layout = _npy_layout(path, f, size)
+            layout = _npy_header(path, f, size)
             yield (f, ) + layout
     except SpikeFileError:
         raise
@@ -347,48 +384,215 @@ def _array_file(path: str) -> Iterator[
             from err
 
 
-def _read_array_window(path: str, start: int,
-                       length: Optional[int]) -> np.ndarray:
-    """Frames ``[start, start + length)`` of an ``.npy``/``.npz`` array,
-    in its own dtype (``.npy``: memory-mapped; ``.npz``:
+#: bytes an ``.npz`` ``layout`` member may declare (a header and a short
+#: string); more is refused unread
+_LAYOUT_MEMBER_BYTES = 4096
+
+
+def _side_file_layout(path: str) -> List[Tuple[str, str]]:
+    """``[(where, layout)]`` the side file ``<path>.json`` records
+    (``{"layout": "THW"}``); empty without one, or without the key."""
+    side = path + '.json'
+    if not osp.exists(side):
+        return []
+    try:
+        meta = load_json_file(side, 'side file')
+    except (OSError, ValueError) as err:
+        raise SpikeFileError(f'{path}: {err}') from err
+    if not isinstance(meta, dict) or 'layout' not in meta:
+        return []
+    if not LAYOUT.accepts(meta['layout']):
+        raise SpikeFileError(
+            f'{path}: side file {side} says "layout": '
+            f'{excerpt(meta["layout"])}; expected {LAYOUT.describe()}')
+    return [(f'its side file {side}', meta['layout'])]
+
+
+def _npz_layout(path: str) -> List[Tuple[str, str]]:
+    """``[(where, layout)]`` an ``.npz`` records: its ``layout`` member
+    (a string array, read without pickles and at most
+    :data:`_LAYOUT_MEMBER_BYTES`) and its Spike-Zoo key ``spk``."""
+    records, value = [], None
+    member = f'{_NPZ_LAYOUT_KEY}.npy'
+    try:
+        with zipfile.ZipFile(path) as archive:
+            if _npz_member(path, archive).filename == 'spk.npy':
+                records.append(('its key "spk" (the Spike-Zoo convention)',
+                                'THW'))
+            if member in archive.namelist():
+                info = archive.getinfo(member)
+                if info.file_size > _LAYOUT_MEMBER_BYTES:
+                    raise SpikeFileError(
+                        f'{path}: member "{_NPZ_LAYOUT_KEY}" declares '
+                        f'{info.file_size} bytes; a layout needs at most '
+                        f'{_LAYOUT_MEMBER_BYTES}')
+                with archive.open(info) as f:
+                    value = _layout_member(path, f)
+    except SpikeFileError:
+        raise
+    except Exception as err:  # noqa: BLE001 as in _array_file
+        raise SpikeFileError(f'{path}: cannot read the array: '
+                             f'{type(err).__name__}: {cut(str(err))}') \
+            from err
+    if value is not None:
+        if not LAYOUT.accepts(value):
+            raise SpikeFileError(
+                f'{path}: member "{_NPZ_LAYOUT_KEY}" holds {excerpt(value)}; '
+                f'expected {LAYOUT.describe()}')
+        records.append((f'its member "{_NPZ_LAYOUT_KEY}"', value))
+    return records
+
+
+def _layout_member(path: str, f: BinaryIO) -> str:
+    """The string an ``.npz`` ``layout`` member holds: a 0-d string array
+    (``np.array('THW')``), its header checked before its few data bytes
+    are read (nothing larger is allocated)."""
+    version = np.lib.format.read_magic(f)
+    read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                   else np.lib.format.read_array_header_2_0)
+    shape, _, dtype = read_header(f)
+    if shape != () or dtype.kind not in 'US' or dtype.itemsize > 64:
+        raise SpikeFileError(
+            f'{path}: member "{_NPZ_LAYOUT_KEY}" is an array of shape {shape} '
+            f'and type {dtype}; expected a string, {LAYOUT.describe()}')
+    data = f.read(dtype.itemsize)
+    if len(data) != dtype.itemsize:
+        raise SpikeFileError(f'{path}: member "{_NPZ_LAYOUT_KEY}" is '
+                             f'truncated')
+    value = np.frombuffer(data, dtype)[0].item()
+    return value.decode('ascii', 'replace') if isinstance(value, bytes) \
+        else value
+
+
+def _ambiguous(path: str) -> SpikeFileError:
+    """The error for an array file that records no layout, none given."""
+    with _array_file(path) as (_, shape, _, _):
+        pass
+    first, second, third = shape
+    return SpikeFileError(
+        f'{path}: a {first}x{second}x{third} array that does not record its '
+        f'layout: frames first, (T, H, W) = {first} frames of '
+        f'{second}x{third} (layout THW), or frames last, (H, W, T) = '
+        f'{third} frames of {first}x{second} (layout HWT)? Give it: '
+        f'layout=\'THW\' or \'HWT\' (load_spikes, spike_shape, '
+        f'LoadSpikeFromFile in a config\'s pipeline), --layout THW or HWT '
+        f'on the tools, or a side file {path}.json holding '
+        f'{{"layout": "THW"}} (files written by save_spikes record it)')
+
+
+def _array_layout(path: str, layout: Optional[str]) -> str:
+    """The layout of an ``.npy``/``.npz`` array: what the file records
+    (see the module docstring), which ``layout``, when given, must agree
+    with; ``layout`` where it records none; an error where neither."""
+    records = _side_file_layout(path)
+    if path.lower().endswith('.npz'):
+        records += _npz_layout(path)
+    for where, told in records[1:]:
+        if told != records[0][1]:
+            raise SpikeFileError(
+                f'{path}: {records[0][0]} says layout {records[0][1]} but '
+                f'{where} says {told}')
+    if records and layout not in (None, records[0][1]):
+        raise SpikeFileError(
+            f'{path}: {records[0][0]} records layout {records[0][1]}, but '
+            f'layout {layout} was given; leave the layout unset or give '
+            f'{records[0][1]}')
+    if records:
+        return records[0][1]
+    if layout is None:
+        raise _ambiguous(path)
+    return layout
+
+
+def _frame_major(path: str, layout: Optional[str]) -> str:
+    """``'THW'``: ``.dat``/``.spk`` store frames one after another; a
+    ``layout`` of ``'HWT'`` is an error."""
+    if layout not in (None, 'THW'):
+        raise SpikeFileError(
+            f'{path}: a {osp.splitext(path)[1]} file stores frames one after '
+            f'another, (T, H, W); layout {layout} does not apply to it '
+            f'(leave it unset or give THW)')
+    return 'THW'
+
+
+def _stream_shape(shape: Tuple[int, int, int],
+                  layout: str) -> Tuple[int, int, int]:
+    """``(T, H, W)`` of an array of ``shape`` stored in ``layout``."""
+    return shape if layout == 'THW' else (shape[2], shape[0], shape[1])
+
+
+def _read_array_window(path: str, start: int, length: Optional[int],
+                       layout: str) -> np.ndarray:
+    """Frames ``[start, start + length)`` of an ``.npy``/``.npz`` array
+    stored in ``layout``, as ``(length, H, W)`` in its own dtype
+    (``.npy``: memory-mapped, only the window copied; ``.npz``:
     :func:`_inflated_window`)."""
     if path.lower().endswith('.npz'):
         stat = os.stat(path)
         return _inflated_window(
             path, (stat.st_ino, stat.st_size, stat.st_mtime_ns), start,
-            length)
+            length, layout)
     with _array_file(path) as (f, shape, dtype, fortran):
-        start, length = _window(path, shape[0], start, length,
-                                math.prod(shape[1:]) * dtype.itemsize)
+        steps, height, width = _stream_shape(shape, layout)
+        start, length = _window(path, steps, start, length,
+                                height * width * dtype.itemsize)
         array = np.memmap(path, dtype=dtype, mode='r', offset=f.tell(),
                           shape=shape, order='F' if fortran else 'C')
-        return np.asarray(array[start:start + length])
+        if layout == 'THW':
+            return np.asarray(array[start:start + length])
+        return np.ascontiguousarray(
+            array[:, :, start:start + length].transpose(2, 0, 1))
+
+
+#: bytes of an interleaved ``.npz`` member inflated at a time
+_CHUNK_BYTES = 1 << 20
 
 
 @functools.lru_cache(maxsize=1)
 def _inflated_window(path: str, identity: Tuple[int, int, int], start: int,
-                     length: Optional[int]) -> np.ndarray:
-    """Frames ``[start, start + length)`` of an ``.npz`` member, read-only.
+                     length: Optional[int], layout: str) -> np.ndarray:
+    """Frames ``[start, start + length)`` of an ``.npz`` member stored in
+    ``layout``, as ``(length, H, W)``, read-only.
 
-    The member inflates once, in chunks, up to the window's end (all of it
-    when stored in Fortran order), keeping only the window; the last
-    window read is kept, so reading it again (the shape, then the frames,
-    of one sample) inflates nothing. ``identity`` (inode, size, mtime) makes
-    a changed file a new key.
+    Frames stored one after another (``(T, H, W)`` in C order, ``(H, W, T)``
+    in Fortran order) inflate once, in chunks, up to the window's end,
+    keeping only the window. Interleaved ones (each pixel's ``T`` values
+    together: ``(H, W, T)`` in C order, ``(T, H, W)`` in Fortran order)
+    inflate whole, :data:`_CHUNK_BYTES` at a time, keeping only each
+    pixel's window. The last window read is kept, so reading it again (the
+    shape, then the frames, of one sample) inflates nothing. ``identity``
+    (inode, size, mtime) makes a changed file a new key.
     """
     with _array_file(path) as (f, shape, dtype, fortran):
-        steps, height, width = shape
+        steps, height, width = _stream_shape(shape, layout)
         frame = height * width * dtype.itemsize
         start, length = _window(path, steps, start, length, frame)
-        if fortran:
-            array = np.frombuffer(f.read(steps * frame), dtype).reshape(
-                shape, order='F')[start:start + length].copy()
-        else:
+        if fortran == (layout == 'HWT'):  # frame after frame
             f.seek(f.tell() + start * frame)  # inflates and drops, in chunks
             data = f.read(length * frame)
             if len(data) != length * frame:
                 raise SpikeFileError(f'{path}: the array data is truncated')
-            array = np.frombuffer(data, dtype).reshape(length, height, width)
+            frames = np.frombuffer(data, dtype)
+            array = (frames.reshape(length, height, width) if not fortran
+                     else frames.reshape(height, width, length,
+                                         order='F').transpose(2, 0, 1))
+        else:  # pixel after pixel, each pixel's steps together
+            run = steps * dtype.itemsize
+            per_chunk = max(1, _CHUNK_BYTES // run)
+            window = np.empty((length, height * width), dtype)
+            for first in range(0, height * width, per_chunk):
+                count = min(per_chunk, height * width - first)
+                data = f.read(count * run)
+                if len(data) != count * run:
+                    raise SpikeFileError(
+                        f'{path}: the array data is truncated')
+                window[:, first:first + count] = np.frombuffer(
+                    data, dtype).reshape(count, steps)[:, start:start +
+                                                       length].T
+            # pixels in C order of (H, W), or (Fortran (T, H, W)) of (W, H)
+            array = (np.ascontiguousarray(window.reshape(
+                length, width, height).transpose(0, 2, 1)) if fortran
+                     else window.reshape(length, height, width))
     array.setflags(write=False)
     return array
 
@@ -413,25 +617,26 @@ def _read_packed(path: str, shape: Tuple[int, int, int], start: int,
     return np.ascontiguousarray(spikes)
 
 
-def _read_dat(path, shape, start, length):
+def _read_dat(path, shape, start, length, layout):
     return _read_packed(path, shape, start, length, 0, bottom_up=True)
 
 
-def _read_spk(path, shape, start, length):
+def _read_spk(path, shape, start, length, layout):
     return _read_packed(path, shape, start, length, _HEADER.size,
                         bottom_up=False)
 
 
-def _array_shape(path: str, height: Optional[int],
-                 width: Optional[int]) -> Tuple[int, int, int]:
-    """``(T, H, W)`` an ``.npy``/``.npz`` header declares, checked (the
-    array records its size: ``height``/``width`` are not used)."""
+def _array_shape(path: str, height: Optional[int], width: Optional[int],
+                 layout: str) -> Tuple[int, int, int]:
+    """``(T, H, W)`` of the ``.npy``/``.npz`` array stored in ``layout``,
+    from its checked header (the array records its size:
+    ``height``/``width`` are not used)."""
     with _array_file(path) as (_, shape, _, _):
-        return shape
+        return _stream_shape(shape, layout)
 
 
-def _read_array(path, shape, start, length):
-    window = _read_array_window(path, start, length)
+def _read_array(path, shape, start, length, layout):
+    window = _read_array_window(path, start, length, layout)
     _check_binary(path, window)
     return window.astype(np.uint8)
 
@@ -458,7 +663,8 @@ def _encode_npy(path: str, spikes: np.ndarray) -> bytes:
 
 def _encode_npz(path: str, spikes: np.ndarray) -> bytes:
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, spikes=spikes)
+    np.savez_compressed(buffer, spikes=spikes,
+                        **{_NPZ_LAYOUT_KEY: np.array('THW')})
     return buffer.getvalue()
 
 
@@ -466,36 +672,54 @@ class SpikeFormat(NamedTuple):
     """One spike file format: what :func:`spike_shape`, :func:`load_spikes`
     and :func:`save_spikes` do for its extension.
 
-    ``shape(path, height, width)``
-        ``(T, H, W)`` of the existing file ``path`` without reading its
-        frames, every size the file declares checked against the file and
+    ``layout(path, layout)``
+        the layout (``'THW'``/``'HWT'``) the existing file ``path`` stores
+        its frames in, from what it records and the caller's ``layout``
+        (or ``None``), or a :class:`SpikeFileError` naming the file where
+        they disagree or neither tells (see the module docstring).
+    ``shape(path, height, width, layout)``
+        ``(T, H, W)`` of the existing file ``path`` stored in ``layout``
+        (``layout``'s answer) without reading its frames, every size the
+        file declares checked against the file and
         :mod:`~wgse_mmseg.core.limits` (``height``/``width``: the caller's,
         or ``None``; formats that record their size ignore them).
-    ``read(path, shape, start, length)``
+    ``read(path, shape, start, length, layout)``
         frames ``[start, start + length)`` (``length=None``: to the end)
-        of the file ``shape`` describes, as a ``(length, H, W)`` ``uint8``
-        array of 0/1, the window checked by :func:`_window` and the values
-        checked to be 0/1 where the format can hold others.
+        of the file ``shape`` and ``layout`` describe, as a
+        ``(length, H, W)`` ``uint8`` array of 0/1, the window checked by
+        :func:`_window` and the values checked to be 0/1 where the format
+        can hold others.
     ``encode(path, spikes)``
         the file's bytes for a checked, non-empty ``(T, H, W)`` ``uint8``
         array of 0/1; a :class:`SpikeFileError` naming ``path`` for what
         the format cannot hold.
+    ``side``
+        what :func:`save_spikes` writes to the side file ``<path>.json``
+        (JSON values), for a format with no room to record it; ``None``
+        for no side file.
     """
     extension: str
-    shape: Callable[[str, Optional[int], Optional[int]],
+    layout: Callable[[str, Optional[str]], str]
+    shape: Callable[[str, Optional[int], Optional[int], str],
                     Tuple[int, int, int]]
-    read: Callable[[str, Tuple[int, int, int], int, Optional[int]],
+    read: Callable[[str, Tuple[int, int, int], int, Optional[int], str],
                    np.ndarray]
     encode: Callable[[str, np.ndarray], bytes]
+    side: Optional[dict] = None
 
 
 #: the spike formats, by lower-case extension (see the module docstring)
 SPIKE_FORMATS: Dict[str, SpikeFormat] = {fmt.extension: fmt for fmt in (
-    SpikeFormat('.dat', _dat_geometry, _read_dat, _encode_dat),
-    SpikeFormat('.spk', lambda path, height, width: _spk_geometry(path),
+    SpikeFormat('.dat', _frame_major,
+                lambda path, height, width, layout: _dat_geometry(
+                    path, height, width), _read_dat, _encode_dat),
+    SpikeFormat('.spk', _frame_major,
+                lambda path, height, width, layout: _spk_geometry(path),
                 _read_spk, _encode_spk),
-    SpikeFormat('.npy', _array_shape, _read_array, _encode_npy),
-    SpikeFormat('.npz', _array_shape, _read_array, _encode_npz),
+    SpikeFormat('.npy', _array_layout, _array_shape, _read_array,
+                _encode_npy, side={'layout': 'THW'}),
+    SpikeFormat('.npz', _array_layout, _array_shape, _read_array,
+                _encode_npz),
 )}
 #: the extensions of :data:`SPIKE_FORMATS`
 SPIKE_EXTENSIONS = tuple(SPIKE_FORMATS)
@@ -511,22 +735,31 @@ def _format(path: str) -> SpikeFormat:
     return SPIKE_FORMATS[ext]
 
 
-@declare(path=Path(), height=_SIDE, width=_SIDE)
-def spike_shape(path: str, height: Optional[int] = None,
-                width: Optional[int] = None) -> Tuple[int, int, int]:
-    """``(T, H, W)`` of a spike file without reading its frames."""
-    path = os.fspath(path)
+def _existing(path: str) -> SpikeFormat:
+    """:func:`_format` of ``path``, an existing spike file."""
     fmt = _format(path)
     if not osp.exists(path):
         raise SpikeFileError(f'{path}: no such spike file')
-    return fmt.shape(path, height, width)
+    return fmt
+
+
+@declare(path=Path(), height=_SIDE, width=_SIDE, layout=LAYOUT.or_none())
+def spike_shape(path: str, height: Optional[int] = None,
+                width: Optional[int] = None,
+                layout: Optional[str] = None) -> Tuple[int, int, int]:
+    """``(T, H, W)`` of a spike file without reading its frames
+    (arguments as :func:`load_spikes`'s)."""
+    path = os.fspath(path)
+    fmt = _existing(path)
+    return fmt.shape(path, height, width, fmt.layout(path, layout))
 
 
 @declare(path=Path(), height=_SIDE, width=_SIDE, start=Integer(0),
-         length=Integer(1, optional=True))
+         length=Integer(1, optional=True), layout=LAYOUT.or_none())
 def load_spikes(path: str, height: Optional[int] = None,
                 width: Optional[int] = None, start: int = 0,
-                length: Optional[int] = None) -> np.ndarray:
+                length: Optional[int] = None,
+                layout: Optional[str] = None) -> np.ndarray:
     """Read frames ``[start, start + length)`` of a spike file.
 
     Args:
@@ -535,26 +768,39 @@ def load_spikes(path: str, height: Optional[int] = None,
         height, width: frame size of a ``.dat`` file (others record it).
         start: first frame.
         length: number of frames; ``None`` reads to the end.
+        layout: how an ``.npy``/``.npz`` array that does not record it is
+            stored: ``'THW'`` ``(T, H, W)`` or ``'HWT'`` ``(H, W, T)``;
+            ``None`` takes the layout the file records (an error naming
+            the file where it records none). A layout the file records
+            otherwise is an error; ``.dat``/``.spk`` are ``'THW'``.
 
     Returns:
-        ``(T, H, W)`` ``uint8`` array of 0/1, upright.
+        ``(T, H, W)`` ``uint8`` array of 0/1, upright, whatever the layout
+        on disk.
 
     Raises:
         SpikeFileError: naming the file, for bad arguments, a file that
-            does not fit its declared sizes, or a window over
+            does not fit its declared sizes, a layout that cannot be told
+            or contradicts the file, or a window over
             :data:`~wgse_mmseg.core.limits.READ_LIMIT_BYTES`.
     """
     path = os.fspath(path)
-    shape = spike_shape(path, height, width)
-    return _format(path).read(path, shape, start, length)
+    fmt = _existing(path)
+    layout = fmt.layout(path, layout)
+    shape = fmt.shape(path, height, width, layout)
+    return fmt.read(path, shape, start, length, layout)
 
 
 @declare(path=Path())
 def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
-    """Write a ``(T, H, W)`` 0/1 array to ``path`` (format from extension).
+    """Write a ``(T, H, W)`` 0/1 array to ``path`` (format from extension),
+    recording its layout ``'THW'`` where the format does not fix it
+    (``.npz``: a member ``layout``; ``.npy``: the side file
+    ``<path>.json``, written first).
 
-    The file appears complete or not at all. Returns what was written
-    (:class:`WrittenFile`: size and SHA-256 of the bytes, from memory).
+    Each file appears complete or not at all. Returns what was written to
+    ``path`` (:class:`WrittenFile`: size and SHA-256 of the bytes, from
+    memory).
     """
     path = os.fspath(path)
     fmt = _format(path)
@@ -564,4 +810,7 @@ def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
             f'{path}: expected a non-empty (T, H, W) array, got shape '
             f'{spikes.shape}')
     _check_binary(path, spikes)
-    return write_bytes(path, fmt.encode(path, spikes.astype(np.uint8)))
+    encoded = fmt.encode(path, spikes.astype(np.uint8))
+    if fmt.side is not None:
+        write_bytes(path + '.json', json.dumps(fmt.side).encode())
+    return write_bytes(path, encoded)

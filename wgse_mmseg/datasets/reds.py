@@ -31,9 +31,9 @@ from mmengine.dataset import BaseDataset
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
-from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SEED, SIDE, Integer,
-                              Number, Path, Sequence as Values, Text,
-                              declare)
+from ..core.arguments import (FRAME_SIZE, LAYOUT, NUM_STEPS, SEED, SIDE,
+                              Integer, Number, Path, Sequence as Values,
+                              Text, declare)
 from ..core.limits import MAX_SAMPLES
 from ..core.seeding import derive_generator, derive_seed
 from ..core.constants import REDS_WHITE_RATE
@@ -60,12 +60,14 @@ class LoadSpikeImagePair(BaseTransform):
         num_steps: frames in the window (41 in the literature).
         height, width: frame size of ``.dat`` files; by default the ground
             truth's size (other formats record theirs).
+        layout: of ``.npy``/``.npz`` spike files that do not record it
+            (``LoadSpikeFromFile``'s ``layout``).
     """
 
     @declare(num_steps=NUM_STEPS, height=SIDE.or_none(),
-             width=SIDE.or_none())
+             width=SIDE.or_none(), layout=LAYOUT.or_none())
     def __init__(self, num_steps: int = 41, height: Optional[int] = None,
-                 width: Optional[int] = None):
+                 width: Optional[int] = None, layout: Optional[str] = None):
         super().__init__()
         if (height is None) != (width is None):
             raise ValueError('LoadSpikeImagePair: height and width go '
@@ -73,13 +75,14 @@ class LoadSpikeImagePair(BaseTransform):
         self.num_steps = num_steps
         self.height = height
         self.width = width
+        self.layout = layout
 
     def transform(self, results: dict) -> dict:
         gt = read_grey_image(results['gt_path'])
         height, width = ((self.height, self.width) if self.height else
                          gt.shape)
         loader = LoadSpikeFromFile(self.num_steps, height, width,
-                                   results.get('gt_frame'))
+                                   results.get('gt_frame'), self.layout)
         results = loader(results)
         if results['img'].shape[:2] != gt.shape:
             raise ValueError(
@@ -93,7 +96,8 @@ class LoadSpikeImagePair(BaseTransform):
 
     def __repr__(self):
         return (f'{self.__class__.__name__}(num_steps={self.num_steps}, '
-                f'height={self.height}, width={self.width})')
+                f'height={self.height}, width={self.width}, '
+                f'layout={self.layout!r})')
 
 
 @TRANSFORMS.register_module()

@@ -21,12 +21,14 @@ __all__ = ['SpikeVisualizationHook', 'spike_clip_image']
 
 def spike_clip_image(path: str, num_steps: Optional[int] = None,
                      height: Optional[int] = None,
-                     width: Optional[int] = None) -> np.ndarray:
+                     width: Optional[int] = None,
+                     layout: Optional[str] = None) -> np.ndarray:
     """``(H, W, 3)`` uint8 grey TFP image of the clip at ``path``, read as
     the test pipeline reads it (``num_steps`` frames centred on the stream,
-    ``None`` for all), with ``'auto'`` exposure (only a dark clip is
-    brightened)."""
-    spikes = LoadSpikeFromFile(num_steps, height, width)(
+    ``None`` for all; ``height``/``width``/``layout`` as
+    :class:`LoadSpikeFromFile`'s), with ``'auto'`` exposure (only a dark
+    clip is brightened)."""
+    spikes = LoadSpikeFromFile(num_steps, height, width, layout=layout)(
         dict(img_path=path))['img']
     grey = apply_exposure(tfp(spikes.transpose(2, 0, 1))).image
     return np.repeat(to_uint8(grey)[..., None], 3, axis=2)
@@ -47,20 +49,22 @@ class SpikeVisualizationHook(SegVisualizationHook):
         num_steps: frames per clip; ``None`` for the config's ``num_steps``
             (or the whole stream where the config has none).
         height, width: frame size of ``.dat`` files.
+        layout: of ``.npy``/``.npz`` files that do not record it
+            (:class:`LoadSpikeFromFile`'s).
         **kwargs: ``draw``, ``interval``, ``show``, ``wait_time`` of MMSeg's
             hook.
     """
 
     def __init__(self, num_steps: Optional[int] = None,
                  height: Optional[int] = None, width: Optional[int] = None,
-                 **kwargs):
+                 layout: Optional[str] = None, **kwargs):
         with warnings.catch_warnings():
             # MMSeg's hook warns whenever draw is False, its default: not
             # news in every run
             warnings.simplefilter('ignore', UserWarning)
             super().__init__(**kwargs)
         self.loader_args = dict(num_steps=num_steps, height=height,
-                                width=width)
+                                width=width, layout=layout)
 
     def clip_image(self, path: str, num_steps: Optional[int]) -> np.ndarray:
         """:func:`spike_clip_image` with the hook's loader arguments

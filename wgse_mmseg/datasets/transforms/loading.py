@@ -12,7 +12,7 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
-from ...core.arguments import NUM_STEPS, SIDE, Integer, declare
+from ...core.arguments import LAYOUT, NUM_STEPS, SIDE, Integer, declare
 from ...core.io import centered_window, load_spikes, spike_shape
 
 __all__ = ['LoadSpikeFromFile']
@@ -36,25 +36,35 @@ class LoadSpikeFromFile(BaseTransform):
         center: frame the window is centred on; ``None`` for the middle.
             A window that does not fit in the stream is an error
             (:func:`~wgse_mmseg.core.io.centered_window`).
+        layout: how ``.npy``/``.npz`` arrays that do not record it are
+            stored, ``'THW'`` ``(T, H, W)`` or ``'HWT'`` ``(H, W, T)``;
+            ``None`` (default) takes the layout each file records, and a
+            file that records none is an error naming it
+            (:func:`~wgse_mmseg.core.io.load_spikes`). A config sets it
+            for a dataset of such files, e.g.
+            ``dict(type='LoadSpikeFromFile', num_steps=41, layout='THW')``.
 
     Added keys: ``img`` ``(H, W, T)`` uint8, ``img_shape``, ``ori_shape``,
     ``num_steps``.
     """
 
     @declare(num_steps=NUM_STEPS.or_none(), height=SIDE.or_none(),
-             width=SIDE.or_none(), center=Integer(0, optional=True))
+             width=SIDE.or_none(), center=Integer(0, optional=True),
+             layout=LAYOUT.or_none())
     def __init__(self, num_steps: Optional[int] = None,
                  height: Optional[int] = None, width: Optional[int] = None,
-                 center: Optional[int] = None):
+                 center: Optional[int] = None, layout: Optional[str] = None):
         super().__init__()
         self.num_steps = num_steps
         self.height = height
         self.width = width
         self.center = center
+        self.layout = layout
 
     def transform(self, results: dict) -> dict:
         path = results['img_path']
-        total, _, _ = spike_shape(path, self.height, self.width)
+        total, _, _ = spike_shape(path, self.height, self.width,
+                                  layout=self.layout)
         length = total if self.num_steps is None else self.num_steps
         if length > total:
             raise ValueError(
@@ -62,7 +72,8 @@ class LoadSpikeFromFile(BaseTransform):
                 f'asks for num_steps={length}')
         center = total // 2 if self.center is None else self.center
         start = centered_window(path, total, center, length)
-        spikes = load_spikes(path, self.height, self.width, start, length)
+        spikes = load_spikes(path, self.height, self.width, start, length,
+                             self.layout)
         results['img'] = np.ascontiguousarray(spikes.transpose(1, 2, 0))
         results['img_shape'] = spikes.shape[1:]
         results['ori_shape'] = spikes.shape[1:]
@@ -72,4 +83,4 @@ class LoadSpikeFromFile(BaseTransform):
     def __repr__(self):
         return (f'{self.__class__.__name__}(num_steps={self.num_steps}, '
                 f'height={self.height}, width={self.width}, '
-                f'center={self.center})')
+                f'center={self.center}, layout={self.layout!r})')
