@@ -16,8 +16,8 @@ functions):
     followed by ``T`` frames, each ``ceil(H*W/8)`` bytes packed as in
     ``.dat`` but stored upright.
 ``.npy`` / ``.npz``
-    A ``(T, H, W)`` array of 0/1 (``.npz``: key ``spikes``, or its only
-    array).
+    A ``(T, H, W)`` array of 0/1 (``.npz``: key ``spikes``, else ``spk``
+    as Spike-Zoo's recordings name it, else its only array).
 
 Every reader returns a ``(T, H, W)`` ``uint8`` array of 0/1, reads only the
 requested window of frames (memory-mapped; an ``.npz`` member inflated
@@ -297,15 +297,17 @@ def _npy_layout(path: str, f: BinaryIO,
 
 
 def _npz_member(path: str, archive: zipfile.ZipFile) -> zipfile.ZipInfo:
-    """The member holding the spikes (``spikes.npy``, or the only member),
-    its declared inflated size checked against the read limit."""
+    """The member holding the spikes (``spikes.npy``, else ``spk.npy``, else
+    the only member), its declared inflated size checked against the read
+    limit."""
     names = archive.namelist()
-    name = 'spikes.npy' if 'spikes.npy' in names else (
+    keys = [n for n in ('spikes.npy', 'spk.npy') if n in names]
+    name = keys[0] if keys else (
         names[0] if len(names) == 1 and names[0].endswith('.npy') else None)
     if name is None:
         raise SpikeFileError(
             f'{path}: .npz holds {excerpt([n[:-4] for n in names])}; '
-            f'expected a key "spikes" or a single array')
+            f'expected a key "spikes" or "spk", or a single array')
     info = archive.getinfo(name)
     if info.file_size > READ_LIMIT_BYTES:
         raise SpikeFileError(
