@@ -29,7 +29,8 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
                 'wgse_mmseg.core.exposure', 'wgse_mmseg.benchmarks.timing',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
-                'wgse_mmseg.core.reconstruction_baselines'):
+                'wgse_mmseg.core.reconstruction_baselines',
+                'wgse_mmseg.benchmarks.reconstruction'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -111,6 +112,8 @@ def _required(entry):
         'waverec': dict(coeffs=[torch.zeros(2, 8)] * 2, wavelet='haar'),
         'tfp': dict(spikes=np.zeros((3, 4, 5))),
         'tfi': dict(spikes=np.zeros((3, 4, 5))),
+        'score_recording': dict(path=files['clip'], methods=['tfp'],
+                                num_steps=5),
     }.get(entry, {})
 
 
@@ -138,7 +141,7 @@ def test_the_public_entry_points_are_declared():
         'SpikeCityscapesDataset', 'auto_exposure', 'apply_exposure',
         'time_calls', 'schedule_options', 'wavedec', 'waverec',
         'analysis_matrix', 'band_lengths', 'synthesis_matrix', 'tfp', 'tfi',
-        'ExperimentSettings'
+        'ExperimentSettings', 'score_recording'
     } <= entries
     for declaration in DECLARATIONS.values():
         parameters = inspect.signature(declaration.function).parameters
