@@ -54,7 +54,7 @@ if __name__ == '__main__':
         packages=find_packages(include=['wgse_mmseg', 'wgse_mmseg.*']),
         include_package_data=True,
         package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*', '.mim/**/**/**/*',
-                                     'weights/*.pth']},
+                                     'weights/*.pth', 'core/quality/data/*']},
         install_requires=[
             'torch>=2.0',
             'mmengine>=0.10,<0.11',

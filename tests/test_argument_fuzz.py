@@ -31,7 +31,8 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.core.exposure', 'wgse_mmseg.benchmarks.timing',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
                 'wgse_mmseg.core.reconstruction_baselines',
-                'wgse_mmseg.data_generation.training_images'):
+                'wgse_mmseg.data_generation.training_images',
+                'wgse_mmseg.benchmarks.reconstruction'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -117,6 +118,8 @@ def _required(entry):
         'tfi_temporal_mean': dict(spikes=np.zeros((3, 4, 5))),
         'export_training_images': dict(out_dir=str(files['root'] / 'images'),
                                        sources=('matplotlib',)),
+        'score_recording': dict(path=files['clip'], methods=['tfp'],
+                                num_steps=5),
     }.get(entry, {})
 
 
@@ -145,7 +148,7 @@ def test_the_public_entry_points_are_declared():
         'time_calls', 'schedule_options', 'wavedec', 'waverec',
         'analysis_matrix', 'band_lengths', 'synthesis_matrix', 'tfp', 'tfi',
         'tfi_spatial_mean', 'tfi_temporal_mean', 'export_training_images',
-        'ExperimentSettings'
+        'ExperimentSettings', 'score_recording'
     } <= entries
     for declaration in DECLARATIONS.values():
         parameters = inspect.signature(declaration.function).parameters

@@ -114,6 +114,14 @@ def test_npz_keys(tmp_path):
     named = str(tmp_path / 'named.npz')
     np.savez(named, spikes=spikes, extra=np.zeros(3))
     np.testing.assert_array_equal(load_spikes(named, layout='THW'), spikes)
+        # Spike-Zoo's recordings (UHSR): spk beside a label; spikes wins
+    spike_zoo = str(tmp_path / 'spike_zoo.npz')
+    np.savez(spike_zoo, spk=spikes, label=np.array(3),
+             label_name=np.array('helicopter'))
+    np.testing.assert_array_equal(load_spikes(spike_zoo), spikes)
+    both = str(tmp_path / 'both.npz')
+    np.savez(both, spk=np.zeros_like(spikes), spikes=spikes)
+    np.testing.assert_array_equal(load_spikes(both, layout='THW'), spikes)
     ambiguous = str(tmp_path / 'ambiguous.npz')
     np.savez(ambiguous, a=spikes, b=spikes)
     with pytest.raises(SpikeFileError, match=_path_in_message(ambiguous)):

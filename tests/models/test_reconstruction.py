@@ -24,8 +24,9 @@ from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
 from wgse_mmseg.data_generation.views import render_trajectory
 from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
                                    gaussian_window, psnr, ssim)
-from wgse_mmseg.benchmarks.reconstruction import (benchmark,
-                                                            format_table)
+from wgse_mmseg.benchmarks.reconstruction import (benchmark, format_table,
+                                                  main, score_recording)
+from wgse_mmseg.core.quality import no_reference_scores
 from wgse_mmseg.core.io import load_spikes, save_spikes
 from wgse_mmseg.models.reconstruction import (CLASSICAL_METHODS, DEFAULT_WEIGHTS,
                                               METHODS, reconstruction_method,
@@ -652,6 +653,43 @@ def test_figure_tool_grid(tmp_path):
     figure = cv2.imread(out, cv2.IMREAD_UNCHANGED)
     tile_h, tile_w = 2 * 8 + 22, 2 * 10  # scaled tile + label band
     assert figure.shape == (2 * tile_h + 4, 3 * tile_w + 2 * 4)
+
+
+def test_recording_table_scores_what_reconstruct_writes(tmp_path, capsys):
+    """The benchmark's real-data mode on a recording without ground truth
+    (a dark .npz with Spike-Zoo's key): each method's scores are those of
+    the image tools/misc/reconstruct.py writes, meaned over the frames."""
+    rng = np.random.default_rng(0)
+    rates = cv2.GaussianBlur(rng.random((96, 192)), (0, 0), 2) * 0.08
+    spikes = (rng.random((60, 96, 192)) < rates).astype(np.uint8)
+    path = str(tmp_path / 'dark.npz')
+    np.savez(path, spk=spikes, label=np.array(1))
+    results = score_recording(path, ['tfp', 'tfi'], frames=[25, 30])
+    _tool('reconstruct').main([path, '--out', str(tmp_path / 'o'),
+                               '--method', 'tfp', '--frames', '25,30'])
+    written = [no_reference_scores(cv2.imread(
+        str(tmp_path / 'o' / f'dark_{f}.png'), cv2.IMREAD_UNCHANGED))
+        for f in (25, 30)]
+    for name in ('NIQE', 'BRISQUE', 'Entropy2D'):
+        assert np.isclose(results['tfp'][name],
+                          np.mean([w[name] for w in written]))
+    printed = capsys.readouterr().out
+    assert f'niqe={written[0]["NIQE"]:.3f}' in printed
+    assert f'brisque={written[0]["BRISQUE"]:.3f}' in printed
+    assert results['tfp']['gain'] > 4  # dark: auto exposure brightened it
+    main([path, '--methods', 'tfi,tfp', '--frames', '30'])
+    table = capsys.readouterr().out
+    assert 'dark.npz, centre frames 30, exposure auto; ' in table
+    assert table.index('| TFI ') < table.index('| TFP ')
+    assert 'NIQE (lower better)' in table
+    with pytest.raises(SystemExit, match='centre frames 20..39 fit'):
+        main([path, '--frames', '50'])
+
+
+def test_recording_mode_reads_the_uhsr_recording(shared_dir):
+    path = osp.join(shared_dir, 'data', 'real', 'uhsr_helicopter.npz')
+    results = score_recording(path, ['tfp'], frames=[100])
+    assert all(np.isfinite(v) for v in results['tfp'].values())
 
 
 def test_benchmark_table(tmp_path):

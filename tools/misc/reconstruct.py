@@ -10,8 +10,10 @@
 ``<file>.json`` side file). For each requested centre frame (default: the
 middle frame) the window of ``--num-steps`` frames centred on it goes through
 the method, and ``DIR/<stem>_<frame>.png`` (8-bit grey, upright) is written;
-each path is printed with the exposure gain applied, the image's 2-D
-entropy (a no-reference measure) and why that gain. ``--exposure auto``
+each path is printed with the exposure gain applied, the image's
+no-reference scores (NIQE and BRISQUE, lower is better; 2-D entropy in
+bits; ``n/a`` where the image is too small or flat for one:
+:mod:`wgse_mmseg.core.quality`) and why that gain. ``--exposure auto``
 (default) leaves an image of normal brightness as the method made it (a
 calibrated stream is never made worse) and brightens only a clearly
 under-exposed one, whose 99.5th percentile is below a quarter of white, so
@@ -39,7 +41,7 @@ wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.core.arguments import (LAYOUT, NUM_STEPS, SIDE, Choice,
                                        Integer, Path, Sequence, Text)
 from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
-from wgse_mmseg.evaluation import entropy_2d  # noqa: E402
+from wgse_mmseg.core.quality import no_reference_scores
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
@@ -121,8 +123,11 @@ def main(argv=None):
         except OSError as err:
             sys.exit(f'{osp.basename(__file__)}: error: --out {args.out}: '
                      f'cannot write {path}: {err}')
-        print(f'{path}\texposure_gain={exposed.gain:.3g}\t'
-              f'entropy2d={entropy_2d(image):.3f}\texposure: {exposed.reason}')
+        scores = '\t'.join(
+            f'{name.lower()}=' + ('n/a' if value is None else f'{value:.3f}')
+            for name, value in no_reference_scores(image).items())
+        print(f'{path}\texposure_gain={exposed.gain:.3g}\t{scores}\t'
+              f'exposure: {exposed.reason}')
 
 
 if __name__ == '__main__':

@@ -17,7 +17,8 @@
   time, memory (``tools/analysis_tools/benchmark.py``, the experiment
   runner);
 * :mod:`.reconstruction`: reconstruction methods scored on a REDS-layout
-  folder (``python -m wgse_mmseg.benchmarks.reconstruction``).
+  folder (PSNR, SSIM) or on a real recording without ground truth (NIQE,
+  BRISQUE, 2-D entropy) (``python -m wgse_mmseg.benchmarks.reconstruction``).
 
 All but the last two need the core alone (torch, numpy), nothing of
 OpenMMLab: they run on a GPU machine with torch alone. :mod:`.segmentation`

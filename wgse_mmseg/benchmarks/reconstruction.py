@@ -1,8 +1,12 @@
-"""Score reconstruction methods on a REDS-layout folder.
+"""Score reconstruction methods on a REDS-layout folder or a real recording.
 
     python -m wgse_mmseg.benchmarks.reconstruction DATA_ROOT
         [--methods wgse,tfp,tfi] [--checkpoint CKPT] [--num-steps 41]
         [--spike-suffix .dat] [--layout THW|HWT]
+    python -m wgse_mmseg.benchmarks.reconstruction RECORDING
+        [--frames 100,...] [--exposure auto|none|GAIN]
+        [--height H --width W] [--layout THW|HWT] [--methods ...]
+        [--checkpoint CKPT]
 
 ``DATA_ROOT`` holds ``spike/<name>.dat`` beside ``gt/<name>.png``
 (:class:`~wgse_mmseg.datasets.reds.REDSSpikeDataset`; ``--spike-suffix``
@@ -11,9 +15,21 @@ record their layout). Every method sees the
 same ``num_steps``-frame windows centred on the ground truth's frame and is
 scored by :class:`ReconstructionMetric` (PSNR, SSIM, 2-D entropy); prints a
 Markdown table with each method's PSNR margin over TFP.
+
+``RECORDING`` is a spike file without ground truth (``.dat``, ``.spk``,
+``.npy``, ``.npz``, e.g. the UHSR recordings' ``.npz``): each method
+reconstructs the window centred on each ``--frames`` frame (default: the
+middle one) and the image, as ``tools/misc/reconstruct.py`` writes it (its
+``--exposure``, by default ``auto``: a dark recording's image brightened so
+that its 99.5th percentile is white, each method's own gain), is scored by
+the no-reference measures (:mod:`wgse_mmseg.core.quality`: NIQE and BRISQUE,
+lower is better; 2-D entropy, higher means more detail); prints a Markdown
+table of the means over the frames, naming the machine.
 """
 import argparse
-from typing import Dict, Optional, Sequence
+import os.path as osp
+import sys
+from typing import Dict, List, Optional, Sequence
 
 from tqdm import tqdm
 
@@ -23,14 +39,32 @@ from .. import register_all_modules
 # as the tools make it, before the layer's packages are imported
 register_all_modules()
 from ..core import arguments
-from ..core.arguments import LAYOUT, NUM_STEPS, Choice, Path, Text
+from ..core.arguments import (LAYOUT, NUM_STEPS, SIDE, Choice, Integer, Path, Text,
+                              declare)
+from ..core.exposure import EXPOSURE, apply_exposure
+from ..core.io import (SpikeFileError, centered_window, load_spikes,
+                       spike_shape, to_uint8)
+from ..core.quality import NO_REFERENCE_METRICS, no_reference_scores
+from .machine import machine_record
+from .markdown import markdown_table
 from ..datasets.reds import (LoadSpikeImagePair, PackReconstructionInputs,
                              REDSSpikeDataset)
 from ..models.reconstruction import (METHODS, load_reconstructor,
                                      reconstruction_method)
 from ..evaluation.metrics import ReconstructionMetric
 
-__all__ = ['benchmark', 'format_table']
+__all__ = ['benchmark', 'format_table', 'score_recording',
+           'format_recording_table']
+
+
+def _method(method: str, checkpoint: Optional[str], device: str):
+    """``(function, window length)`` of a method: ``(T, H, W)`` spikes to an
+    ``(H, W)`` image; the length is the model's for ``wgse``, else
+    ``None`` (any)."""
+    if method == 'wgse':
+        model = load_reconstructor(checkpoint, device)
+        return model.reconstruct, model.num_steps
+    return reconstruction_method(method), None
 
 
 def benchmark(data_root: str, methods: Sequence[str] = METHODS,
@@ -47,15 +81,11 @@ def benchmark(data_root: str, methods: Sequence[str] = METHODS,
     """
     functions = {}
     for method in methods:
-        if method == 'wgse':
-            model = load_reconstructor(checkpoint, device)
-            if model.num_steps != num_steps:
-                raise ValueError(
-                    f'{checkpoint or "shipped weights"}: the model takes '
-                    f'{model.num_steps}-frame windows, not {num_steps}')
-            functions[method] = model.reconstruct
-        else:
-            functions[method] = reconstruction_method(method)
+        functions[method], length = _method(method, checkpoint, device)
+        if length not in (None, num_steps):
+            raise ValueError(
+                f'{checkpoint or "shipped weights"}: the model takes '
+                f'{length}-frame windows, not {num_steps}')
     dataset = REDSSpikeDataset(
         data_root=data_root, spike_suffix=spike_suffix,
         pipeline=[LoadSpikeImagePair(num_steps, layout=layout),
@@ -89,11 +119,82 @@ def format_table(results: Dict[str, Dict[str, float]]) -> str:
     return '\n'.join(lines)
 
 
+@declare(path=Path(), methods=arguments.Sequence(Choice(METHODS),
+                                                 max_length=len(METHODS)),
+         checkpoint=Path(optional=True), num_steps=NUM_STEPS,
+         frames=arguments.Sequence(Integer(), optional=True),
+         exposure=EXPOSURE, height=SIDE.or_none(), width=SIDE.or_none(),
+         device=Text(empty=False), layout=LAYOUT.or_none())
+def score_recording(path: str, methods: Sequence[str] = METHODS,
+                    checkpoint: Optional[str] = None, num_steps: int = 41,
+                    frames: Optional[Sequence[int]] = None,
+                    exposure='auto', height: Optional[int] = None,
+                    width: Optional[int] = None, device: str = 'cpu',
+                    layout: Optional[str] = None
+                    ) -> Dict[str, Dict[str, Optional[float]]]:
+    """No-reference scores of each method on a recording without ground
+    truth: ``{method: {'NIQE', 'BRISQUE', 'Entropy2D', 'gain'}}``, means
+    over the centre ``frames`` (default: the middle frame; ``None`` for a
+    measure undefined on any of them, see
+    :func:`~wgse_mmseg.core.quality.no_reference_scores`).
+
+    Each image is scored as ``tools/misc/reconstruct.py`` writes it: the
+    method's output at ``exposure`` (``'auto'``, ``'none'`` or a gain;
+    ``gain`` is the mean gain applied), in 8 bits. ``tfp``/``tfi`` use
+    ``num_steps``-frame windows, ``wgse`` its model's. ``layout``: as
+    :func:`~wgse_mmseg.core.io.load_spikes` takes it.
+    """
+    total, _, _ = spike_shape(path, height, width, layout)
+    frames = list(frames) if frames else [total // 2]
+    results = {}
+    for method in methods:
+        function, length = _method(method, checkpoint, device)
+        length = length or num_steps
+        starts = [centered_window(path, total, f, length) for f in frames]
+        scores: Dict[str, List[Optional[float]]] = {
+            name: [] for name in list(NO_REFERENCE_METRICS) + ['gain']}
+        for start in starts:
+            window = load_spikes(path, height, width, start, length, layout)
+            exposed = apply_exposure(function(window), exposure)
+            scores['gain'].append(exposed.gain)
+            for name, value in no_reference_scores(
+                    to_uint8(exposed.image)).items():
+                scores[name].append(value)
+        results[method] = {
+            name: None if None in values else float(sum(values) / len(values))
+            for name, values in scores.items()}
+    return results
+
+
+def format_recording_table(results: Dict[str, Dict[str, Optional[float]]],
+                           recording: str, frames: Sequence[int],
+                           exposure, device: str = 'cpu') -> str:
+    """Markdown table of :func:`score_recording`'s results, under a line
+    naming the recording, frames, exposure and machine."""
+    def cell(value, digits):
+        return '-' if value is None else f'{value:.{digits}f}'
+
+    rows = [[method.upper(), cell(s['NIQE'], 3), cell(s['BRISQUE'], 2),
+             cell(s['Entropy2D'], 3), cell(s['gain'], 2)]
+            for method, s in results.items()]
+    machine = machine_record(device)
+    where = machine.get('gpu') or machine['cpu']
+    return (f'{osp.basename(recording)}, centre frames '
+            f'{",".join(map(str, frames))}, exposure {exposure}; {where}, '
+            f'torch {machine["torch"]}, wgse_mmseg {machine["wgse_mmseg"]}'
+            '\n\n' + markdown_table(
+                ['method', 'NIQE (lower better)', 'BRISQUE (lower better)',
+                 '2-D entropy (bits)', 'exposure gain'], rows))
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        description='Score reconstruction methods on a REDS-layout folder')
+        description='Score reconstruction methods on a REDS-layout folder '
+        '(PSNR, SSIM) or a recording without ground truth (NIQE, BRISQUE, '
+        '2-D entropy)')
     parser.add_argument('data_root', type=Path(),
-                        help='folder with spike/ and gt/')
+                        help='folder with spike/ and gt/, or a spike file '
+                        '(.dat, .spk, .npy, .npz) without ground truth')
     parser.add_argument('--methods', default=METHODS,
                         type=arguments.Sequence(Choice(METHODS),
                                       max_length=len(METHODS)),
@@ -109,12 +210,42 @@ def build_parser() -> argparse.ArgumentParser:
         help='THW or HWT: how a .npy/.npz that does not record its '
         'layout stores its frames, (T, H, W) or (H, W, T) (default: what '
         'the file records; an error where it records none)')
+    parser.add_argument(
+        '--frames', type=arguments.Sequence(Integer()),
+        help='a recording\'s comma-separated centre frames (default: the '
+        'middle frame)')
+    parser.add_argument(
+        '--exposure', type=EXPOSURE, default='auto',
+        help='a recording\'s images are scored at this exposure: auto '
+        '(default: a dark one brightened, its 99.5th percentile to white), '
+        'none, or a gain')
+    parser.add_argument('--height', type=SIDE,
+                        help='frame height of a .dat recording')
+    parser.add_argument('--width', type=SIDE,
+                        help='frame width of a .dat recording')
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     methods = list(dict.fromkeys(args.methods))  # in order, once each
+    if osp.isfile(args.data_root):
+        if (args.height is None) != (args.width is None):
+            parser.error('--height and --width go together')
+        try:
+            total, _, _ = spike_shape(args.data_root, args.height,
+                                      args.width, args.layout)
+            frames = args.frames or [total // 2]
+            results = score_recording(
+                args.data_root, methods, args.checkpoint, args.num_steps,
+                frames, args.exposure, args.height, args.width, args.device,
+                args.layout)
+        except (SpikeFileError, ValueError) as err:
+            sys.exit(f'{parser.prog}: error: {err}')
+        print(format_recording_table(results, args.data_root, frames,
+                                     args.exposure, args.device))
+        return
     results = benchmark(args.data_root, methods, args.checkpoint,
                         args.num_steps, args.spike_suffix, args.device,
                         layout=args.layout)

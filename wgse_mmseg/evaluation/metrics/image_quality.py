@@ -2,7 +2,8 @@
 
 Full-reference (against ground truth): :func:`psnr` and :func:`ssim`, on
 images in [0, 1] (data range 1). No-reference (real recordings without ground
-truth): :func:`entropy_2d`.
+truth): :func:`entropy_2d`, re-exported from :mod:`wgse_mmseg.core.quality`,
+the one home of the no-reference measures (with NIQE and BRISQUE).
 
 Every function takes ``(H, W)`` arrays: float in [0, 1], or ``uint8`` (read
 as ``value / 255``).
@@ -10,24 +11,16 @@ as ``value / 255``).
 import cv2
 import numpy as np
 
+from ...core.quality import as_unit_grey, entropy_2d
+
 __all__ = ['psnr', 'ssim', 'entropy_2d', 'gaussian_window']
 
 #: SSIM constants of Wang et al. (2004) for data range 1.
 _K1, _K2 = 0.01, 0.03
 
 
-def _as_unit_float(image, name: str) -> np.ndarray:
-    array = np.asarray(image)
-    if array.ndim != 2:
-        raise ValueError(f'{name} must be an (H, W) image, got shape '
-                         f'{array.shape}')
-    if array.dtype == np.uint8:
-        return array.astype(np.float64) / 255.0
-    return array.astype(np.float64)
-
-
 def _pair(pred, gt):
-    pred, gt = _as_unit_float(pred, 'pred'), _as_unit_float(gt, 'gt')
+    pred, gt = as_unit_grey(pred, 'pred'), as_unit_grey(gt, 'gt')
     if pred.shape != gt.shape:
         raise ValueError(f'pred {pred.shape} and gt {gt.shape} differ in size')
     return pred, gt
@@ -77,21 +70,3 @@ def ssim(pred, gt, size: int = 11, sigma: float = 1.5) -> float:
     ssim_map = ((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / (
         (mu_x ** 2 + mu_y ** 2 + c1) * (var_x + var_y + c2))
     return float(ssim_map.mean())
-
-
-def entropy_2d(image) -> float:
-    """Two-dimensional image entropy in bits (no reference needed).
-
-    The joint distribution of each pixel's 8-bit grey level ``i`` and the
-    mean ``j`` of its 3x3 neighbourhood (reflected at the border, rounded to
-    8 bits): ``-sum p(i, j) log2 p(i, j)``. Between 0 (flat) and 16 bits;
-    higher means more detail (noise counts as detail too, so compare
-    reconstructions of the same recording).
-    """
-    grey = np.clip(np.round(_as_unit_float(image, 'image') * 255), 0, 255)
-    neighbourhood = cv2.blur(grey, (3, 3), borderType=cv2.BORDER_REFLECT)
-    joint = grey.astype(np.int64) * 256 + np.round(neighbourhood).astype(
-        np.int64)
-    counts = np.bincount(joint.ravel(), minlength=256 * 256)
-    p = counts[counts > 0] / joint.size
-    return float(-(p * np.log2(p)).sum())

@@ -1,0 +1,24 @@
+"""No-reference image quality: the measures for reconstructions of real
+recordings, which have no ground truth. Needs numpy and OpenCV only.
+
+* :func:`~.niqe.niqe`: NIQE (lower is better), as the authors' MATLAB
+  release and basicsr 1.4.2 compute it;
+* :func:`~.brisque.brisque`: BRISQUE (lower is better), as the brisque 0.2.0
+  package computes it;
+* :func:`~.entropy.entropy_2d`: two-dimensional entropy in bits (higher
+  means more detail);
+* :func:`~.no_reference.no_reference_scores`: all three of one image.
+
+Each takes an ``(H, W)`` grey image (:mod:`.grey`) and scores it as shown,
+in 8 bits. The model data NIQE and BRISQUE need ships in ``data/``
+(:mod:`.model_data`). The full-reference measures (PSNR, SSIM) are the
+MMSeg layer's (:mod:`wgse_mmseg.evaluation.metrics.image_quality`).
+"""
+from .brisque import brisque
+from .entropy import entropy_2d
+from .grey import as_grey_levels, as_unit_grey
+from .niqe import niqe
+from .no_reference import NO_REFERENCE_METRICS, no_reference_scores
+
+__all__ = ['niqe', 'brisque', 'entropy_2d', 'no_reference_scores',
+           'NO_REFERENCE_METRICS', 'as_unit_grey', 'as_grey_levels']
