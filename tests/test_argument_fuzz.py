@@ -29,7 +29,8 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
                 'wgse_mmseg.core.exposure', 'wgse_mmseg.benchmarks.timing',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
-                'wgse_mmseg.core.reconstruction_baselines'):
+                'wgse_mmseg.core.reconstruction_baselines',
+                'wgse_mmseg.core.recording_walk'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -111,6 +112,12 @@ def _required(entry):
         'waverec': dict(coeffs=[torch.zeros(2, 8)] * 2, wavelet='haar'),
         'tfp': dict(spikes=np.zeros((3, 4, 5))),
         'tfi': dict(spikes=np.zeros((3, 4, 5))),
+        'plan_walk': dict(total=100, length=9, stride=10),
+        'walk_recording': dict(
+            path=files['clip'], video=str(files['root'] / 'walk.gif'),
+            model=lambda spikes: spikes.mean(1),
+            render=lambda window, rate: np.zeros((4, 6), np.uint8),
+            length=3, stride=2, progress=False),
     }.get(entry, {})
 
 
