@@ -275,20 +275,21 @@ def _differences(recorded: Any, identity: dict, keys: List[str]) -> str:
                      f'{str(identity.get(k))[:80]}' for k in keys)
 
 
-def _to_bgr(frame: np.ndarray) -> np.ndarray:
-    """An 8-bit grey or RGB frame as OpenCV's BGR."""
+def _png_image(frame: np.ndarray) -> np.ndarray:
+    """An 8-bit grey or RGB frame as :func:`write_png` takes it (grey, or
+    OpenCV's BGR)."""
     frame = np.asarray(frame)
     if frame.dtype != np.uint8 or frame.ndim not in (2, 3) or (
             frame.ndim == 3 and frame.shape[2] != 3):
         raise WalkError(f'render must return an 8-bit (H, W) or (H, W, 3) '
                         f'frame, got {frame.dtype} of shape {frame.shape}')
-    if frame.ndim == 2:
-        return cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
-    return np.ascontiguousarray(frame[..., ::-1])
+    return frame if frame.ndim == 2 else np.ascontiguousarray(
+        frame[..., ::-1])
 
 
 def _frames(outputs: WalkOutputs, count: int):
-    """The ``count`` saved frames, BGR, all of one size."""
+    """The ``count`` saved frames (grey or colour), BGR, all of one
+    size."""
     size = None
     for index in range(count):
         path = osp.join(outputs.partial, _frame_name(index))
@@ -415,7 +416,7 @@ def walk_recording(path: str, video: str,
             for offset, centre in enumerate(centres):
                 index = resumed + first + offset
                 write_png(osp.join(outputs.partial, _frame_name(index)),
-                          _to_bgr(render(windows[offset], results[offset])))
+                          _png_image(render(windows[offset], results[offset])))
                 log.write(_csv_line([
                     index, centre, plan.start(centre),
                     plan.start(centre) + length, resumed + first,
