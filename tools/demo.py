@@ -33,7 +33,7 @@ it stopped (its state is in ``<out-file>.partial/``); with other arguments
 it is refused, naming the differences.
 
 ``--backend onnxruntime`` runs an exported model: CHECKPOINT is then the
-``.onnx`` file (:class:`wgse_mmseg.apis.onnx_segmentor.OnnxSpikeSegmentor`,
+``.onnx`` file (``OnnxSpikeSegmentor`` of ``wgse_mmseg.apis.onnx_segmentor``,
 preprocessing and enhancer inside), the config still gives ``num_steps``,
 and the palette is Spike-Cityscapes'.
 """
