@@ -161,8 +161,9 @@ def walk_outputs(video: str) -> WalkOutputs:
     ``.mp4``/``.gif`` is a :class:`WalkError`."""
     stem, ext = osp.splitext(os.fspath(video))
     if ext.lower() not in VIDEO_EXTENSIONS:
-        raise WalkError(f'{video}: a walk writes a video, {" or ".join(VIDEO_EXTENSIONS)} '
-                        f'by the extension; got {ext or "no extension"!r}')
+        raise WalkError(f'{video}: a walk writes a video, '
+                        f'{" or ".join(VIDEO_EXTENSIONS)} by the extension; '
+                        f'got {ext or "no extension"!r}')
     return WalkOutputs(video, stem + '.csv', stem + '_frames',
                        video + '.partial')
 
@@ -400,8 +401,8 @@ def walk_recording(path: str, video: str,
             f'{path}: no window of length={length} readouts centred on a '
             f'multiple of stride={stride} fits in the recording\'s {total} '
             f'readouts')
-    resumed = _open_state(outputs, _identity(path, height, width, plan, settings or {}),
-                          plan)
+    identity = _identity(path, height, width, plan, settings or {})
+    resumed = _open_state(outputs, identity, plan)
     todo = plan.centres[resumed:]
     bar = tqdm(total=len(plan.centres), initial=resumed, unit='window',
                desc=osp.basename(path), file=sys.stderr,
