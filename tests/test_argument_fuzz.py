@@ -32,7 +32,8 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
                 'wgse_mmseg.core.reconstruction_baselines',
                 'wgse_mmseg.data_generation.training_images',
-                'wgse_mmseg.benchmarks.reconstruction'):
+                'wgse_mmseg.benchmarks.reconstruction',
+                'wgse_mmseg.core.recording_walk'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -120,6 +121,12 @@ def _required(entry):
                                        sources=('matplotlib',)),
         'score_recording': dict(path=files['clip'], methods=['tfp'],
                                 num_steps=5),
+        'plan_walk': dict(total=100, length=9, stride=10),
+        'walk_recording': dict(
+            path=files['clip'], video=str(files['root'] / 'walk.gif'),
+            model=lambda spikes: spikes.mean(1),
+            render=lambda window, rate: np.zeros((4, 6), np.uint8),
+            length=3, stride=2, progress=False),
     }.get(entry, {})
 
 
@@ -165,7 +172,7 @@ def test_every_reader_of_a_recording_declares_the_layout():
     ``'HWT'`` or ``None`` (what the file records), on every entry point
     that reads one."""
     readers = {'load_spikes', 'spike_shape', 'LoadSpikeFromFile',
-               'LoadSpikeImagePair'}
+               'LoadSpikeImagePair', 'score_recording', 'walk_recording'}
     declaring = {declaration.entry for declaration in DECLARATIONS.values()
                  if 'layout' in declaration.arguments}
     assert declaring == readers

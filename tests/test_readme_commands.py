@@ -67,6 +67,9 @@ HOW = {
         TRAIN_TESTS,
     'python tools/demo.py clip_spike.spk $CONFIG CKPT --out-file seg.png':
         'tests/tools/test_demo_and_example.py::test_demo_writes_overlay',
+    'python tools/demo.py recording.dat $CONFIG CKPT --stride 100 '
+    '--out-file walk.mp4': 'tests/tools/test_demo_and_example.py::'
+    'test_demo_walk_segments_each_window_as_the_one_window_demo',
     'bash tools/dist_train.sh configs/pspnet_wgse.py 8 --cfg-options '
     'data_root=/data/spikes': NotHere('8 GPUs', DIST_TEST),
     'bash tools/dist_test.sh configs/pspnet_wgse.py '
@@ -105,6 +108,9 @@ HOW = {
     '--out recon/': RUN,
     'python tools/misc/reconstruct.py clip.npy --layout THW --out recon/ '
     '--method tfp': RUN,
+    'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
+    '203_part2_key_id151.dat --height 250 --width 400 --stride 30 --fps 4 '
+    '--out walk.gif': RUN,
     'python -m wgse_mmseg.apis.reconstruction_benchmark '
     '../shared/data/reds_sample': RUN,
 }
@@ -118,6 +124,11 @@ PRINTS = {
                     r'.*left as it is',
     'python tools/misc/reconstruct.py clip.npy --layout THW --out recon/ '
     '--method tfp': r'recon/clip_20\.png',
+    'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
+    '203_part2_key_id151.dat --height 250 --width 400 --stride 30 --fps 4 '
+    '--out walk.gif': r'9 windows of 41 readouts centred on readouts '
+                      r'30\.\.270 every 30 .* at the start 0, at the end 300'
+                      r'\nwalk\.gif\nwalk\.csv',
     'python -m wgse_mmseg.apis.reconstruction_benchmark '
     '../shared/data/reds_sample': r'\| WGSE \| \d\d\.\d\d \|',
 }

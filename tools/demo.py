@@ -1,8 +1,11 @@
-"""Segment one spike stream and save a colour overlay (MMSeg's image demo).
+"""Segment one spike stream and save a colour overlay (MMSeg's image demo),
+or walk a recording into a video of overlays.
 
     python tools/demo.py SPIKE_FILE CONFIG CHECKPOINT [--out-file PATH]
         [--device cpu] [--opacity 0.5] [--height H --width W]
         [--layout THW|HWT] [--cfg-options num_steps=41 ...]
+        [--backend pytorch|onnxruntime]
+        [--stride N [--batch-size 8] [--fps 10] [--save-frames]]
 
 ``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.spk``, ``.npy``,
 ``.npz``; ``.dat`` needs ``--height``/``--width`` or a ``<file>.json`` side
@@ -18,9 +21,28 @@ The prediction is painted in the dataset's palette (from the checkpoint's
 spike rate in that window (the highest rate is white), blended with
 ``--opacity``, and written as a PNG to ``--out-file`` (default
 ``<stem>_seg.png`` in the current directory). The path is printed.
+
+``--stride N`` walks the recording instead
+(:mod:`wgse_mmseg.core.recording_walk`): the window of ``num_steps``
+readouts centred on every ``N``-th readout (``0, N, 2N, ...``; those whose
+window does not fit at the ends are skipped and said so) is segmented,
+``--batch-size`` windows a model call, each exactly as the one-window demo
+segments its window, and its overlay becomes a frame of the video
+``--out-file`` (``.mp4`` or ``.gif``; default ``<stem>_seg.mp4``), with
+``<out stem>.csv`` (window, centre readout, start, end, batch, time_ms) and,
+with ``--save-frames``, ``<out stem>_frames/*.png``. A progress bar goes to
+stderr. An interrupted walk re-run with the same arguments continues where
+it stopped (its state is in ``<out-file>.partial/``); with other arguments
+it is refused, naming the differences.
+
+``--backend onnxruntime`` runs an exported model: CHECKPOINT is then the
+``.onnx`` file (``OnnxSpikeSegmentor`` of ``wgse_mmseg.apis.onnx_segmentor``,
+preprocessing and enhancer inside), the config still gives ``num_steps``,
+and the palette is Spike-Cityscapes'.
 """
 import argparse
 import copy
+import json
 import os.path as osp
 import sys
 from typing import Tuple
@@ -36,15 +58,25 @@ from mmengine.registry import init_default_scope  # noqa: E402
 from mmengine.runner.checkpoint import load_state_dict  # noqa: E402
 from mmseg.apis import init_model  # noqa: E402
 from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, SIDE,  # noqa
+                                       Choice,
                                        Path, Text)
 from wgse_mmseg.core.exposure import (EXPOSURE, Exposed,  # noqa: E402
                                       apply_exposure)
 from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
+from wgse_mmseg.core.recording_walk import (WalkError,  # noqa: E402
+                                            add_walk_options, walk_outputs,
+                                            walk_recording)
+from wgse_mmseg.apis.window_segmentor import (  # noqa: E402
+    PipelineSegmentor, pipeline_loader)
 from wgse_mmseg.core.reconstruction_baselines import tfp  # noqa: E402
 from wgse_mmseg.datasets import SpikeCityscapesDataset  # noqa: E402
 from wgse_mmseg.utils.checkpoint import read_checkpoint  # noqa: E402
 from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
                                      load_config)
+
+
+#: what runs the model: the checkpoint in PyTorch, or an exported model
+BACKENDS = ('pytorch', 'onnxruntime')
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,10 +85,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('spikes', type=Path(),
                         help='spike file (.dat, .spk, .npy, .npz)')
     parser.add_argument('config', type=Path(), help='config file')
-    parser.add_argument('checkpoint', type=Path(), help='checkpoint file')
+    parser.add_argument(
+        'checkpoint', type=Path(),
+        help='checkpoint file (the .onnx file with --backend onnxruntime)')
     parser.add_argument(
         '--out-file', type=Path(),
-        help='output PNG (default: <stem>_seg.png)')
+        help='output PNG (default: <stem>_seg.png); with --stride the '
+        'video, .mp4 or .gif (default: <stem>_seg.mp4)')
     parser.add_argument(
         '--device', type=Text(empty=False),
         default='cuda:0' if torch.cuda.is_available() else 'cpu',
@@ -80,17 +115,23 @@ def build_parser() -> argparse.ArgumentParser:
         help='exposure of the grey clip under the overlay: auto (default: '
         'brightens only a clearly under-exposed clip, its 99.5th percentile '
         'to white), none, or a gain')
+    parser.add_argument(
+        '--backend', type=Choice(BACKENDS), default='pytorch',
+        help='pytorch (default: CHECKPOINT is a checkpoint) or onnxruntime '
+        '(CHECKPOINT is an exported .onnx model)')
+    add_walk_options(parser)
     return parser
 
 
-def parse_args():
+def parse_args(argv=None):
     parser = build_parser()
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if (args.height is None) != (args.width is None):
         parser.error('--height and --width go together')
     if args.out_file is None:
         stem = osp.splitext(osp.basename(args.spikes))[0]
-        args.out_file = f'{stem}_seg.png'
+        args.out_file = f'{stem}_seg.' + (
+            'png' if args.stride is None else 'mp4')
     return args
 
 
@@ -167,24 +208,85 @@ def overlay(grey: np.ndarray, labels: np.ndarray, palette,
     return np.round(blended).astype(np.uint8)
 
 
-def main():
-    args = parse_args()
+def onnx_segmentor(path: str, device: str):
+    """``(B, T, H, W)`` float spikes -> ``(B, H, W)`` labels by the
+    exported model ``path`` in ONNX Runtime (imported only when asked)."""
+    from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
+    model = OnnxSpikeSegmentor(path, device=device)
+    return lambda spikes: model(spikes).argmax(1)
+
+
+def walk(args, cfg) -> None:
+    """``--stride``: segment a window every ``args.stride`` readouts into
+    the video ``args.out_file`` (:func:`walk_recording`)."""
+    walk_outputs(args.out_file)  # a wrong extension fails before loading
+    pipeline = build_pipeline(cfg, args.height, args.width, args.layout)
+    length = pipeline_loader(pipeline).num_steps
+    if length is None:
+        raise ValueError(f'{args.config}: a walk needs the window length: '
+                         f'num_steps of LoadSpikeFromFile in the test '
+                         f'pipeline (--cfg-options num_steps=T)')
+    if args.backend == 'pytorch':
+        model = load_model(cfg, args.checkpoint, args.device)
+        segment = PipelineSegmentor(model, pipeline, args.spikes)
+        palette = model.dataset_meta['palette']
+    else:
+        segment = onnx_segmentor(args.checkpoint, args.device)
+        palette = SpikeCityscapesDataset.METAINFO['palette']
+
+    def render(window, labels):
+        grey, _ = clip_image(torch.from_numpy(window), args.exposure)
+        return overlay(grey, labels.cpu().numpy(), palette, args.opacity)
+
+    settings = dict(config=osp.abspath(args.config),
+                    checkpoint=osp.abspath(args.checkpoint),
+                    backend=args.backend, cfg_options=json.dumps(
+                        args.cfg_options or {}, sort_keys=True, default=str),
+                    opacity=args.opacity, exposure=args.exposure)
+    report = walk_recording(
+        args.spikes, args.out_file, segment, render, length, args.stride,
+        args.batch_size, args.fps, settings, args.save_frames, args.height,
+        args.width, pipeline_loader(pipeline).layout)
+    print(report.plan.describe())
+    if report.resumed:
+        print(f'resumed an interrupted walk: {report.resumed} windows were '
+              f'done, {report.computed} segmented now')
+    print('\n'.join([report.outputs.video, report.outputs.csv] +
+                    ([report.outputs.frames] if args.save_frames else [])))
+
+
+def main(argv=None):
+    args = parse_args(argv)
     cfg = load_config(args.config, args.cfg_options)
     init_default_scope(cfg.get('default_scope', 'mmseg'))
+    if args.stride is not None:
+        try:
+            return walk(args, cfg)
+        except (ValueError, FileNotFoundError) as err:
+            sys.exit(f'{osp.basename(__file__)}: error: {err}')
     try:
         # The stream is read first, so a file that does not fit fails fast.
         data = build_pipeline(cfg, args.height, args.width, args.layout)(
             dict(img_path=args.spikes))
-        model = load_model(cfg, args.checkpoint, args.device)
+        if args.backend == 'pytorch':
+            model = load_model(cfg, args.checkpoint, args.device)
+        else:
+            segment = onnx_segmentor(args.checkpoint, args.device)
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
 
-    batch = dict(inputs=[data['inputs']], data_samples=[data['data_samples']])
-    with torch.no_grad():
-        result = model.test_step(batch)[0]
-    labels = result.pred_sem_seg.data[0].cpu().numpy()
+    if args.backend == 'pytorch':
+        batch = dict(inputs=[data['inputs']],
+                     data_samples=[data['data_samples']])
+        with torch.no_grad():
+            result = model.test_step(batch)[0]
+        labels = result.pred_sem_seg.data[0].cpu().numpy()
+        palette = model.dataset_meta['palette']
+    else:
+        labels = segment(data['inputs'][None].float())[0].cpu().numpy()
+        palette = SpikeCityscapesDataset.METAINFO['palette']
     grey, exposed = clip_image(data['inputs'], args.exposure)
-    image = overlay(grey, labels, model.dataset_meta['palette'], args.opacity)
+    image = overlay(grey, labels, palette, args.opacity)
     write_png(args.out_file, image[..., ::-1])  # RGB -> OpenCV's BGR
     print(f'{args.out_file}\texposure_gain={exposed.gain:.3g}\t'
           f'exposure: {exposed.reason}')

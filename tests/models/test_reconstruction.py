@@ -642,6 +642,52 @@ def test_reconstruct_cli_writes_one_png_per_frame(tmp_path, capsys):
                    '--method', 'tfi'])
 
 
+def test_reconstruct_windows_is_reconstruct_batched():
+    model = load_reconstructor()
+    windows = (np.random.default_rng(0).random((3, model.num_steps, 8, 12))
+               < 0.3).astype(np.uint8)
+    batched = model.reconstruct_windows(torch.from_numpy(windows))
+    assert batched.shape == (3, 8, 12) and batched.device.type == 'cpu'
+    for image, window in zip(batched, windows):
+        np.testing.assert_allclose(image.numpy(), model.reconstruct(window),
+                                   atol=1e-5)
+
+
+@pytest.mark.parametrize('method', ['tfp', 'wgse'])
+def test_reconstruct_cli_walk_gives_the_one_frame_images(tmp_path, capsys,
+                                                         method):
+    """``--stride`` writes, for each centre 0, 30, 60, ... whose window
+    fits, the image the tool writes for that centre frame alone."""
+    spikes = (np.random.default_rng(0).random((200, 16, 24)) <
+              np.linspace(0.05, 0.6, 24)).astype(np.uint8)
+    path = str(tmp_path / 'rec.npy')
+    save_spikes(path, spikes)
+    tool = _tool('reconstruct')
+    video = tmp_path / 'walk' / 'rec.mp4'
+    tool.main([path, '--out', str(video), '--method', method, '--stride',
+               '30', '--batch-size', '2', '--save-frames'])
+    printed = capsys.readouterr().out
+    # 41 readouts: centres 30..150 fit, 0 (from -20) and 180 (to 201) not
+    assert '5 windows of 41 readouts centred on readouts 30..150 every 30' \
+        in printed and 'at the start 0, at the end 180' in printed
+    capture = cv2.VideoCapture(str(video))
+    assert int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
+    rows = (tmp_path / 'walk' / 'rec.csv').read_text().splitlines()
+    assert [row.rsplit(',', 1)[0] for row in rows] == [
+        'window,centre,start,end,batch', '0,30,10,51,0', '1,60,40,81,0',
+        '2,90,70,111,2', '3,120,100,141,2', '4,150,130,171,4']
+    tool.main([path, '--out', str(tmp_path / 'one'), '--method', method,
+               '--frames', '30,60,90,120,150'])
+    for index, centre in enumerate(range(30, 151, 30)):
+        walked = cv2.imread(str(tmp_path / 'walk' / 'rec_frames' /
+                                f'{index:06d}.png'), cv2.IMREAD_UNCHANGED)
+        alone = cv2.imread(str(tmp_path / 'one' / f'rec_{centre}.png'),
+                           cv2.IMREAD_UNCHANGED)
+        # batched convolutions may round a value the other way
+        assert np.abs(walked.astype(int) - alone).max() <= 1
+        assert (walked == alone).mean() > 0.99
+
+
 def test_figure_tool_grid(tmp_path):
     spikes = (np.random.default_rng(0).random((45, 8, 10)) < 0.3).astype(
         np.uint8)

@@ -124,6 +124,27 @@ CASES = [
                  'num_steps=9'], '{t}/missing.pth: no such checkpoint'),
     ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--opacity', '2'],
      'argument --opacity: must be a finite number >= 0 and <= 1'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/missing.pth', '--stride', '5',
+                 '--out-file', '{t}/walk.png'],
+     "{t}/walk.png: a walk writes a video, .mp4 or .gif by the extension; "
+     "got '.png'"),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/missing.pth', '--stride', '5',
+                 '--cfg-options', 'num_steps=9'],
+     '{t}/missing.pth: no such checkpoint'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--stride', '0'],
+     'argument --stride: must be an integer >= 1'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--backend', 'trt'],
+     "argument --backend: must be one of ['pytorch', 'onnxruntime']"),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
+                             '--method', 'tfp', '--stride', '100'],
+     '{t}/ok.npy: no window of length=41 readouts centred on a multiple of '
+     'stride=100 fits in the recording\'s 50 readouts'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
+                             '--stride', '10', '--frames', '25'],
+     '--frames and --stride'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
+                             '--stride', '10', '--batch-size', '0'],
+     'argument --batch-size: must be an integer >= 1 and <= 4096'),
 ]
 
 

@@ -1,13 +1,17 @@
 """The worked example config (DeepLabV3+-R18 + WGSE) and tools/demo.py."""
+import csv
 import importlib.util
+import json
 import os.path as osp
 import subprocess
 import sys
+import types
 
 import cv2
 import numpy as np
 import pytest
 import torch
+from PIL import Image
 
 import wgse_mmseg
 from mmengine.registry import init_default_scope
@@ -16,7 +20,7 @@ from mmseg.registry import MODELS
 from mmseg.structures import SegDataSample
 from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.datasets import SpikeCityscapesDataset
-from wgse_mmseg.core.io import save_spikes
+from wgse_mmseg.core.io import load_spikes, save_spikes
 
 wgse_mmseg.register_all_modules()  # before mmseg builds anything
 
@@ -123,10 +127,15 @@ def test_demo_rejects_short_stream(tmp_path, checkpoint):
     assert not (tmp_path / 'short_seg.png').exists()
 
 
-def test_demo_grey_image_and_blend():
+def _demo_module():
     spec = importlib.util.spec_from_file_location('wgse_demo', DEMO)
     demo = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(demo)
+    return demo
+
+
+def test_demo_grey_image_and_blend():
+    demo = _demo_module()
 
     spikes = torch.zeros(10, 2, 3, dtype=torch.uint8)
     spikes[:3, 0, 0] = 1  # rate 0.3: TFP 0.5
@@ -155,3 +164,115 @@ def test_demo_grey_image_and_blend():
     assert (demo.overlay(grey, labels, palette, 0.0) == grey[...,
                                                              None]).all()
     assert (demo.overlay(grey, labels, palette, 1.0) == palette[0]).all()
+
+
+@pytest.fixture(scope='module')
+def varied_checkpoint(tmp_path_factory):
+    """The untrained example model with its classifier's weights drawn
+    from N(0, 1) and no bias: it predicts 7-9 classes a window (the
+    untrained one, one class everywhere, would hide a wrong label)."""
+    torch.manual_seed(0)
+    _, model = _build()
+    with torch.no_grad():
+        model.decode_head.conv_seg.weight.normal_(0, 1)
+        model.decode_head.conv_seg.bias.zero_()
+    path = tmp_path_factory.mktemp('ckpt') / 'varied.pth'
+    torch.save({'state_dict': model.state_dict()}, path)
+    return path
+
+
+def _dat_recording(path, steps, height, width, seed=0):
+    """A random ``.dat`` recording with its side file."""
+    save_spikes(str(path), _spikes(steps, height, width, seed))
+    (path.parent / (path.name + '.json')).write_text(
+        json.dumps(dict(height=height, width=width)))
+    return path
+
+
+def test_demo_walk_segments_each_window_as_the_one_window_demo(
+        tmp_path, varied_checkpoint):
+    checkpoint = varied_checkpoint
+    recording = _dat_recording(tmp_path / 'rec.dat', 300, 24, 40)
+    out = tmp_path / 'walk' / 'rec.gif'
+    proc = _demo(recording, EXAMPLE, checkpoint, '--stride', '25',
+                 '--batch-size', '3', '--out-file', out, '--save-frames',
+                 cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    # T=9: centre 0's window starts at -4 (skipped); 275's ends at 280
+    centres = list(range(25, 276, 25))
+    assert '11 windows of 9 readouts centred on readouts 25..275' in \
+        proc.stdout and 'at the start 0, at the end none' in proc.stdout
+    assert 'window/s' in proc.stderr  # the progress bar
+    with open(tmp_path / 'walk' / 'rec.csv') as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r['centre']) for r in rows] == centres
+    assert [int(r['batch']) for r in rows] == [i // 3 * 3
+                                               for i in range(11)]
+    with Image.open(out) as gif:
+        assert gif.n_frames == 11 and gif.size == (40, 24)
+    frames = tmp_path / 'walk' / 'rec_frames'
+    assert len(list(frames.glob('*.png'))) == 11
+    # the one-window demo on the window alone gives the walk's frame
+    for index in (0, 10):
+        centre = centres[index]
+        alone = tmp_path / f'alone{centre}.spk'
+        save_spikes(str(alone), load_spikes(str(recording),
+                                            start=centre - NUM_STEPS // 2,
+                                            length=NUM_STEPS))
+        png = tmp_path / f'alone{centre}.png'
+        proc = _demo(alone, EXAMPLE, checkpoint, '--out-file', png,
+                     cwd=tmp_path)
+        assert proc.returncode == 0, proc.stderr
+        np.testing.assert_array_equal(
+            cv2.imread(str(frames / f'{index:06d}.png')),
+            cv2.imread(str(png)))
+
+
+class FakeOnnxSegmentor:
+    """``OnnxSpikeSegmentor``'s contract: ``(B, T, H, W)`` float spikes ->
+    ``(B, K, H, W)`` logits; class 1 where the spike rate exceeds 0.2."""
+    made = []
+
+    def __init__(self, onnx_path, device='cpu'):
+        self.made.append((onnx_path, device))
+
+    def __call__(self, spikes):
+        rate = spikes.mean(1)
+        return torch.stack([torch.full_like(rate, 0.2), rate], 1)
+
+
+def test_demo_onnxruntime_backend_runs_the_exported_model(
+        tmp_path, checkpoint, monkeypatch):
+    """The plumbing of --backend onnxruntime, with a stand-in for the
+    exported model (the class is imported only when asked)."""
+    fake = types.ModuleType('wgse_mmseg.apis.onnx_segmentor')
+    fake.OnnxSpikeSegmentor = FakeOnnxSegmentor
+    monkeypatch.setitem(sys.modules, 'wgse_mmseg.apis.onnx_segmentor', fake)
+    demo = _demo_module()
+    recording = _dat_recording(tmp_path / 'rec.dat', 60, 16, 24)
+    onnx = tmp_path / 'model.onnx'
+    onnx.write_bytes(b'stand-in')
+    video = tmp_path / 'rec.mp4'
+    common = ['--device', 'cpu', '--backend', 'onnxruntime', '--opacity',
+              '0.7', '--cfg-options', f'num_steps={NUM_STEPS}']
+    demo.main([str(recording), EXAMPLE, str(onnx), '--stride', '10',
+               '--out-file', str(video), '--save-frames', *common])
+    assert FakeOnnxSegmentor.made[-1] == (str(onnx), 'cpu')
+    palette = SpikeCityscapesDataset.METAINFO['palette']
+
+    def expected(window):
+        labels = (window.mean(0) > 0.2).astype(np.int64)
+        grey, _ = demo.clip_image(torch.from_numpy(window), 'auto')
+        return demo.overlay(grey, labels, palette, 0.7)[..., ::-1]
+    centres = range(10, 51, 10)
+    for index, centre in enumerate(centres):
+        window = load_spikes(str(recording), start=centre - 4, length=9)
+        np.testing.assert_array_equal(
+            cv2.imread(str(tmp_path / 'rec_frames' / f'{index:06d}.png')),
+            expected(window))
+    # and one window, as the demo without --stride
+    png = tmp_path / 'one.png'
+    demo.main([str(recording), EXAMPLE, str(onnx), '--out-file', str(png),
+               *common])
+    np.testing.assert_array_equal(cv2.imread(str(png)), expected(
+        load_spikes(str(recording), start=30 - 4, length=9)))

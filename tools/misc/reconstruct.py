@@ -1,9 +1,12 @@
-"""Reconstruct grey images from a spike stream and write them as PNGs.
+"""Reconstruct grey images from a spike stream and write them as PNGs, or
+walk a recording into a video.
 
     python tools/misc/reconstruct.py SPIKE_FILE --out DIR [--method wgse|tfp|tfi]
         [--checkpoint CKPT] [--height H --width W] [--layout THW|HWT]
         [--frames 150,...] [--num-steps 41] [--exposure auto|none|GAIN]
         [--device cpu]
+    python tools/misc/reconstruct.py SPIKE_FILE --out VIDEO.mp4|.gif
+        --stride N [--batch-size 8] [--fps 10] [--save-frames] [...]
 
 ``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat``, ``.spk``,
 ``.npy``, ``.npz``; a ``.dat`` needs ``--height``/``--width`` or a
@@ -30,11 +33,23 @@ mmengine checkpoint of a ``configs/reconstruction`` config or a file of
 ``export_weights``; without one, the weights shipped in
 ``wgse_mmseg/weights``. The model's window length is its own ``num_steps``.
 ``tfp``/``tfi`` are the classical baselines on the REDS intensity scale.
+
+``--stride N`` walks the recording (:mod:`wgse_mmseg.core.recording_walk`):
+the window centred on every ``N``-th readout (``0, N, 2N, ...``; those whose
+window does not fit at the ends are skipped and said so) is reconstructed,
+``--batch-size`` windows a model call, exposed as above (each window on its
+own), and becomes a frame of the video ``--out`` (``.mp4`` or ``.gif``),
+with ``<out stem>.csv`` (window, centre readout, start, end, batch,
+time_ms) and, with ``--save-frames``, ``<out stem>_frames/*.png``. A
+progress bar goes to stderr. An interrupted walk re-run with the same
+arguments continues (its state is in ``<out>.partial/``); with other
+arguments it is refused, naming the differences.
 """
 import argparse
 import os.path as osp
 import sys
 
+import torch
 
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
@@ -44,6 +59,8 @@ from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
 from wgse_mmseg.core.quality import no_reference_scores
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
+from wgse_mmseg.core.recording_walk import (add_walk_options, walk_outputs,
+                                            walk_recording)
 from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
                                               reconstruction_method)
 
@@ -54,7 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('spikes', type=Path(),
                         help='spike file (.dat, .spk, .npy, .npz)')
     parser.add_argument('--out', type=Path(), required=True,
-                        help='output directory')
+                        help='output directory; with --stride the video, '
+                        '.mp4 or .gif')
     parser.add_argument('--method', type=Choice(METHODS), default='wgse',
                         help=f'reconstruction method, of {list(METHODS)} '
                         '(default: wgse)')
@@ -82,6 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
         'its 99.5th percentile to white), none, or a gain')
     parser.add_argument('--device', type=Text(empty=False), default='cpu',
                         help='torch device')
+    add_walk_options(parser)
     return parser
 
 
@@ -92,11 +111,51 @@ def parse_args(argv=None):
         parser.error('--height and --width go together')
     if args.checkpoint and args.method != 'wgse':
         parser.error('--checkpoint is for --method wgse')
+    if args.stride is not None and args.frames:
+        parser.error('--frames and --stride: name centre frames, or walk '
+                     'every STRIDE-th one')
     return args
+
+
+def walk(args) -> None:
+    """``--stride``: reconstruct a window every ``args.stride`` readouts into
+    the video ``args.out`` (:func:`walk_recording`)."""
+    walk_outputs(args.out)  # a wrong extension fails before loading
+    if args.method == 'wgse':
+        model = load_reconstructor(args.checkpoint, args.device)
+        reconstruct, length = model.reconstruct_windows, model.num_steps
+    else:
+        method = reconstruction_method(args.method)
+        length = args.num_steps
+
+        def reconstruct(spikes):
+            return [method(window.numpy()) for window in spikes]
+
+    def render(window, image):
+        image = torch.as_tensor(image).cpu().numpy()
+        return to_uint8(apply_exposure(image, args.exposure).image)
+
+    settings = dict(method=args.method, checkpoint=args.checkpoint and
+                    osp.abspath(args.checkpoint), exposure=args.exposure)
+    report = walk_recording(
+        args.spikes, args.out, reconstruct, render, length, args.stride,
+        args.batch_size, args.fps, settings, args.save_frames, args.height,
+        args.width, args.layout)
+    print(report.plan.describe())
+    if report.resumed:
+        print(f'resumed an interrupted walk: {report.resumed} windows were '
+              f'done, {report.computed} reconstructed now')
+    print('\n'.join([report.outputs.video, report.outputs.csv] +
+                    ([report.outputs.frames] if args.save_frames else [])))
 
 
 def main(argv=None):
     args = parse_args(argv)
+    if args.stride is not None:
+        try:
+            return walk(args)
+        except (ValueError, FileNotFoundError) as err:
+            sys.exit(f'{osp.basename(__file__)}: error: {err}')
     try:
         total, _, _ = spike_shape(args.spikes, args.height, args.width,
                                   layout=args.layout)

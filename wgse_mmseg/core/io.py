@@ -75,7 +75,7 @@ from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'centered_window', 'atomic_output', 'temporaries_of',
+           'centered_window', 'atomic_path', 'atomic_output', 'temporaries_of',
            'WrittenFile', 'write_bytes',
            'write_png', 'to_uint8', 'SpikeFormat', 'SPIKE_FORMATS',
            'SPIKE_EXTENSIONS']
@@ -90,25 +90,27 @@ class SpikeFileError(ValueError):
 
 
 @contextlib.contextmanager
-def atomic_output(path: str) -> Iterator[BinaryIO]:
-    """Open ``path`` for binary writing so that it appears whole or not at all.
+def atomic_path(path: str) -> Iterator[str]:
+    """A temporary path to write ``path``'s content to, so that ``path``
+    appears whole or not at all (for writers that take a file name, such
+    as OpenCV's ``VideoWriter``).
 
-    Writes go to a temporary file beside ``path``, renamed over it when the
-    block ends without error (with the permissions ``open`` would give);
-    on error the temporary file is removed and ``path`` is untouched. The
-    temporary file is named after its target, ``.tmp-<name>.<random><ext>``
-    (:func:`temporaries_of`), so a process killed mid-write leaves one that
-    the next run for that target can find and remove, without touching the
-    temporaries of other processes writing beside it.
+    The temporary file lies beside ``path``, is named after it,
+    ``.tmp-<name>.<random><ext>`` (:func:`temporaries_of`), and is renamed
+    over ``path`` when the block ends without error (with the permissions
+    ``open`` would give); on error it is removed and ``path`` is untouched.
+    A process killed mid-write leaves one that the next run for that
+    target can find and remove, without touching the temporaries of other
+    processes writing beside it.
     """
     directory = osp.dirname(osp.abspath(path))
     os.makedirs(directory, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=directory,
                                prefix=f'.tmp-{osp.basename(path)}.',
                                suffix=osp.splitext(path)[1])
+    os.close(fd)
     try:
-        with os.fdopen(fd, 'wb') as f:
-            yield f
+        yield tmp
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600
@@ -117,6 +119,14 @@ def atomic_output(path: str) -> Iterator[BinaryIO]:
         if osp.exists(tmp):
             os.remove(tmp)
         raise
+
+
+@contextlib.contextmanager
+def atomic_output(path: str) -> Iterator[BinaryIO]:
+    """Open ``path`` for binary writing so that it appears whole or not at
+    all: the file of :func:`atomic_path`."""
+    with atomic_path(path) as tmp, open(tmp, 'wb') as f:
+        yield f
 
 
 def temporaries_of(paths: Sequence[str]) -> List[str]:

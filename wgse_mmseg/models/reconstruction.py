@@ -162,13 +162,19 @@ class SpikeReconstructor(BaseModel):
         raise ValueError(f'mode must be "tensor", "loss" or "predict", got '
                          f'{mode!r}')
 
-    @torch.no_grad()
     def reconstruct(self, spikes: np.ndarray) -> np.ndarray:
         """One window ``(T, H, W)`` of 0/1 -> ``(H, W)`` float in [0, 1]."""
+        windows = torch.as_tensor(np.asarray(spikes),
+                                  dtype=next(self.parameters()).dtype)
+        return self.reconstruct_windows(windows[None])[0].numpy()
+
+    @torch.no_grad()
+    def reconstruct_windows(self, spikes: torch.Tensor) -> torch.Tensor:
+        """Windows ``(B, T, H, W)`` of 0/1 (any device) -> ``(B, H, W)``
+        float images in [0, 1] on the CPU, one model call."""
         param = next(self.parameters())
-        inputs = torch.as_tensor(np.asarray(spikes), dtype=param.dtype,
-                                 device=param.device)[None]
-        return self._forward(inputs)[0, 0].clamp(0, 1).cpu().numpy()
+        inputs = spikes.to(dtype=param.dtype, device=param.device)
+        return self._forward(inputs)[:, 0].clamp(0, 1).cpu()
 
 
 #: what a checkpoint's model config may build (checked at every depth by

@@ -72,12 +72,19 @@ class LoadSpikeFromFile(BaseTransform):
                 f'asks for num_steps={length}')
         center = total // 2 if self.center is None else self.center
         start = centered_window(path, total, center, length)
-        spikes = load_spikes(path, self.height, self.width, start, length,
-                             self.layout)
+        return self.from_window(
+            results, load_spikes(path, self.height, self.width, start, length,
+                                  self.layout))
+
+    def from_window(self, results: dict, spikes: np.ndarray) -> dict:
+        """``results`` with the keys :meth:`transform` adds, from a window
+        ``(T, H, W)`` of 0/1 already read (a walk over a recording reads
+        the windows of a batch at once,
+        :mod:`wgse_mmseg.core.recording_walk`)."""
         results['img'] = np.ascontiguousarray(spikes.transpose(1, 2, 0))
         results['img_shape'] = spikes.shape[1:]
         results['ori_shape'] = spikes.shape[1:]
-        results['num_steps'] = length
+        results['num_steps'] = spikes.shape[0]
         return results
 
     def __repr__(self):

@@ -1,0 +1,337 @@
+"""Walking a recording (wgse_mmseg.core.recording_walk): the plan against an
+enumeration of the grid, the windows against load_spikes, a generated .dat
+recording many batches long walked into MP4 and GIF, resuming after an
+interruption, refusing mixed settings, and memory bounded by the batch."""
+import csv
+import json
+import os
+import tracemalloc
+
+import cv2
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from PIL import Image
+
+from wgse_mmseg.core.io import load_spikes, save_spikes, to_uint8
+from wgse_mmseg.core.recording_walk import (CSV_COLUMNS, WalkError,
+                                            plan_walk, read_windows,
+                                            walk_outputs, walk_recording)
+
+HEIGHT, WIDTH = 32, 48
+LENGTH, HALF = 41, 20
+
+
+def _recording(path, steps, seed=0, height=HEIGHT, width=WIDTH):
+    """A random ``.dat`` recording of ``steps`` readouts with its side
+    file, written a chunk at a time (never the whole stream in memory)."""
+    rng = np.random.default_rng(seed)
+    with open(path, 'wb') as f:
+        for first in range(0, steps, 1000):
+            count = min(1000, steps - first)
+            chunk = (rng.random((count, height, width)) < 0.2).astype(
+                np.uint8)
+            f.write(np.packbits(chunk[:, ::-1].reshape(count, -1), axis=1,
+                                bitorder='little').tobytes())
+    with open(path + '.json', 'w') as f:
+        json.dump(dict(height=height, width=width), f)
+    return path
+
+
+class RateModel:
+    """A window model: each window's spike rate ``(B, H, W)``; counts its
+    calls and the windows of each."""
+
+    def __init__(self, fail_on_call=None):
+        self.batches, self.fail_on_call = [], fail_on_call
+
+    def __call__(self, spikes):
+        assert spikes.dtype == torch.float32 and spikes.dim() == 4
+        if len(self.batches) == self.fail_on_call:
+            raise KeyboardInterrupt  # what Ctrl-C does mid-walk
+        self.batches.append(len(spikes))
+        return spikes.mean(1)
+
+
+def rate_frame(window, rate):
+    """The frame of a window: its rate as grey."""
+    return to_uint8(np.asarray(rate))
+
+
+def _reference_frame(path, centre):
+    """The frame of the window centred on ``centre``, read on its own."""
+    window = load_spikes(path, start=centre - HALF, length=LENGTH)
+    return to_uint8(window.mean(0, dtype=np.float32))
+
+
+def _video_frames(path):
+    capture = cv2.VideoCapture(str(path))
+    frames = []
+    while True:
+        ok, frame = capture.read()
+        if not ok:
+            return frames
+        frames.append(frame)
+
+
+def _rows(path):
+    with open(path, newline='') as f:
+        return list(csv.DictReader(f))
+
+
+@settings(max_examples=200)
+@given(total=st.integers(1, 300), length=st.integers(1, 60),
+       stride=st.integers(1, 80))
+def test_plan_is_the_grid_of_centres_whose_window_fits(total, length,
+                                                       stride):
+    plan = plan_walk(total, length, stride)
+    grid = list(range(0, total, stride))
+    fits = [c for c in grid
+            if c - length // 2 >= 0 and c - length // 2 + length <= total]
+    assert list(plan.centres) == fits
+    assert list(plan.skipped_start) + list(plan.centres) + \
+        list(plan.skipped_end) == grid
+    assert all(c - length // 2 < 0 for c in plan.skipped_start)
+    assert all(c - length // 2 + length > total for c in plan.skipped_end)
+
+
+def test_plan_describes_what_it_skips():
+    plan = plan_walk(1000, 41, 100)
+    assert (plan.centres[0], plan.centres[-1]) == (100, 900)
+    assert list(plan.skipped_start) == [0] and not plan.skipped_end
+    text = plan.describe()
+    assert '9 windows of 41 readouts' in text and '100..900' in text
+    assert 'at the start 0, at the end none' in text
+    # centres 0..994 every 7: 21 (window from 1) to 973 (to 994 + 20 = 1014
+    # > 1000 for 994; 973 - 20 + 41 = 994 <= 1000) fit
+    plan = plan_walk(1000, 41, 7)
+    assert plan.centres[-1] == 973 and list(plan.skipped_end) == [980, 987,
+                                                                  994]
+    assert list(plan.skipped_start) == [0, 7, 14]
+    assert 'at the start 0, 7, 14, at the end 980, 987, 994' in \
+        plan.describe()
+
+
+@settings(max_examples=30, deadline=None)
+@given(stride=st.integers(1, 90), first=st.integers(0, 5),
+       count=st.integers(1, 6))
+def test_batch_windows_are_the_windows_read_alone(tmp_path_factory, stride,
+                                                  first, count):
+    path = str(tmp_path_factory.mktemp('rec') / 'rec.dat')
+    _recording(path, 700, height=8, width=8)
+    plan = plan_walk(700, LENGTH, stride)
+    centres = plan.centres[first:first + count]
+    if not centres:
+        return
+    windows = read_windows(path, plan, centres)
+    assert windows.shape == (len(centres), LENGTH, 8, 8)
+    for window, centre in zip(windows, centres):
+        np.testing.assert_array_equal(
+            window, load_spikes(path, start=centre - HALF, length=LENGTH))
+
+
+@pytest.mark.parametrize('extension', ['.mp4', '.gif'])
+def test_walk_of_a_recording_many_batches_long(tmp_path, extension):
+    path = _recording(str(tmp_path / 'rec.dat'), 4000)
+    video = str(tmp_path / 'out' / f'walk{extension}')
+    model = RateModel()
+    report = walk_recording(path, video, model, rate_frame, LENGTH, 50,
+                            batch_size=4, save_frames=True, progress=False)
+    # centres 0, 50, ..., 3950: 0 does not fit (its window starts at -20),
+    # 3950 does (it ends at 3950 - 20 + 41 = 3971 <= 4000)
+    centres = list(range(50, 3951, 50))
+    assert list(report.plan.centres) == centres
+    assert list(report.plan.skipped_start) == [0]
+    assert not report.plan.skipped_end
+    assert (report.resumed, report.computed) == (0, len(centres))
+    assert model.batches == [4] * 19 + [3]  # 79 windows, 4 a call
+
+    rows = _rows(tmp_path / 'out' / 'walk.csv')
+    assert tuple(rows[0]) == CSV_COLUMNS
+    assert [int(r['centre']) for r in rows] == centres
+    assert [int(r['window']) for r in rows] == list(range(len(centres)))
+    assert all(int(r['start']) == int(r['centre']) - HALF and
+               int(r['end']) == int(r['start']) + LENGTH for r in rows)
+    assert [int(r['batch']) for r in rows] == [i // 4 * 4
+                                               for i in range(len(rows))]
+    assert all(float(r['time_ms']) >= 0 for r in rows)
+
+    frames = sorted(os.listdir(tmp_path / 'out' / 'walk_frames'))
+    assert frames == [f'{i:06d}.png' for i in range(len(centres))]
+    for index in (0, 1, len(centres) - 1):
+        saved = cv2.imread(str(tmp_path / 'out' / 'walk_frames' /
+                               frames[index]), cv2.IMREAD_GRAYSCALE)
+        np.testing.assert_array_equal(
+            saved, _reference_frame(path, centres[index]))
+    if extension == '.gif':
+        with Image.open(video) as gif:
+            assert gif.n_frames == len(centres)
+            assert gif.size == (WIDTH, HEIGHT)
+            gif.seek(len(centres) - 1)
+            last = np.asarray(gif.convert('L'))
+        np.testing.assert_array_equal(  # a grey palette holds every level
+            last, _reference_frame(path, centres[-1]))
+    else:
+        decoded = _video_frames(video)
+        assert len(decoded) == len(centres)
+        assert decoded[0].shape == (HEIGHT, WIDTH, 3)
+        # lossy codec: close to the frame, far from another window's
+        error = np.abs(decoded[-1][..., 0].astype(int) -
+                       _reference_frame(path, centres[-1]))
+        assert error.mean() < 12
+    assert not os.path.exists(video + '.partial')
+    assert not [n for n in os.listdir(tmp_path / 'out') if '.tmp-' in n]
+
+
+def test_resumes_an_interrupted_walk_without_redoing_it(tmp_path):
+    path = _recording(str(tmp_path / 'rec.dat'), 3000)
+    whole = str(tmp_path / 'whole' / 'walk.mp4')
+    walk_recording(path, whole, RateModel(), rate_frame, LENGTH, 30,
+                   batch_size=8, save_frames=True, progress=False)
+
+    video = str(tmp_path / 'cut' / 'walk.mp4')
+    outputs = walk_outputs(video)
+    interrupted = RateModel(fail_on_call=3)
+    with pytest.raises(KeyboardInterrupt):
+        walk_recording(path, video, interrupted, rate_frame, LENGTH, 30,
+                       batch_size=8, save_frames=True, progress=False)
+    # complete or absent: nothing but the state folder
+    assert sorted(os.listdir(tmp_path / 'cut')) == ['walk.mp4.partial']
+    assert len(open(os.path.join(outputs.partial,
+                                 'progress.csv')).readlines()) == 24
+    model = RateModel()
+    report = walk_recording(path, video, model, rate_frame, LENGTH, 30,
+                            batch_size=8, save_frames=True, progress=False)
+    total = len(report.plan.centres)  # centres 30..2970
+    assert (report.resumed, report.computed) == (24, total - 24)
+    assert sum(model.batches) == total - 24
+    _same_walk(tmp_path / 'whole', tmp_path / 'cut')
+    assert _rows(tmp_path / 'whole' / 'walk.csv')[30]['batch'] == \
+        _rows(tmp_path / 'cut' / 'walk.csv')[30]['batch'] == '24'
+
+
+
+def _same_walk(one, other):
+    """Two walks' CSVs (but the times and batches) and frames are the
+    same."""
+    def rows(folder):
+        return [{k: v for k, v in row.items() if k not in ('time_ms',
+                                                           'batch')}
+                for row in _rows(folder / 'walk.csv')]
+    assert rows(one) == rows(other)
+    names = sorted(os.listdir(one / 'walk_frames'))
+    assert names == sorted(os.listdir(other / 'walk_frames'))
+    for name in names:
+        assert (one / 'walk_frames' / name).read_bytes() == \
+            (other / 'walk_frames' / name).read_bytes()
+    assert len(_video_frames(one / 'walk.mp4')) == len(names) == \
+        len(_video_frames(other / 'walk.mp4'))
+
+
+def test_resume_redoes_a_torn_row_and_a_missing_frame(tmp_path):
+    path = _recording(str(tmp_path / 'rec.dat'), 2000)
+    whole = str(tmp_path / 'whole' / 'walk.mp4')
+    walk_recording(path, whole, RateModel(), rate_frame, LENGTH, 40,
+                   batch_size=5, save_frames=True, progress=False)
+    video = str(tmp_path / 'cut' / 'walk.mp4')
+    partial = walk_outputs(video).partial
+    with pytest.raises(KeyboardInterrupt):
+        walk_recording(path, video, RateModel(fail_on_call=4), rate_frame,
+                       LENGTH, 40, batch_size=5, save_frames=True,
+                       progress=False)
+    progress = os.path.join(partial, 'progress.csv')
+    lines = open(progress).readlines()
+    assert len(lines) == 20
+    # killed mid-row, and window 12's PNG lost (rows 12.. are then redone)
+    with open(progress, 'a') as f:
+        f.write('20,840,8')
+    os.remove(os.path.join(partial, '000012.png'))
+    report = walk_recording(path, video, RateModel(), rate_frame, LENGTH,
+                            40, batch_size=5, save_frames=True,
+                            progress=False)
+    assert report.resumed == 12
+    _same_walk(tmp_path / 'whole', tmp_path / 'cut')
+    # the rows say which model call made them: 12-16 the first after resuming
+    batches = [int(r['batch']) for r in _rows(tmp_path / 'cut' / 'walk.csv')]
+    assert batches[:17] == [0] * 5 + [5] * 5 + [10] * 2 + [12] * 5
+
+
+def test_refuses_to_mix_walks_of_other_settings(tmp_path):
+    path = _recording(str(tmp_path / 'rec.dat'), 1500)
+    video = str(tmp_path / 'walk.gif')
+    with pytest.raises(KeyboardInterrupt):
+        walk_recording(path, video, RateModel(fail_on_call=1), rate_frame,
+                       LENGTH, 30, batch_size=4, settings=dict(gain=1),
+                       progress=False)
+    partial = walk_outputs(video).partial
+    state = sorted(os.listdir(partial))
+    for stride, options, named in [(60, dict(gain=1), 'stride'),
+                                   (30, dict(gain=2), 'settings')]:
+        with pytest.raises(WalkError) as info:
+            walk_recording(path, video, RateModel(), rate_frame, LENGTH,
+                           stride, batch_size=4, settings=options,
+                           progress=False)
+        message = str(info.value)
+        assert partial in message and named in message
+        assert 'remove the folder to start over' in message
+    assert sorted(os.listdir(partial)) == state  # untouched
+    assert not os.path.exists(video)
+    # a changed recording is another walk too
+    _recording(path, 1500, seed=1)
+    os.utime(path, ns=(1, 1))
+    with pytest.raises(WalkError, match='mtime_ns'):
+        walk_recording(path, video, RateModel(), rate_frame, LENGTH, 30,
+                       batch_size=4, settings=dict(gain=1), progress=False)
+
+
+def test_peak_memory_does_not_grow_with_the_recording(tmp_path, bounded):
+    """A 4x longer recording (8000 readouts: 12 MB as read, 49 MB as float)
+    peaks within a small bound of the shorter one: the walk holds a batch,
+    never the recording."""
+    peaks = {}
+    for steps in (2000, 8000):
+        path = _recording(str(tmp_path / f'rec{steps}.dat'), steps)
+        tracemalloc.start()
+        with bounded(120, 64 << 20):
+            report = walk_recording(
+                path, str(tmp_path / f'walk{steps}.mp4'), RateModel(),
+                rate_frame, LENGTH, 25, batch_size=8, progress=False)
+        peaks[steps] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert len(report.plan.centres) == steps // 25 - 1
+    assert peaks[8000] < peaks[2000] * 1.25 + (1 << 20), peaks
+    assert peaks[8000] < 8 << 20, peaks
+
+
+def test_odd_frames_are_padded_for_mp4(tmp_path):
+    path = str(tmp_path / 'odd.npy')
+    save_spikes(path, (np.random.default_rng(0).random((60, 7, 9)) <
+                       0.5).astype(np.uint8))
+    video = str(tmp_path / 'odd.mp4')
+    walk_recording(path, video, RateModel(), rate_frame, 9, 5,
+                   progress=False)
+    frames = _video_frames(video)
+    assert len(frames) == len(plan_walk(60, 9, 5).centres) == 11
+    assert frames[0].shape == (8, 10, 3)
+
+
+def test_bad_walks_are_named_errors(tmp_path):
+    path = _recording(str(tmp_path / 'rec.dat'), 100, height=8, width=8)
+    with pytest.raises(WalkError, match=r'walk\.png: a walk writes a video'):
+        walk_recording(path, str(tmp_path / 'walk.png'), RateModel(),
+                       rate_frame, LENGTH, 10, progress=False)
+    # centres 0 and 150 of a 100-readout recording: neither window fits
+    with pytest.raises(WalkError) as info:
+        walk_recording(path, str(tmp_path / 'walk.mp4'), RateModel(),
+                       rate_frame, LENGTH, 150, progress=False)
+    assert path in str(info.value) and 'stride=150' in str(info.value)
+    assert not os.path.exists(tmp_path / 'walk.mp4.partial')
+
+    def bad_frame(window, rate):
+        return np.zeros((2, 2), np.float32)
+    with pytest.raises(WalkError, match='8-bit'):
+        walk_recording(path, str(tmp_path / 'bad.mp4'), RateModel(),
+                       bad_frame, LENGTH, 10, progress=False)
+    assert not os.path.exists(tmp_path / 'bad.mp4')
