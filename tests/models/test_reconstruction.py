@@ -25,7 +25,8 @@ from wgse_mmseg.data_generation.views import render_trajectory
 from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
                                    gaussian_window, psnr, ssim)
 from wgse_mmseg.benchmarks.reconstruction import (benchmark, format_table,
-                                                  main, score_recording)
+                                                  main, multiply_adds,
+                                                  score_recording)
 from wgse_mmseg.core.quality import no_reference_scores
 from wgse_mmseg.core.io import load_spikes, save_spikes
 from wgse_mmseg.models.reconstruction import (CLASSICAL_METHODS, DEFAULT_WEIGHTS,
@@ -745,6 +746,45 @@ def test_benchmark_table(tmp_path):
     table = format_table(results)
     assert '| TFP |' in table and '+0.00 |' in table
 
+
+
+def test_multiply_adds_count_every_convolution():
+    """A model without enhancer: H * W * C_in * C_out * 9 per 3x3 conv."""
+    model = _tiny_model(enhancer=None, num_blocks=2).eval()
+    spikes = (np.random.default_rng(0).random((5, 6, 7)) < 0.3).astype(
+        np.float32)
+    convs = [(5, 8)] + [(8, 8)] * 4 + [(8, 4), (4, 1)]
+    assert multiply_adds(model, spikes) == sum(
+        6 * 7 * i * o * 9 for i, o in convs)
+    # WGSE adds its band networks' products, counted on the torch backend,
+    # and leaves the backend as it was
+    wgse = _tiny_model(num_blocks=2).eval()
+    wgse.enhancer.backend = 'compiled'
+    assert multiply_adds(wgse, spikes) > multiply_adds(model, spikes)
+    assert wgse.enhancer.backend == 'compiled'
+
+
+def test_benchmark_costs_and_more_models(tmp_path):
+    root = _reds_folder(str(tmp_path / 'r'), steps=5, size=(16, 16))
+    model = _tiny_model()
+    checkpoint = tmp_path / 'tiny.pth'
+    torch.save(dict(state_dict=model.state_dict(), meta=dict(
+        model=_exported_model_config())), checkpoint)
+    results = benchmark(root, ['tfp'], num_steps=5, spike_suffix='.npy',
+                        models=[str(checkpoint)], repeat=2, progress=False)
+    assert list(results) == ['tfp', 'tiny']
+    assert results['tfp']['params'] == 0
+    assert results['tfp']['multiply_adds'] is None
+    assert results['tiny']['params'] == sum(
+        p.numel() for p in model.parameters())
+    assert results['tiny']['multiply_adds'] > 0
+    assert all(r['ms_per_frame'] > 0 for r in results.values())
+    table = format_table(results)
+    assert 'torch' in table.splitlines()[0]  # the machine, above the table
+    assert '| TINY |' in table and '| 0 | - |' in table
+    with pytest.raises(ValueError, match='takes 5-frame windows, not 9'):
+        benchmark(root, ['tfp'], num_steps=9, spike_suffix='.npy',
+                  models=[str(checkpoint)], progress=False)
 
 # ---------------------------------------------------- shipped weights
 def test_shipped_weights_are_small_and_load():

@@ -1,8 +1,9 @@
 """Score reconstruction methods on a REDS-layout folder or a real recording.
 
     python -m wgse_mmseg.benchmarks.reconstruction DATA_ROOT
-        [--methods wgse,tfp,tfi] [--checkpoint CKPT] [--num-steps 41]
-        [--spike-suffix .dat] [--layout THW|HWT]
+        [--methods wgse,tfp,tfi] [--checkpoint CKPT] [--models CKPT,...]
+        [--num-steps 41] [--spike-suffix .dat] [--layout THW|HWT]
+        [--repeat 3]
     python -m wgse_mmseg.benchmarks.reconstruction RECORDING
         [--frames 100,...] [--exposure auto|none|GAIN]
         [--height H --width W] [--layout THW|HWT] [--methods ...]
@@ -13,8 +14,14 @@
 for ``.spk``/``.npy``/``.npz`` streams, ``--layout`` for arrays that do not
 record their layout). Every method sees the
 same ``num_steps``-frame windows centred on the ground truth's frame and is
-scored by :class:`ReconstructionMetric` (PSNR, SSIM, 2-D entropy); prints a
-Markdown table with each method's PSNR margin over TFP.
+scored by :class:`ReconstructionMetric` (PSNR, SSIM, 2-D entropy); so is
+each trained model of ``--models`` (named by its file's stem). Beside each
+method's PSNR margin over TFP the table gives its cost on the first sample's
+frame size: parameters, multiply-adds (torch's ``FlopCounterMode`` FLOPs / 2,
+the convention of Spike-Zoo's GFLOPs; a model's enhancer counted on its
+``torch`` backend, which computes what every backend computes) and the
+median wall time of ``--repeat`` reconstructions of one frame on this
+machine, which a line above the table names.
 
 ``RECORDING`` is a spike file without ground truth (``.dat``, ``.spk``,
 ``.npy``, ``.npz``, e.g. the UHSR recordings' ``.npz``): each method
@@ -31,6 +38,8 @@ import os.path as osp
 import sys
 from typing import Dict, List, Optional, Sequence
 
+import numpy as np
+from torch.utils.flop_counter import FlopCounterMode
 from tqdm import tqdm
 
 from .. import register_all_modules
@@ -47,14 +56,16 @@ from ..core.io import (SpikeFileError, centered_window, load_spikes,
 from ..core.quality import NO_REFERENCE_METRICS, no_reference_scores
 from .machine import machine_record
 from .markdown import markdown_table
+from .timing import summarize, time_calls
 from ..datasets.reds import (LoadSpikeImagePair, PackReconstructionInputs,
                              REDSSpikeDataset)
-from ..models.reconstruction import (METHODS, load_reconstructor,
+from ..models.reconstruction import (METHODS, SpikeReconstructor,
+                                     load_reconstructor,
                                      reconstruction_method)
 from ..evaluation.metrics import ReconstructionMetric
 
 __all__ = ['benchmark', 'format_table', 'score_recording',
-           'format_recording_table']
+           'format_recording_table', 'multiply_adds']
 
 
 def _method(method: str, checkpoint: Optional[str], device: str):
@@ -67,25 +78,75 @@ def _method(method: str, checkpoint: Optional[str], device: str):
     return reconstruction_method(method), None
 
 
+def multiply_adds(model: SpikeReconstructor, spikes: np.ndarray) -> int:
+    """Multiply-adds of ``model.reconstruct(spikes)`` for one ``(T, H, W)``
+    window: torch's ``FlopCounterMode`` FLOPs / 2, with a WGSE enhancer on
+    its ``torch`` backend (plain torch operators the counter sees; the
+    compiled and Triton backends compute the same products)."""
+    enhancer = model.enhancer
+    backend = getattr(enhancer, 'backend', None)
+    if backend is not None:
+        enhancer.backend = 'torch'
+    try:
+        with FlopCounterMode(display=False) as counter:
+            model.reconstruct(spikes)
+    finally:
+        if backend is not None:
+            enhancer.backend = backend
+    return counter.get_total_flops() // 2
+
+
+def _cost(function, model: Optional[SpikeReconstructor],
+          spikes: np.ndarray, device: str,
+          repeat: int) -> Dict[str, Optional[float]]:
+    """Parameters, multiply-adds and median milliseconds of one frame."""
+    timings = time_calls(lambda: function(spikes), device, repeat, warmup=1)
+    return dict(
+        params=0 if model is None else sum(
+            p.numel() for p in model.parameters()),
+        multiply_adds=None if model is None else multiply_adds(model,
+                                                               spikes),
+        ms_per_frame=summarize(timings.wall)['median'] * 1000)
+
+
 def benchmark(data_root: str, methods: Sequence[str] = METHODS,
               checkpoint: Optional[str] = None, num_steps: int = 41,
               spike_suffix: str = '.dat', device: str = 'cpu',
               progress: bool = True,
-              layout: Optional[str] = None) -> Dict[str, Dict[str, float]]:
+              layout: Optional[str] = None,
+              models: Sequence[str] = (),
+              repeat: int = 0) -> Dict[str, Dict[str, float]]:
     """``{method: {'PSNR', 'SSIM', 'Entropy2D'}}`` over the folder's samples
     (a progress bar on stderr unless ``progress`` is False).
 
-    ``checkpoint`` is the ``wgse`` model (default: the shipped weights); its
-    ``num_steps`` must equal ``num_steps``. ``layout``: of ``.npy``/``.npz``
-    streams that do not record it (``LoadSpikeFromFile``'s).
+    ``checkpoint`` is the ``wgse`` model (default: the shipped weights);
+    ``models`` are more trained models, each scored under its file's stem;
+    every model's ``num_steps`` must equal ``num_steps``. ``layout``: of
+    ``.npy``/``.npz`` streams that do not record it
+    (``LoadSpikeFromFile``'s). With ``repeat`` > 0 each entry also gets
+    ``params``, ``multiply_adds`` (``None`` for the classical methods) and
+    ``ms_per_frame`` on the first sample (median of ``repeat`` calls after
+    one untimed).
     """
-    functions = {}
+    functions, networks = {}, {}
     for method in methods:
         functions[method], length = _method(method, checkpoint, device)
+        networks[method] = (getattr(functions[method], '__self__', None)
+                            if method == 'wgse' else None)
         if length not in (None, num_steps):
             raise ValueError(
                 f'{checkpoint or "shipped weights"}: the model takes '
                 f'{length}-frame windows, not {num_steps}')
+    for path in models:
+        name = osp.splitext(osp.basename(path))[0]
+        if name in functions:
+            raise ValueError(f'{path}: a second entry named {name!r}')
+        networks[name] = load_reconstructor(path, device)
+        functions[name] = networks[name].reconstruct
+        if networks[name].num_steps != num_steps:
+            raise ValueError(
+                f'{path}: the model takes {networks[name].num_steps}-frame '
+                f'windows, not {num_steps}')
     dataset = REDSSpikeDataset(
         data_root=data_root, spike_suffix=spike_suffix,
         pipeline=[LoadSpikeImagePair(num_steps, layout=layout),
@@ -101,22 +162,48 @@ def benchmark(data_root: str, methods: Sequence[str] = METHODS,
             pred.data = pred.data.new_tensor(function(spikes))[None]
             metrics[method].process(None, [dict(pred_image=pred,
                                                 gt_image=gt)])
-    return {method: metric.evaluate(len(dataset))
-            for method, metric in metrics.items()}
+    results = {method: metric.evaluate(len(dataset))
+               for method, metric in metrics.items()}
+    if repeat > 0:
+        spikes = dataset[0]['inputs'].numpy()
+        for method, function in functions.items():
+            results[method].update(_cost(function, networks[method], spikes,
+                                         device, repeat))
+    return results
 
 
-def format_table(results: Dict[str, Dict[str, float]]) -> str:
-    """Markdown table of :func:`benchmark`'s results (margin over TFP)."""
-    lines = ['| method | PSNR (dB) | SSIM | 2-D entropy (bits) | PSNR - TFP |',
-             '|---|---|---|---|---|']
+def format_table(results: Dict[str, Dict[str, float]],
+                 device: Optional[str] = None) -> str:
+    """Markdown table of :func:`benchmark`'s results (margin over TFP; the
+    cost columns where measured, under a line naming the machine of
+    ``device``)."""
+    costs = all('ms_per_frame' in scores for scores in results.values())
+    headers = ['method', 'PSNR (dB)', 'SSIM', '2-D entropy (bits)',
+               'PSNR - TFP']
+    if costs:
+        headers += ['parameters', 'GMACs / frame', 'ms / frame']
     reference = results.get('tfp', {}).get('PSNR')
+    rows = []
     for method, scores in results.items():
-        margin = ('' if reference is None else
-                  f'{scores["PSNR"] - reference:+.2f}')
-        lines.append(f'| {method.upper()} | {scores["PSNR"]:.2f} | '
-                     f'{scores["SSIM"]:.4f} | {scores["Entropy2D"]:.3f} | '
-                     f'{margin} |')
-    return '\n'.join(lines)
+        row = [method.upper(), f'{scores["PSNR"]:.2f}', f'{scores["SSIM"]:.4f}',
+               f'{scores["Entropy2D"]:.3f}',
+               '' if reference is None else
+               f'{scores["PSNR"] - reference:+.2f}']
+        if costs:
+            macs = scores['multiply_adds']
+            row += [f'{scores["params"]:,}',
+                    '-' if macs is None else f'{macs / 1e9:.1f}',
+                    f'{scores["ms_per_frame"]:.0f}']
+        rows.append(row)
+    table = '\n'.join('| ' + ' | '.join(cells) + ' |' for cells in
+                      [headers, ['---'] * len(headers)] + rows)
+    if not costs:
+        return table
+    machine = machine_record(device or 'cpu')
+    where = machine.get('gpu') or machine['cpu']
+    return (f'{where} ({machine["torch_threads"]} threads, load '
+            f'{machine["load_average"]:.1f}), torch {machine["torch"]}, '
+            f'wgse_mmseg {machine["wgse_mmseg"]}\n\n' + table)
 
 
 @declare(path=Path(), methods=arguments.Sequence(Choice(METHODS),
@@ -201,6 +288,14 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f'comma-separated, of {list(METHODS)}')
     parser.add_argument('--checkpoint', type=Path(),
                         help='wgse model (default: shipped weights)')
+    parser.add_argument(
+        '--models', type=arguments.Sequence(Path(), max_length=64),
+        default=(), help='comma-separated checkpoints of more trained '
+        'models, each scored under its file name (a folder of REDS streams)')
+    parser.add_argument(
+        '--repeat', type=Integer(0, 1000), default=3,
+        help='timed reconstructions of one frame per method for the cost '
+        'columns (default 3; 0 leaves them out)')
     parser.add_argument('--num-steps', type=NUM_STEPS, default=41)
     parser.add_argument('--spike-suffix', type=Text(empty=False),
                         default='.dat')
@@ -248,8 +343,9 @@ def main(argv=None):
         return
     results = benchmark(args.data_root, methods, args.checkpoint,
                         args.num_steps, args.spike_suffix, args.device,
-                        layout=args.layout)
-    print(format_table(results))
+                        layout=args.layout, models=args.models,
+                        repeat=args.repeat)
+    print(format_table(results, args.device))
 
 
 if __name__ == '__main__':
