@@ -113,6 +113,11 @@ HOW = {
     '--out walk.gif': RUN,
     'python -m wgse_mmseg.apis.reconstruction_benchmark '
     '../shared/data/reds_sample': RUN,
+    'python -m wgse_mmseg.benchmarks.reconstruction '
+    '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150': RUN,
+    'bash tools/train_reconstruction.sh':
+        'tests/tools/test_train_reconstruction.py::'
+        'test_the_recipe_runs_start_to_finish',
 }
 
 #: what a command run here must print (a regular expression)
@@ -131,6 +136,9 @@ PRINTS = {
                       r'\nwalk\.gif\nwalk\.csv',
     'python -m wgse_mmseg.apis.reconstruction_benchmark '
     '../shared/data/reds_sample': r'\| WGSE \| \d\d\.\d\d \|',
+    'python -m wgse_mmseg.benchmarks.reconstruction '
+    '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150':
+        r'\| WGSE +\| +\d+\.\d+ \|',
 }
 
 #: environment a command run here gets: the quickstart's documented
