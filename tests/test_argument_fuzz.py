@@ -29,7 +29,8 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
                 'wgse_mmseg.core.exposure', 'wgse_mmseg.benchmarks.timing',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
-                'wgse_mmseg.core.reconstruction_baselines'):
+                'wgse_mmseg.core.reconstruction_baselines',
+                'wgse_mmseg.apis.onnx_export'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -111,6 +112,9 @@ def _required(entry):
         'waverec': dict(coeffs=[torch.zeros(2, 8)] * 2, wavelet='haar'),
         'tfp': dict(spikes=np.zeros((3, 4, 5))),
         'tfi': dict(spikes=np.zeros((3, 4, 5))),
+        'export_onnx': dict(graph=torch.nn.Identity(),
+                            path=str(files['root'] / 'model.onnx'),
+                            num_steps=2, height=4, width=4),
     }.get(entry, {})
 
 
