@@ -30,7 +30,8 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.core.exposure', 'wgse_mmseg.benchmarks.timing',
                 'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
                 'wgse_mmseg.core.reconstruction_baselines',
-                'wgse_mmseg.apis.onnx_export'):
+                'wgse_mmseg.apis.onnx_export',
+                'wgse_mmseg.benchmarks.deployment'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -115,6 +116,8 @@ def _required(entry):
         'export_onnx': dict(graph=torch.nn.Identity(),
                             path=str(files['root'] / 'model.onnx'),
                             num_steps=2, height=4, width=4),
+        'measure_deployment': dict(name='x', config=files['missing'],
+                                   cfg_options=None, shape=(2, 4, 4)),
     }.get(entry, {})
 
 

@@ -274,3 +274,24 @@ def test_the_comparison_sees_a_model_that_differs(exported):
                               spikes)
     assert not found['ok'] and found['max_abs_diff'] > 50
     assert found['argmax_agreement'] < MIN_ARGMAX_AGREEMENT
+
+
+def test_measure_deployment_times_both_backends():
+    """The deployment benchmark: both backends timed on the same batch,
+    windows per second the batch over the median call, the machine named."""
+    from wgse_mmseg.benchmarks.deployment import (BACKENDS,
+                                                  format_deployment,
+                                                  measure_deployment)
+    result = measure_deployment('segformer_b0_raw', osp.join(
+        ROOT, 'configs', 'segformer_b0_raw.py'), None, (T, H, W),
+        batch_size=2, repeat=2, warmup=0)
+    for backend in BACKENDS:
+        seconds = result[backend]['seconds']
+        assert len(seconds['samples']) == 2
+        assert result[backend]['windows_per_s'] == pytest.approx(
+            2 / seconds['median'])
+    assert result['shape'] == [T, H, W] and result['batch_size'] == 2
+    assert result['environment']['onnxruntime']
+    table = format_deployment([result])
+    assert '| segformer_b0_raw | 9x32x64   |     2 |' in table
+    assert 'Machine: ' in table and 'onnxruntime' in table

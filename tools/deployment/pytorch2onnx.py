@@ -24,17 +24,13 @@ import wgse_mmseg
 wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
 from mmengine.registry import init_default_scope  # noqa: E402
 from wgse_mmseg.apis.onnx_export import (  # noqa: E402
-    LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET, OPSETS,
+    LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET, OPSETS, SHAPE_ENTRY,
     SpikeSegmentorGraph, compare_with_onnx, export_onnx, load_segmentor,
     random_spikes)
-from wgse_mmseg.core.arguments import SEED, Integer, Path  # noqa: E402
-from wgse_mmseg.core.limits import MAX_NUM_STEPS  # noqa: E402
+from wgse_mmseg.core.arguments import SEED, Path  # noqa: E402
 from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
                                      load_config)
 
-#: each of T, H and W (an export at a side above MAX_NUM_STEPS would not
-#: fit a runtime's memory anyway)
-SHAPE_ENTRY = Integer(1, MAX_NUM_STEPS)
 #: streams of the check against the torch model
 VERIFY_BATCH = 2
 

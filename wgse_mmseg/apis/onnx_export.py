@@ -38,11 +38,13 @@ from torch import nn
 from mmseg.registry import MODELS
 from ..core.arguments import NUM_STEPS, SIDE, Integer, declare
 from ..core.io import atomic_output
+from ..core.limits import MAX_NUM_STEPS
 from ..core.wgse import WGSE
 from ..datasets import SpikeCityscapesDataset
 from ..utils.checkpoint import read_checkpoint
 
 __all__ = ['LOGITS_TOLERANCE', 'MIN_ARGMAX_AGREEMENT', 'OPSETS', 'OPSET',
+           'SHAPE_ENTRY',
            'SpikeSegmentorGraph', 'load_segmentor', 'random_spikes',
            'export_onnx', 'compare_with_onnx']
 
@@ -57,6 +59,10 @@ MIN_ARGMAX_AGREEMENT = 0.999
 #: ONNX Runtime 1.32 runs); :data:`OPSET` is the default
 OPSETS = Integer(18, 23)
 OPSET = 18
+#: each of ``T``, ``H`` and ``W`` of an export, on a command line (a side
+#: above :data:`~wgse_mmseg.core.limits.MAX_NUM_STEPS` would not fit a
+#: runtime's memory anyway)
+SHAPE_ENTRY = Integer(1, MAX_NUM_STEPS)
 #: spike probability of the random streams of :func:`compare_with_onnx`
 SPIKE_PROBABILITY = 0.3
 #: the names of the graph's input and output
