@@ -179,6 +179,9 @@ def test_files_that_are_not_exported_models(wrong_file_kinds, tmp_path):
         OnnxSpikeSegmentor(other)
     with pytest.raises(ValueError, match="'cpu' or 'cuda"):
         OnnxSpikeSegmentor(other, device='tpu')
+    for threads in (0, 1.5, True):
+        with pytest.raises(ValueError, match='threads must be'):
+            OnnxSpikeSegmentor(other, threads=threads)
 
 
 def test_a_model_that_does_not_export_leaves_no_file(tmp_path):
@@ -284,7 +287,7 @@ def test_measure_deployment_times_both_backends():
                                                   measure_deployment)
     result = measure_deployment('segformer_b0_raw', osp.join(
         ROOT, 'configs', 'segformer_b0_raw.py'), None, (T, H, W),
-        batch_size=2, repeat=2, warmup=0)
+        batch_size=2, repeat=2, warmup=0, threads=1)
     for backend in BACKENDS:
         seconds = result[backend]['seconds']
         assert len(seconds['samples']) == 2
@@ -292,6 +295,7 @@ def test_measure_deployment_times_both_backends():
             2 / seconds['median'])
     assert result['shape'] == [T, H, W] and result['batch_size'] == 2
     assert result['environment']['onnxruntime']
+    assert result['threads'] == result['environment']['torch_threads'] == 1
     table = format_deployment([result])
     assert '| segformer_b0_raw | 9x32x64   |     2 |' in table
-    assert 'Machine: ' in table and 'onnxruntime' in table
+    assert 'Machine: ' in table and 'threads: 1' in table

@@ -242,10 +242,10 @@ REVIEWED = {
         'weights-only, loaded strictly) and its dataset meta as data',
     ('tools/deployment/pytorch2onnx.py', 'main', 'init_default_scope'):
         'the user\'s config file',
-    ('wgse_mmseg/benchmarks/deployment.py', 'measure_deployment',
+    ('wgse_mmseg/benchmarks/deployment.py', '_measure',
      'MODELS.build'):
         'the user\'s grid and config files; random weights',
-    ('wgse_mmseg/benchmarks/deployment.py', 'measure_deployment',
+    ('wgse_mmseg/benchmarks/deployment.py', '_measure',
      'init_default_scope'):
         'the user\'s config file',
 }

@@ -3,7 +3,7 @@ in ONNX Runtime, on this CPU.
 
     python tools/analysis_tools/benchmark_deployment.py GRID [--only NAME ...]
         [--shape T H W] [--batch-size 1] [--repeat 5] [--warmup 1]
-        [--out FILE]
+        [--threads N] [--out FILE]
 
 Each selected entry of GRID (e.g. configs/experiments/grid_cpu.py; entries
 as ``run_experiments.py --list`` names them) is built with the grid's
@@ -31,7 +31,7 @@ from wgse_mmseg.benchmarks.timing import time_calls  # noqa: E402
 from wgse_mmseg.apis.onnx_export import SHAPE_ENTRY  # noqa: E402
 from wgse_mmseg.core.arguments import Integer, Path, Text  # noqa: E402
 from wgse_mmseg.core.io import atomic_output  # noqa: E402
-from wgse_mmseg.core.limits import MAX_BATCH_SIZE  # noqa: E402
+from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS  # noqa
 
 #: the declarations of a measurement's repeats and warm-up calls
 TIMING = time_calls.declaration.arguments
@@ -56,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help='timed calls per backend')
     parser.add_argument('--warmup', type=TIMING['warmup'], default=1,
                         help='untimed calls before them')
+    parser.add_argument('--threads', type=Integer(1, MAX_WORKERS),
+                        help='torch and ONNX Runtime intra-op threads, the '
+                        'same for both (default: each one\'s own; 1 is '
+                        'steadier on a shared machine)')
     parser.add_argument('--out', type=Path(), help='write the JSON here')
     return parser
 
@@ -74,7 +78,7 @@ def main(argv=None) -> int:
             results.append(run_isolated(
                 measure_deployment, entry.name, entry.config, options,
                 args.shape, batch_size=args.batch_size, repeat=args.repeat,
-                warmup=args.warmup))
+                warmup=args.warmup, threads=args.threads))
         except Exception as error:  # report it, measure the others
             message = str(error).splitlines()[0][:300] if str(error) else ''
             print(f'{entry.name} FAILED: {type(error).__name__}: {message}',

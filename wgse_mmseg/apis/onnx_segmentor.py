@@ -35,6 +35,8 @@ class OnnxSpikeSegmentor:
         onnx_path: a file of ``tools/deployment/pytorch2onnx.py``.
         device: ``'cpu'``, or ``'cuda'``/``'cuda:N'`` where ONNX Runtime
             has its CUDA provider.
+        threads: ONNX Runtime's intra-op threads; ``None``: its default
+            (one per core).
 
     Attributes:
         input_shape: the ``(T, H, W)`` the model was exported for.
@@ -42,7 +44,8 @@ class OnnxSpikeSegmentor:
             (read as JSON, data only), or ``None``.
     """
 
-    def __init__(self, onnx_path: str, device: str = 'cpu'):
+    def __init__(self, onnx_path: str, device: str = 'cpu',
+                 threads: Optional[int] = None):
         import onnxruntime
         if not osp.isfile(onnx_path):
             raise FileNotFoundError(f'{onnx_path}: no such ONNX file')
@@ -59,9 +62,16 @@ class OnnxSpikeSegmentor:
         elif device != 'cpu':
             raise ValueError(f"device must be 'cpu' or 'cuda[:N]', got "
                              f'{device!r}')
+        options = onnxruntime.SessionOptions()
+        if threads is not None:
+            if isinstance(threads, bool) or not isinstance(threads, int) \
+                    or threads < 1:
+                raise ValueError(f'threads must be an integer >= 1 or None, '
+                                 f'got {threads!r}')
+            options.intra_op_num_threads = threads
         try:
             self.session = onnxruntime.InferenceSession(
-                onnx_path, providers=providers)
+                onnx_path, options, providers=providers)
         except Exception as err:  # onnxruntime raises its own types
             raise ValueError(
                 f'{onnx_path}: not a model ONNX Runtime can load '
