@@ -33,7 +33,10 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.core.reconstruction_baselines',
                 'wgse_mmseg.data_generation.training_images',
                 'wgse_mmseg.benchmarks.reconstruction',
-                'wgse_mmseg.core.recording_walk'):
+                'wgse_mmseg.core.recording_walk',
+
+                'wgse_mmseg.apis.onnx_export',
+                'wgse_mmseg.benchmarks.deployment'):
     importlib.import_module(_module)
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
@@ -127,6 +130,11 @@ def _required(entry):
             model=lambda spikes: spikes.mean(1),
             render=lambda window, rate: np.zeros((4, 6), np.uint8),
             length=3, stride=2, progress=False),
+        'export_onnx': dict(graph=torch.nn.Identity(),
+                            path=str(files['root'] / 'model.onnx'),
+                            num_steps=2, height=4, width=4),
+        'measure_deployment': dict(name='x', config=files['missing'],
+                                   cfg_options=None, shape=(2, 4, 4)),
     }.get(entry, {})
 
 

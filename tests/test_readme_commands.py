@@ -65,6 +65,17 @@ HOW = {
     'python tools/train.py $CONFIG --resume': TRAIN_TESTS,
     'python tools/test.py $CONFIG work_dirs/pspnet_wgse/epoch_100.pth':
         TRAIN_TESTS,
+    'python tools/deployment/pytorch2onnx.py configs/segformer_b0_wgse.py '
+    'work_dirs/segformer_b0_wgse/epoch_100.pth --shape 129 256 512':
+        'tests/apis/test_onnx_export.py::'
+        'test_the_tool_exports_a_checkpoint_and_checks_it',
+    'python tools/analysis_tools/benchmark_deployment.py '
+    'configs/experiments/grid_cpu.py --only segformer_b0_raw '
+    'segformer_b0_tfp segformer_b0_wgse1d pspnet_raw pspnet_tfp '
+    'pspnet_wgse1d --threads 1 --out docs/deployment_cpu.json': NotHere(
+        'exports and times six full-size models for about 20 minutes on 2 '
+        'cores', 'tests/apis/test_onnx_export.py::'
+        'test_measure_deployment_times_both_backends'),
     'python tools/demo.py clip_spike.spk $CONFIG CKPT --out-file seg.png':
         'tests/tools/test_demo_and_example.py::test_demo_writes_overlay',
     'python tools/demo.py recording.dat $CONFIG CKPT --stride 100 '

@@ -267,8 +267,10 @@ def _argv(parser, action, words):
                 options.append(f'{other.option_strings[0]}={words[0]}')
             elif given:
                 options += [other.option_strings[0], *words]
-            elif other.required:
-                options += [other.option_strings[0], _valid_word(other.type)]
+            elif other.required:  # as many words as it takes
+                count = other.nargs if isinstance(other.nargs, int) else 1
+                options += [other.option_strings[0],
+                            *[_valid_word(other.type)] * count]
         elif given:
             positionals += words
         elif other.nargs not in ('?', '*'):

@@ -406,6 +406,69 @@ def test_aggregate_and_report(tmp_path):
     assert (tmp_path / 'loss.png').read_bytes()[:4] == b'\x89PNG'
 
 
+def _deployment_file(path, speeds):
+    """A JSON file as benchmark_deployment.py writes it: name -> (torch,
+    onnxruntime) windows per second."""
+    env = dict(cpu='test cpu', cpu_count=2, torch_threads=2, torch='2.x',
+               onnxruntime='1.x', load_average=0.5)
+    results = [dict(name=name, shape=[41, 128, 256], batch_size=1,
+                    environment=env,
+                    torch_eager=dict(windows_per_s=eager),
+                    onnxruntime=dict(windows_per_s=onnx))
+               for name, (eager, onnx) in speeds.items()]
+    path.write_text(json.dumps(dict(results=results, failed=[])))
+    return str(path)
+
+
+def test_report_gains_the_deployment_columns(tmp_path):
+    """With --deployment, the CSV, the table and the plot gain windows per
+    second in torch and ONNX Runtime; an entry not measured reads '-'."""
+    grid, entries = runner.load_grid(GRID_CPU)
+    raw, tfi = runner.select(entries, ['segformer_b0_raw',
+                                       'segformer_b0_tfi'])
+    work = tmp_path / 'work'
+    fake_result(work, raw, 0, 10.0, 5.0, 60.0)
+    fake_result(work, tfi, 0, 20.0, 6.0, 90.0)
+    deployment = _deployment_file(tmp_path / 'deployment.json',
+                                  {'segformer_b0_raw': (3.25, 7.5)})
+    settings = ExperimentSettings(GRID_CPU, 'data/x', str(work), seeds=[0],
+                                  epochs=3, report_dir=str(tmp_path / 'r'),
+                                  deployment=deployment)
+    rows = runner.report([raw, tfi], settings, grid, 'python cmd')
+    assert rows[0]['deployment']['onnxruntime'] == 7.5
+    assert rows[1]['deployment'] is None
+    with open(tmp_path / 'r' / 'results.csv') as f:
+        table = list(csv.DictReader(f))
+    assert (table[0]['torch_windows_per_s'],
+            table[0]['onnxruntime_windows_per_s']) == ('3.25', '7.5')
+    assert table[1]['torch_windows_per_s'] == ''
+    text = (tmp_path / 'r' / 'results.md').read_text()
+    header = next(line for line in text.splitlines()
+                  if line.startswith('| entry'))
+    assert [c.strip() for c in header.strip('|').split('|')][-2:] == [
+        'windows/s torch', 'windows/s ONNX Runtime']
+    cells = {line.split('|')[1].strip(): [
+        c.strip() for c in line.strip('|').split('|')][-2:]
+        for line in text.splitlines() if line.startswith('| segformer')}
+    assert cells == {'segformer_b0_raw': ['3.25', '7.50'],
+                     'segformer_b0_tfi': ['-', '-']}
+    assert 'onnxruntime 1.x; 1-minute load average 0.5' in text
+    assert (tmp_path / 'r' / 'accuracy_vs_time.png').read_bytes()[:4] == \
+        b'\x89PNG'
+    # without the file: neither columns nor note
+    plain = ExperimentSettings(GRID_CPU, 'data/x', str(work), seeds=[0],
+                               epochs=3, report_dir=str(tmp_path / 'p'))
+    runner.report([raw, tfi], plain, grid, 'python cmd')
+    text = (tmp_path / 'p' / 'results.md').read_text()
+    assert 'windows/s' not in text
+    # a file that is not one, named
+    bad = tmp_path / 'bad.json'
+    bad.write_text('{"results": [{"name": "x"}]}')
+    with pytest.raises(ValueError, match='bad.json: not a JSON file of '
+                       'benchmark_deployment.py'):
+        runner.read_deployment(str(bad))
+
+
 def test_tiny_grid_end_to_end_and_resume(tmp_path):
     data = tmp_path / 'data'
     make_synthetic_dataset(str(data), num_train=4, num_val=2, height=32,

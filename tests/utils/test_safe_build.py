@@ -237,6 +237,17 @@ REVIEWED = {
         'only',
     ('tools/demo.py', 'main', 'init_default_scope'):
         'the user\'s config file',
+    ('wgse_mmseg/apis/onnx_export.py', 'load_segmentor', 'MODELS.build'):
+        'the user\'s config file; the checkpoint gives weights (read '
+        'weights-only, loaded strictly) and its dataset meta as data',
+    ('tools/deployment/pytorch2onnx.py', 'main', 'init_default_scope'):
+        'the user\'s config file',
+    ('wgse_mmseg/benchmarks/deployment.py', '_measure',
+     'MODELS.build'):
+        'the user\'s grid and config files; random weights',
+    ('wgse_mmseg/benchmarks/deployment.py', '_measure',
+     'init_default_scope'):
+        'the user\'s config file',
 }
 
 

@@ -3,7 +3,7 @@
     python tools/analysis_tools/run_experiments.py GRID --data-root DIR --work-dir DIR
         [--seeds 0 1 2] [--epochs N | --max-iters N] [--only NAME ...]
         [--report-dir DIR] [--keep-checkpoints] [--list] [--report-only]
-        [--benchmark]
+        [--benchmark] [--deployment FILE]
 
 GRID (e.g. configs/experiments/grid_cpu.py) lists models and enhancers; each
 entry ``<model>_<enhancer>`` is the model's config with
@@ -19,7 +19,9 @@ the selected entries and seeds is aggregated into ``results.csv``,
 ``--report-dir`` (default: the work dir). ``--benchmark`` first measures
 each reported entry once with the package's benchmark (FLOPs, training-step
 time, peak memory: the table's cost columns; run it with nothing else
-loading the machine). See docs/benchmark.md.
+loading the machine); ``--deployment FILE`` adds the windows per second in
+torch and ONNX Runtime that ``benchmark_deployment.py`` measured. See
+docs/benchmark.md.
 """
 import argparse
 import os
@@ -76,6 +78,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help='before reporting, measure FLOPs, training-step '
                         'time and memory of each entry with finished runs '
                         '(once per entry, in WORK_DIR/<entry>/benchmark.json)')
+    parser.add_argument('--deployment', type=Path(),
+                        help='JSON of tools/analysis_tools/'
+                        'benchmark_deployment.py: the report gains its '
+                        'windows per second (torch eager, ONNX Runtime)')
     return parser
 
 
@@ -94,7 +100,8 @@ def settings_from(args, grid):
         seeds=args.seeds or list(grid.seeds), epochs=epochs,
         max_iters=args.max_iters, only=args.only,
         report_dir=args.report_dir, keep_checkpoints=args.keep_checkpoints,
-        benchmark=args.benchmark, report_only=args.report_only)
+        benchmark=args.benchmark, report_only=args.report_only,
+        deployment=args.deployment)
 
 
 def measure_entries(runs, grid, work_dir):

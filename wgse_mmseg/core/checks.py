@@ -14,8 +14,13 @@ def check_finite(owner: str, name: str, tensor: torch.Tensor) -> None:
     others). The message names ``owner``, the argument ``name`` and how many
     values are not finite. Integer and bool tensors pass without a pass
     over the data; a float tensor costs one reduction (one device sync on a
-    GPU).
+    GPU). Skipped while ``torch.export`` traces (an ONNX export): a check
+    of the values is data-dependent control flow, which no exported graph
+    holds; what runs the exported graph checks its input instead
+    (:class:`~wgse_mmseg.apis.onnx_segmentor.OnnxSpikeSegmentor`).
     """
+    if torch.compiler.is_exporting():
+        return
     if not tensor.is_floating_point() or bool(torch.isfinite(tensor).all()):
         return
     bad = tensor.numel() - int(torch.isfinite(tensor).sum())

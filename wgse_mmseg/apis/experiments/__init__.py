@@ -19,8 +19,8 @@ command line; docs/benchmark.md the details), one module per job:
 from .aggregate import aggregate, loss_change
 from .grid import (ENHANCER_KEY, PROJECT_ROOT, Entry, as_cli, describe,
                    enhancer_options, load_grid, schedule_options, select)
-from .report import (CSV_COLUMNS, LOSS_PLOT, plot, plot_loss_curves, report,
-                     write_csv, write_markdown)
+from .report import (CSV_COLUMNS, LOSS_PLOT, plot, plot_loss_curves,
+                     read_deployment, report, write_csv, write_markdown)
 from .runner import (METRICS, Run, RunFailed, StaleRunError, benchmark_entry,
                      finished, loss_curve, plan, read_benchmark,
                      run_directory, run_one)
@@ -33,5 +33,5 @@ __all__ = [
     'StaleRunError', 'plan', 'finished', 'run_one', 'run_directory',
     'loss_curve', 'benchmark_entry', 'read_benchmark', 'aggregate',
     'loss_change', 'CSV_COLUMNS', 'LOSS_PLOT', 'write_csv', 'write_markdown',
-    'plot', 'plot_loss_curves', 'report'
+    'plot', 'plot_loss_curves', 'read_deployment', 'report'
 ]

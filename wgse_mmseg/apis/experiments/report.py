@@ -7,6 +7,7 @@ command that made it, the grid's settings and the machine.
 """
 import csv
 import io
+import json
 import os.path as osp
 from typing import Any, Dict, List
 
@@ -24,7 +25,37 @@ CSV_COLUMNS = ['name', 'model', 'enhancer', 'seeds', 'mIoU_mean',
                'ms_per_image_std', 'train_seconds_mean', 'train_seconds_std',
                'final_loss_mean', 'final_loss_std', 'loss_change_mean',
                'loss_change_std', 'gflops', 'enhancer_gflops',
-               'train_step_ms', 'train_memory_mb']
+               'train_step_ms', 'train_memory_mb', 'torch_windows_per_s',
+               'onnxruntime_windows_per_s']
+
+
+def read_deployment(path: str) -> Dict[str, Dict[str, Any]]:
+    """Entry name -> its result in a JSON file of
+    ``tools/analysis_tools/benchmark_deployment.py``
+    (:func:`~wgse_mmseg.benchmarks.deployment.measure_deployment`); a
+    ``ValueError`` names the file if it is not one."""
+    try:
+        with open(path) as f:
+            results = json.load(f)['results']
+        return {r['name']: dict(
+            torch=float(r['torch_eager']['windows_per_s']),
+            onnxruntime=float(r['onnxruntime']['windows_per_s']),
+            shape=[int(v) for v in r['shape']],
+            batch_size=int(r['batch_size']),
+            environment=dict(r['environment'])) for r in results}
+    except (ValueError, KeyError, TypeError) as err:
+        raise ValueError(f'{path}: not a JSON file of '
+                         f'benchmark_deployment.py ({type(err).__name__}: '
+                         f'{err})') from None
+
+
+def _deployment_columns(row: Dict[str, Any]) -> Dict[str, Any]:
+    """Windows per second in torch eager and ONNX Runtime of the entry
+    (:func:`read_deployment`); ``None`` each where not measured."""
+    measured = row.get('deployment')
+    return dict(torch_windows_per_s=measured and measured['torch'],
+                onnxruntime_windows_per_s=measured and
+                measured['onnxruntime'])
 
 
 def _benchmark_columns(row: Dict[str, Any]) -> Dict[str, Any]:
@@ -53,7 +84,8 @@ def write_csv(rows: List[Dict[str, Any]], path: str) -> None:
                             lineterminator='\n')
     writer.writeheader()
     for row in rows:
-        row = dict(row, **_benchmark_columns(row))
+        row = dict(row, **_benchmark_columns(row),
+                   **_deployment_columns(row))
         writer.writerow({k: round(v, 4) if isinstance(v, float) else v
                          for k, v in row.items()})
     with atomic_output(path) as f:
@@ -95,11 +127,18 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
             _pm(r, 'loss_change', 100, 1), number(cost['gflops'], 2),
             number(cost['train_step_ms'], 0),
             number(cost['train_memory_mb'], 0)])
-    table = markdown_table(
-        ['entry', 'enhancer', 'seeds', 'mIoU', 'mAcc', 'aAcc', 'params (M)',
-         'ms / image', 'train time (min)', 'final loss',
-         'loss change, last quarter (%)', 'GFLOPs', 'train step (ms)',
-         'train memory (MB)'], table_rows)
+    headers = ['entry', 'enhancer', 'seeds', 'mIoU', 'mAcc', 'aAcc',
+               'params (M)', 'ms / image', 'train time (min)', 'final loss',
+               'loss change, last quarter (%)', 'GFLOPs', 'train step (ms)',
+               'train memory (MB)']
+    deployed = [r['deployment'] for r in rows if r.get('deployment')]
+    if deployed:  # the deployment columns, where measured
+        headers += ['windows/s torch', 'windows/s ONNX Runtime']
+        for cells, r in zip(table_rows, rows):
+            speed = _deployment_columns(r)
+            cells += [number(speed['torch_windows_per_s'], 2),
+                      number(speed['onnxruntime_windows_per_s'], 2)]
+    table = markdown_table(headers, table_rows)
     env = rows[0]['environment']
     options = ', '.join(f'{k}={v}' for k, v in grid.cfg_options.items())
     grid_name = osp.relpath(osp.abspath(settings.grid))
@@ -136,7 +175,8 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
         '(`wgse_mmseg.benchmarks.segmentation.benchmark_config`, as '
         '`tools/analysis_tools/benchmark.py`) of each entry at the training '
         'crop and batch size, measured once per entry (`--benchmark`) '
-        'with nothing else running; `-`: not measured.', '',
+        'with nothing else running; `-`: not measured.',
+        *_deployment_note(deployed), '',
         f'![mIoU against ms per image]({plot_name})', '',
         f'![Training loss curves]({LOSS_PLOT})'
     ]
@@ -144,10 +184,33 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
         f.write(('\n'.join(lines) + '\n').encode())
 
 
+def _deployment_note(deployed: List[Dict[str, Any]]) -> List[str]:
+    """The bullet that says how the deployment columns were measured."""
+    if not deployed:
+        return []
+    first, env = deployed[0], deployed[0]['environment']
+    loads = [d['environment'].get('load_average') for d in deployed]
+    loads = [f'{v:.1f}' for v in loads if v is not None]
+    return [
+        '- windows/s torch, windows/s ONNX Runtime: windows '
+        f"({'x'.join(map(str, first['shape']))}, T x H x W) per second, "
+        f"batch {first['batch_size']}, of `model.test_step` in torch "
+        '(eager, the enhancer on its default backend) and of the model '
+        'exported to ONNX (`tools/deployment/pytorch2onnx.py`) in ONNX '
+        'Runtime, argmax included, random weights; measured by '
+        '`tools/analysis_tools/benchmark_deployment.py` on '
+        f"{env['cpu']} ({env['cpu_count']} logical cores, "
+        f"{env['torch_threads']} torch threads), torch {env['torch']}, "
+        f"onnxruntime {env.get('onnxruntime', '?')}; 1-minute load "
+        f"average {', '.join(loads) or 'unknown'}; `-`: not measured."]
+
+
 def plot(rows: List[Dict[str, Any]], path: str) -> None:
     """mIoU against ms per image (log scale), error bars one standard
     deviation over seeds; marker: model, colour: enhancer type, label:
-    enhancer name."""
+    enhancer name. Where rows have deployment measurements
+    (:func:`read_deployment`), a second panel: mIoU against windows per
+    second, torch eager hollow and ONNX Runtime filled, joined per entry."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -157,7 +220,10 @@ def plot(rows: List[Dict[str, Any]], path: str) -> None:
     markers = dict(zip(models, 'osD^v<>p*h'))
     types = sorted({r['enhancer'].split('(')[0] for r in rows})
     colours = {t: plt.get_cmap('tab10')(i % 10) for i, t in enumerate(types)}
-    figure, axes = plt.subplots(figsize=(9, 6))
+    deployed = [r for r in rows if r.get('deployment')]
+    figure, panels = plt.subplots(1, 2 if deployed else 1, squeeze=False,
+                                  figsize=(16 if deployed else 9, 6))
+    axes = panels[0][0]
     for row in rows:
         axes.errorbar(row['ms_per_image_mean'], row['mIoU_mean'],
                       xerr=row['ms_per_image_std'], yerr=row['mIoU_std'],
@@ -178,6 +244,33 @@ def plot(rows: List[Dict[str, Any]], path: str) -> None:
     axes.set_ylabel('mIoU (%)')
     axes.set_title('Accuracy against time per image')
     axes.grid(True, which='both', alpha=0.3)
+    if deployed:
+        speed = panels[0][1]
+        for row in deployed:
+            colour = colours[row['enhancer'].split('(')[0]]
+            marker = markers[row['model']]
+            eager = row['deployment']['torch']
+            onnx = row['deployment']['onnxruntime']
+            speed.plot([eager, onnx], [row['mIoU_mean']] * 2, color=colour,
+                       linewidth=0.8)
+            speed.plot(eager, row['mIoU_mean'], marker=marker,
+                       markerfacecolor='none', color=colour,
+                       linestyle='none')
+            speed.plot(onnx, row['mIoU_mean'], marker=marker, color=colour,
+                       linestyle='none')
+            speed.annotate(row['name'][len(row['model']) + 1:],
+                           (onnx, row['mIoU_mean']), fontsize=6,
+                           xytext=(3, 3), textcoords='offset points')
+        speed.legend(handles=[
+            Line2D([], [], marker='o', markerfacecolor='none', color='grey',
+                   linestyle='none', label='torch eager'),
+            Line2D([], [], marker='o', color='grey', linestyle='none',
+                   label='ONNX Runtime')], fontsize=7, loc='best')
+        speed.set_xscale('log')
+        speed.set_xlabel('windows per second (CPU, log scale)')
+        speed.set_ylabel('mIoU (%)')
+        speed.set_title('Accuracy against deployed speed')
+        speed.grid(True, which='both', alpha=0.3)
     figure.tight_layout()
     with atomic_output(path) as f:
         figure.savefig(f, format='png', dpi=150)
@@ -232,6 +325,10 @@ def report(entries: List[Entry], settings: ExperimentSettings,
     if not rows:
         print('no finished runs to report')
         return rows
+    if settings.deployment is not None:
+        deployment = read_deployment(settings.deployment)
+        for row in rows:
+            row['deployment'] = deployment.get(row['name'])
     report_dir = settings.report_to
     plot_path = osp.join(report_dir, 'accuracy_vs_time.png')
     plot(rows, plot_path)

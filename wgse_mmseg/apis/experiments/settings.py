@@ -34,7 +34,8 @@ def check_schedule(epochs: Optional[int], max_iters: Optional[int]) -> int:
                 epochs=EPOCHS.or_none(), max_iters=ITERATIONS.or_none(),
                 only=Sequence(Text(empty=False), optional=True),
                 report_dir=Path(optional=True), keep_checkpoints=Flag(),
-                benchmark=Flag(), report_only=Flag())
+                benchmark=Flag(), report_only=Flag(),
+                deployment=Path(exists='file', optional=True))
 @dataclass(frozen=True)
 class ExperimentSettings:
     """What one run of a grid trains, where, and what it reports.
@@ -51,6 +52,9 @@ class ExperimentSettings:
         keep_checkpoints: keep each run's checkpoints once it is done.
         benchmark: measure each reported entry once before reporting.
         report_only: train nothing; report the finished runs.
+        deployment: a JSON file of ``tools/analysis_tools/
+            benchmark_deployment.py`` whose windows per second (torch eager,
+            ONNX Runtime) the report adds per entry; ``None``: none.
     """
     grid: str
     data_root: str
@@ -63,6 +67,7 @@ class ExperimentSettings:
     keep_checkpoints: bool = False
     benchmark: bool = False
     report_only: bool = False
+    deployment: Optional[str] = None
 
     def __post_init__(self):
         check_schedule(self.epochs, self.max_iters)
@@ -78,6 +83,8 @@ class ExperimentSettings:
             normalised['only'] = tuple(self.only)
         if self.report_dir is not None:
             normalised['report_dir'] = os.fspath(self.report_dir)
+        if self.deployment is not None:
+            normalised['deployment'] = os.fspath(self.deployment)
         for name, value in normalised.items():
             object.__setattr__(self, name, value)
 

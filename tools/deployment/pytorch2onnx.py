@@ -1,0 +1,97 @@
+"""Export a trained spike segmentor, enhancer included, to ONNX.
+
+    python tools/deployment/pytorch2onnx.py CONFIG CHECKPOINT --shape T H W
+        [--out FILE] [--opset 18] [--no-verify] [--seed 1]
+        [--cfg-options num_steps=41 ...]
+
+One graph maps float spikes ``(batch, T, H, W)`` to logits ``(batch, K, H,
+W)``: the config's enhancer (WGSE, TFP, the mean filters), the segmentor
+and the final resize (``wgse_mmseg.apis.onnx_export``). ``T``, ``H`` and
+``W`` are fixed; the batch is dynamic. The checkpoint is read weights-only
+and must fit the config exactly (``--cfg-options num_steps=T`` for another
+``T``). The file (default ``<config name>.onnx``) is written whole or not
+at all. Then, unless ``--no-verify``, ONNX Runtime (CPU) runs it on two
+random Bernoulli streams beside the torch model; the largest logit
+difference and the share of pixels with the same class are printed, and
+the tool exits with status 1 (the file kept, for inspection) beyond
+``LOGITS_TOLERANCE`` or below ``MIN_ARGMAX_AGREEMENT``.
+"""
+import argparse
+import os.path as osp
+import sys
+
+import wgse_mmseg
+wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
+from mmengine.registry import init_default_scope  # noqa: E402
+from wgse_mmseg.apis.onnx_export import (  # noqa: E402
+    LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET, OPSETS, SHAPE_ENTRY,
+    SpikeSegmentorGraph, compare_with_onnx, export_onnx, load_segmentor,
+    random_spikes)
+from wgse_mmseg.core.arguments import SEED, Path  # noqa: E402
+from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
+                                     load_config)
+
+#: streams of the check against the torch model
+VERIFY_BATCH = 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        description='Export a spike segmentor (enhancer included) to ONNX')
+    parser.add_argument('config', type=Path(), help='config file')
+    parser.add_argument('checkpoint', type=Path(), help='checkpoint file')
+    parser.add_argument('--shape', type=SHAPE_ENTRY, nargs=3, required=True,
+                        metavar=('T', 'H', 'W'),
+                        help='the input the graph takes: T (the config\'s '
+                        'num_steps) and the frame height and width')
+    parser.add_argument('--out', type=Path(),
+                        help='output file (default: <config name>.onnx)')
+    parser.add_argument('--opset', type=OPSETS, default=OPSET,
+                        help=f'ONNX opset ({OPSETS.minimum} to '
+                        f'{OPSETS.maximum}; default {OPSET})')
+    parser.add_argument('--no-verify', action='store_true',
+                        help='skip the check against the torch model in '
+                        'ONNX Runtime')
+    parser.add_argument('--seed', type=SEED, default=1,
+                        help='seed of the random spikes of the check')
+    add_config_options(parser)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    num_steps, height, width = args.shape
+    out = args.out or osp.splitext(osp.basename(args.config))[0] + '.onnx'
+    cfg = load_config(args.config, args.cfg_options)
+    if cfg.get('num_steps') != num_steps:
+        sys.exit(f'pytorch2onnx.py: error: --shape T={num_steps} but the '
+                 f'config is built for num_steps={cfg.get("num_steps")}; '
+                 f'add --cfg-options num_steps={num_steps}')
+    init_default_scope(cfg.get('default_scope', 'mmseg'))
+    try:
+        model, dataset_meta = load_segmentor(cfg, args.checkpoint)
+    except (ValueError, FileNotFoundError) as err:
+        sys.exit(f'pytorch2onnx.py: error: {err}')
+    graph = SpikeSegmentorGraph(model)
+    try:
+        export_onnx(graph, out, num_steps, height, width, opset=args.opset,
+                    dataset_meta=dataset_meta)
+    except ValueError as err:
+        sys.exit(f'pytorch2onnx.py: error: {err}')
+    print(f'{out}\tinput spikes (batch, {num_steps}, {height}, {width})')
+    if args.no_verify:
+        return 0
+    spikes = random_spikes((VERIFY_BATCH, num_steps, height, width),
+                           args.seed)
+    found = compare_with_onnx(graph, out, spikes)
+    verdict = 'ok' if found['ok'] else 'FAILED'
+    print(f"onnxruntime against torch: max |logits difference| "
+          f"{found['max_abs_diff']:.3g} (tolerance "
+          f"{LOGITS_TOLERANCE * found['scale']:.3g}), argmax agreement "
+          f"{100 * found['argmax_agreement']:.3f}% (at least "
+          f'{100 * MIN_ARGMAX_AGREEMENT:.1f}%): {verdict}')
+    return 0 if found['ok'] else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

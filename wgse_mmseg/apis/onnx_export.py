@@ -1,0 +1,205 @@
+"""Export a spike segmentor, enhancer included, to one ONNX graph.
+
+The graph (:class:`SpikeSegmentorGraph`) maps float spikes ``(B, T, H, W)``
+to logits ``(B, K, H, W)`` at the input's size: the enhancer of the
+config's ``SpikeSegDataPreProcessor`` (WGSE, TFP, the mean filters, or
+none), the segmentor's backbone and decode head, and the final resize, all
+inside. ``T``, ``H`` and ``W`` are fixed at export (PSPNet's adaptive
+pooling and WGSE's wavelet matrices are constants of them); the batch is
+dynamic. :func:`export_onnx` writes it with ``torch.onnx.export(...,
+dynamo=True)``; :func:`compare_with_onnx` runs it in ONNX Runtime and
+measures its agreement with the torch model (:data:`LOGITS_TOLERANCE`,
+:data:`MIN_ARGMAX_AGREEMENT`); :class:`~.onnx_segmentor.OnnxSpikeSegmentor`
+runs it.
+
+What exports: WGSE through its ``'reference'`` backend (the band networks'
+own ``nn.Conv`` modules; the compiled C kernel and the Triton kernel are
+custom code ONNX has no operator for, and the ``'torch'`` backend's
+chunked recomputation is a training-memory device), so the export sets
+every WGSE's backend to ``'reference'``; synchronised batch norm becomes
+batch norm. The input checks of the preprocessor and the enhancers (0 and
+1 only, finite values) are data-dependent control flow and stay outside
+the graph: :class:`~.onnx_segmentor.OnnxSpikeSegmentor` makes them.
+"""
+from .._openmmlab import check_mmseg_layer
+
+check_mmseg_layer('wgse_mmseg.apis.onnx_export')  # before MMSeg is imported
+
+import json
+import warnings
+from typing import Any, Dict, Optional, Sequence, Tuple
+
+import onnx
+import torch
+from mmengine.model import revert_sync_batchnorm
+from mmengine.runner.checkpoint import load_state_dict
+from torch import nn
+
+from mmseg.registry import MODELS
+from ..core.arguments import NUM_STEPS, SIDE, Integer, declare
+from ..core.io import atomic_output
+from ..core.limits import MAX_NUM_STEPS
+from ..core.wgse import WGSE
+from ..datasets import SpikeCityscapesDataset
+from ..utils.checkpoint import read_checkpoint
+
+__all__ = ['LOGITS_TOLERANCE', 'MIN_ARGMAX_AGREEMENT', 'OPSETS', 'OPSET',
+           'SHAPE_ENTRY',
+           'SpikeSegmentorGraph', 'load_segmentor', 'random_spikes',
+           'export_onnx', 'compare_with_onnx']
+
+#: the largest ``|logits_onnx - logits_torch|`` accepted, relative to
+#: ``max(1, max |logits_torch|)``: float32 rounding through a different
+#: order of operations (measured: below 1e-5 for every shipped config)
+LOGITS_TOLERANCE = 1e-4
+#: the least share of pixels whose class (argmax over the logits) the ONNX
+#: graph must give as the torch model does
+MIN_ARGMAX_AGREEMENT = 0.999
+#: the ONNX opsets the export offers (the dynamo exporter's range that
+#: ONNX Runtime 1.32 runs); :data:`OPSET` is the default
+OPSETS = Integer(18, 23)
+OPSET = 18
+#: each of ``T``, ``H`` and ``W`` of an export, on a command line (a side
+#: above :data:`~wgse_mmseg.core.limits.MAX_NUM_STEPS` would not fit a
+#: runtime's memory anyway)
+SHAPE_ENTRY = Integer(1, MAX_NUM_STEPS)
+#: spike probability of the random streams of :func:`compare_with_onnx`
+SPIKE_PROBABILITY = 0.3
+#: the names of the graph's input and output
+INPUT, OUTPUT = 'spikes', 'logits'
+
+
+class SpikeSegmentorGraph(nn.Module):
+    """A built MMSeg segmentor with a ``SpikeSegDataPreProcessor`` as one
+    module: float spikes ``(B, T, H, W)`` -> logits ``(B, K, H, W)``.
+
+    The preprocessor's enhancer (if any) runs first; then the segmentor's
+    ``encode_decode``, whose decode head resizes its logits to the input's
+    ``(H, W)``. Every WGSE inside runs its ``'reference'`` backend (the
+    only one ONNX can hold; see the module docstring). ``segmentor`` is
+    put in evaluation mode, with synchronised batch norm reverted.
+    """
+
+    def __init__(self, segmentor: nn.Module):
+        super().__init__()
+        self.segmentor = revert_sync_batchnorm(segmentor).eval()
+        self.enhancer = getattr(segmentor.data_preprocessor, 'enhancer',
+                                None)
+        if self.enhancer is not None:
+            for module in self.enhancer.modules():
+                if isinstance(module, WGSE):
+                    module.backend = 'reference'
+
+    def forward(self, spikes: torch.Tensor) -> torch.Tensor:
+        """``(B, T, H, W)`` float spikes -> ``(B, K, H, W)`` logits."""
+        inputs = spikes if self.enhancer is None else self.enhancer(spikes)
+        size = tuple(spikes.shape[-2:])
+        meta = dict(img_shape=size, ori_shape=size, pad_shape=size)
+        return self.segmentor.encode_decode(inputs, [meta])
+
+
+def _dataset_meta(state: dict) -> Dict[str, list]:
+    """Classes and palette from a checkpoint's ``meta['dataset_meta']``,
+    Spike-Cityscapes' where it names none."""
+    meta = state.get('meta')
+    meta = meta.get('dataset_meta') if isinstance(meta, dict) else None
+    meta = meta if isinstance(meta, dict) else {}
+    default = SpikeCityscapesDataset.METAINFO
+    return dict(classes=list(meta.get('classes', default['classes'])),
+                palette=[list(c) for c in meta.get('palette',
+                                                   default['palette'])])
+
+
+def load_segmentor(cfg, checkpoint: str) -> Tuple[nn.Module, dict]:
+    """The segmentor of ``cfg`` (a loaded config; its ``num_steps`` set)
+    with the weights of ``checkpoint``, and its dataset meta (``classes``,
+    ``palette``).
+
+    The checkpoint is read weights-only
+    (:func:`~wgse_mmseg.utils.checkpoint.read_checkpoint`) and must fit the
+    model exactly: a ``ValueError`` names the file otherwise (one trained
+    with another ``T`` needs ``--cfg-options num_steps=T``).
+    """
+    model = MODELS.build(cfg.model)
+    state = read_checkpoint(checkpoint)
+    try:
+        load_state_dict(model, state.get('state_dict', state), strict=True)
+    except RuntimeError as err:
+        raise ValueError(
+            f'{checkpoint}: does not fit the model built from the config '
+            f'(num_steps={cfg.get("num_steps")}; a checkpoint trained with '
+            f'another T needs --cfg-options num_steps=T): {err}') from err
+    return model.eval(), _dataset_meta(state)
+
+
+def random_spikes(shape: Sequence[int], seed: int) -> torch.Tensor:
+    """Bernoulli(:data:`SPIKE_PROBABILITY`) float32 spikes of ``shape``
+    (``(B, T, H, W)``), from a generator seeded with ``seed``."""
+    generator = torch.Generator().manual_seed(seed)
+    return (torch.rand(*shape, generator=generator) <
+            SPIKE_PROBABILITY).float()
+
+
+@declare(num_steps=NUM_STEPS, height=SIDE, width=SIDE, opset=OPSETS)
+def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
+                height: int, width: int, opset: int = OPSET,
+                dataset_meta: Optional[dict] = None) -> str:
+    """Write ``graph`` as ONNX to ``path``, whole or not at all; a model
+    the exporter cannot trace (TFI's data-dependent scans) is a
+    ``ValueError`` naming ``path``, and nothing is written.
+
+    The input ``spikes`` is ``(batch, num_steps, height, width)`` float32
+    with a dynamic batch; the output ``logits`` ``(batch, K, height,
+    width)``. ``dataset_meta`` (``classes``, ``palette``) is stored as JSON
+    in the model's metadata (``dataset_meta``). Returns ``path``.
+    """
+    example = random_spikes((2, num_steps, height, width), seed=0)
+    batch = torch.export.Dim('batch', min=1, max=4096)
+    try:
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter('ignore')  # the exporter's notes
+            program = torch.onnx.export(
+                graph.eval(), (example, ), dynamo=True, opset_version=opset,
+                input_names=[INPUT], output_names=[OUTPUT],
+                dynamic_shapes=({0: batch}, ), verbose=False)
+    except Exception as err:  # the exporter raises many types
+        summary = str(err).strip().splitlines()
+        raise ValueError(
+            f'{path}: this model does not export to ONNX '
+            f'({type(graph.enhancer).__name__} enhancer; TFI does not: '
+            f'see the README, "Export to ONNX"): {type(err).__name__}: '
+            f'{summary[0][:300] if summary else ""}') from err
+    model = program.model_proto
+    if dataset_meta is not None:
+        entry = model.metadata_props.add()
+        entry.key, entry.value = 'dataset_meta', json.dumps(dataset_meta)
+    onnx.checker.check_model(model)
+    with atomic_output(path) as f:
+        f.write(model.SerializeToString())
+    return path
+
+
+def compare_with_onnx(graph: SpikeSegmentorGraph, onnx_path: str,
+                      spikes: torch.Tensor) -> Dict[str, Any]:
+    """Run ``graph`` and the ONNX file (ONNX Runtime, CPU) on the same
+    float spikes ``(B, T, H, W)`` (:func:`random_spikes` of the file's
+    shape, say) and measure how far they agree.
+
+    Returns:
+        ``max_abs_diff`` (the largest logit difference), ``scale``
+        (``max(1, max |torch logits|)``), ``argmax_agreement`` (the share
+        of pixels with the same class), ``shape`` of the logits, and ``ok``:
+        ``max_abs_diff <= LOGITS_TOLERANCE * scale`` and
+        ``argmax_agreement >= MIN_ARGMAX_AGREEMENT``.
+    """
+    from .onnx_segmentor import OnnxSpikeSegmentor
+    got = OnnxSpikeSegmentor(onnx_path)(spikes)
+    with torch.no_grad():
+        expected = graph.eval()(spikes)
+    difference = float((got - expected).abs().max())
+    scale = max(1.0, float(expected.abs().max()))
+    agreement = float((got.argmax(1) == expected.argmax(1)).float().mean())
+    return dict(max_abs_diff=difference, scale=scale,
+                argmax_agreement=agreement, shape=list(expected.shape),
+                ok=bool(difference <= LOGITS_TOLERANCE * scale and
+                        agreement >= MIN_ARGMAX_AGREEMENT))
