@@ -34,7 +34,6 @@ for _module in ('wgse_mmseg.data_generation.synthetic',
                 'wgse_mmseg.data_generation.training_images',
                 'wgse_mmseg.benchmarks.reconstruction',
                 'wgse_mmseg.core.recording_walk',
-
                 'wgse_mmseg.apis.onnx_export',
                 'wgse_mmseg.benchmarks.deployment'):
     importlib.import_module(_module)
