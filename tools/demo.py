@@ -55,8 +55,7 @@ import wgse_mmseg
 wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
 from mmengine.dataset import Compose  # noqa: E402
 from mmengine.registry import init_default_scope  # noqa: E402
-from mmengine.runner.checkpoint import load_state_dict  # noqa: E402
-from mmseg.apis import init_model  # noqa: E402
+from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor  # noqa
 from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, SIDE,  # noqa
                                        Choice,
                                        Path, Text)
@@ -70,7 +69,6 @@ from wgse_mmseg.apis.window_segmentor import (  # noqa: E402
     PipelineSegmentor, pipeline_loader)
 from wgse_mmseg.core.reconstruction_baselines import tfp  # noqa: E402
 from wgse_mmseg.datasets import SpikeCityscapesDataset  # noqa: E402
-from wgse_mmseg.utils.checkpoint import read_checkpoint  # noqa: E402
 from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
                                      load_config)
 
@@ -159,28 +157,11 @@ def build_pipeline(cfg, height=None, width=None, layout=None) -> Compose:
 
 
 def load_model(cfg, checkpoint: str, device: str):
-    """``mmseg.apis.init_model``, but refusing a checkpoint that does not fit.
-
-    ``init_model`` loads non-strictly, so a checkpoint trained for another
-    ``num_steps`` would leave the backbone's stem at random weights with only
-    a logged warning.
-    """
-    model = init_model(cfg, None, device='cpu')
-    state = read_checkpoint(checkpoint)  # weights only; names a bad file
-    try:
-        load_state_dict(model, state.get('state_dict', state), strict=True)
-    except RuntimeError as err:
-        raise ValueError(
-            f'{checkpoint}: does not fit the model built from the config '
-            f'(num_steps={cfg.num_steps}; a checkpoint trained with another '
-            f'T needs --cfg-options num_steps=T): {err}') from err
-    meta = state.get('meta', {}).get('dataset_meta') or {}
-    model.dataset_meta = {
-        'classes': meta.get('classes',
-                            SpikeCityscapesDataset.METAINFO['classes']),
-        'palette': meta.get('palette',
-                            SpikeCityscapesDataset.METAINFO['palette']),
-    }
+    """The segmentor of ``cfg`` with the weights of ``checkpoint``, strictly
+    (:func:`~wgse_mmseg.apis.segmentor_checkpoint.load_segmentor`), its
+    ``dataset_meta`` (classes, palette) set, in eval mode on ``device``."""
+    model, model.dataset_meta = load_segmentor(cfg, checkpoint)
+    model.cfg = cfg
     return model.to(device).eval()
 
 
@@ -209,11 +190,15 @@ def overlay(grey: np.ndarray, labels: np.ndarray, palette,
 
 
 def onnx_segmentor(path: str, device: str):
-    """``(B, T, H, W)`` float spikes -> ``(B, H, W)`` labels by the
-    exported model ``path`` in ONNX Runtime (imported only when asked)."""
+    """The exported model ``path`` in ONNX Runtime (imported only when
+    asked): a function ``(B, T, H, W)`` float spikes -> ``(B, H, W)``
+    labels, and the palette the file records (Spike-Cityscapes' where it
+    records none)."""
     from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
     model = OnnxSpikeSegmentor(path, device=device)
-    return lambda spikes: model(spikes).argmax(1)
+    meta = getattr(model, 'dataset_meta', None) or {}
+    palette = meta.get('palette', SpikeCityscapesDataset.METAINFO['palette'])
+    return (lambda spikes: model(spikes).argmax(1)), palette
 
 
 def walk(args, cfg) -> None:
@@ -231,8 +216,7 @@ def walk(args, cfg) -> None:
         segment = PipelineSegmentor(model, pipeline, args.spikes)
         palette = model.dataset_meta['palette']
     else:
-        segment = onnx_segmentor(args.checkpoint, args.device)
-        palette = SpikeCityscapesDataset.METAINFO['palette']
+        segment, palette = onnx_segmentor(args.checkpoint, args.device)
 
     def render(window, labels):
         grey, _ = clip_image(torch.from_numpy(window), args.exposure)
@@ -271,7 +255,7 @@ def main(argv=None):
         if args.backend == 'pytorch':
             model = load_model(cfg, args.checkpoint, args.device)
         else:
-            segment = onnx_segmentor(args.checkpoint, args.device)
+            segment, palette = onnx_segmentor(args.checkpoint, args.device)
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
 
@@ -284,7 +268,6 @@ def main(argv=None):
         palette = model.dataset_meta['palette']
     else:
         labels = segment(data['inputs'][None].float())[0].cpu().numpy()
-        palette = SpikeCityscapesDataset.METAINFO['palette']
     grey, exposed = clip_image(data['inputs'], args.exposure)
     image = overlay(grey, labels, palette, args.opacity)
     write_png(args.out_file, image[..., ::-1])  # RGB -> OpenCV's BGR

@@ -13,6 +13,8 @@ cases about 80 s in all).
 import importlib.util
 import os.path as osp
 
+import cv2
+import numpy as np
 import onnx
 import pytest
 import torch
@@ -28,6 +30,7 @@ from wgse_mmseg.apis.onnx_export import (  # noqa: E402
     LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, SpikeSegmentorGraph,
     compare_with_onnx, export_onnx, random_spikes)
 from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor  # noqa: E402
+from wgse_mmseg.core.io import save_spikes  # noqa: E402
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 TOOL = osp.join(ROOT, 'tools', 'deployment', 'pytorch2onnx.py')
@@ -196,6 +199,14 @@ def test_a_model_that_does_not_export_leaves_no_file(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+def _demo_module():
+    spec = importlib.util.spec_from_file_location(
+        'wgse_demo', osp.join(ROOT, 'tools', 'demo.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def _tool():
     spec = importlib.util.spec_from_file_location('pytorch2onnx', TOOL)
     module = importlib.util.module_from_spec(spec)
@@ -209,10 +220,11 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys):
     not the config's T, refused naming what to change."""
     model = _model('segformer_b0_wgse.py', seed=3)
     checkpoint = str(tmp_path / 'model.pth')
+    classes = [f'class {i}' for i in range(19)]  # the model's 19 outputs
+    palette = [[i, 2 * i, 3 * i] for i in range(19)]
     torch.save(dict(state_dict=model.state_dict(),
-                    meta=dict(dataset_meta=dict(classes=['x', 'y'],
-                                                palette=[[0, 0, 0],
-                                                         [9, 9, 9]]))),
+                    meta=dict(dataset_meta=dict(classes=classes,
+                                                palette=palette))),
                checkpoint)
     tool = _tool()
     config = osp.join(ROOT, 'configs', 'segformer_b0_wgse.py')
@@ -225,7 +237,7 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys):
     assert f'{out}\tinput spikes (batch, {T}, {H}, {W})' in printed
     assert 'argmax agreement 100.000%' in printed and ': ok' in printed
     runner = OnnxSpikeSegmentor(out)
-    assert runner.dataset_meta['classes'] == ['x', 'y']
+    assert runner.dataset_meta['classes'] == classes
     spikes = random_spikes((2, T, H, W), seed=5)
     difference, scale, same = _agreement(
         runner(spikes), _test_step_logits(model, spikes))
@@ -242,6 +254,29 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys):
                    'num_steps=5'])
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         'model.onnx', 'model.pth']
+
+    # the walk of tools/demo.py runs the exported file: the same labels as
+    # the torch model's walk on >= 99.9% of pixels, in the file's palette
+    demo = _demo_module()
+    recording = tmp_path / 'walk' / 'rec.npy'
+    recording.parent.mkdir()
+    save_spikes(str(recording), random_spikes((1, 3 * T, H, W), 7)[0]
+                .numpy().astype(np.uint8))
+    frames = {}
+    for backend, model_file in (('pytorch', checkpoint), ('onnxruntime', out)):
+        video = recording.parent / f'{backend}.gif'
+        demo.main([str(recording), config, model_file, '--device', 'cpu',
+                   '--backend', backend, '--stride', str(T),
+                   '--out-file', str(video), '--save-frames', '--opacity',
+                   '1', '--cfg-options', f'num_steps={T}'])
+        frames[backend] = [cv2.imread(str(p)) for p in sorted(
+            (recording.parent / f'{backend}_frames').iterdir())]
+    assert len(frames['onnxruntime']) == len(frames['pytorch']) >= 2
+    for got, expected in zip(frames['onnxruntime'], frames['pytorch']):
+        assert (got == expected).all(-1).mean() >= MIN_ARGMAX_AGREEMENT
+        # opacity 1: every pixel is a colour of the file's palette
+        assert set(map(tuple, got.reshape(-1, 3)[:, ::-1].tolist())) <= set(
+            map(tuple, palette))
 
 
 def test_the_tool_refuses_a_failed_check(tmp_path, capsys, monkeypatch):

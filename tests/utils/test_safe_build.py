@@ -232,12 +232,10 @@ REVIEWED = {
         'the fixed MMENGINE_CHECKPOINT_GLOBALS',
     ('tools/demo.py', 'build_pipeline', 'Compose'):
         'the test pipeline of the user\'s config file',
-    ('tools/demo.py', 'load_model', 'init_model'):
-        'the user\'s config file; the checkpoint gives weights and palette '
-        'only',
     ('tools/demo.py', 'main', 'init_default_scope'):
         'the user\'s config file',
-    ('wgse_mmseg/apis/onnx_export.py', 'load_segmentor', 'MODELS.build'):
+    ('wgse_mmseg/apis/segmentor_checkpoint.py', 'load_segmentor',
+     'MODELS.build'):
         'the user\'s config file; the checkpoint gives weights (read '
         'weights-only, loaded strictly) and its dataset meta as data',
     ('tools/deployment/pytorch2onnx.py', 'main', 'init_default_scope'):

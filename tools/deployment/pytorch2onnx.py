@@ -25,8 +25,8 @@ wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
 from mmengine.registry import init_default_scope  # noqa: E402
 from wgse_mmseg.apis.onnx_export import (  # noqa: E402
     LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET, OPSETS, SHAPE_ENTRY,
-    SpikeSegmentorGraph, compare_with_onnx, export_onnx, load_segmentor,
-    random_spikes)
+    SpikeSegmentorGraph, compare_with_onnx, export_onnx, random_spikes)
+from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor  # noqa
 from wgse_mmseg.core.arguments import SEED, Path  # noqa: E402
 from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
                                      load_config)

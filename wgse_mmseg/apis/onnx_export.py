@@ -32,20 +32,17 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 import onnx
 import torch
 from mmengine.model import revert_sync_batchnorm
-from mmengine.runner.checkpoint import load_state_dict
 from torch import nn
 
-from mmseg.registry import MODELS
 from ..core.arguments import NUM_STEPS, SIDE, Integer, declare
 from ..core.io import atomic_output
 from ..core.limits import MAX_NUM_STEPS
 from ..core.wgse import WGSE
-from ..datasets import SpikeCityscapesDataset
-from ..utils.checkpoint import read_checkpoint
+from .segmentor_checkpoint import load_segmentor
 
 __all__ = ['LOGITS_TOLERANCE', 'MIN_ARGMAX_AGREEMENT', 'OPSETS', 'OPSET',
            'SHAPE_ENTRY',
-           'SpikeSegmentorGraph', 'load_segmentor', 'random_spikes',
+           'SpikeSegmentorGraph', 'random_spikes',
            'export_onnx', 'compare_with_onnx']
 
 #: the largest ``|logits_onnx - logits_torch|`` accepted, relative to
@@ -96,40 +93,6 @@ class SpikeSegmentorGraph(nn.Module):
         size = tuple(spikes.shape[-2:])
         meta = dict(img_shape=size, ori_shape=size, pad_shape=size)
         return self.segmentor.encode_decode(inputs, [meta])
-
-
-def _dataset_meta(state: dict) -> Dict[str, list]:
-    """Classes and palette from a checkpoint's ``meta['dataset_meta']``,
-    Spike-Cityscapes' where it names none."""
-    meta = state.get('meta')
-    meta = meta.get('dataset_meta') if isinstance(meta, dict) else None
-    meta = meta if isinstance(meta, dict) else {}
-    default = SpikeCityscapesDataset.METAINFO
-    return dict(classes=list(meta.get('classes', default['classes'])),
-                palette=[list(c) for c in meta.get('palette',
-                                                   default['palette'])])
-
-
-def load_segmentor(cfg, checkpoint: str) -> Tuple[nn.Module, dict]:
-    """The segmentor of ``cfg`` (a loaded config; its ``num_steps`` set)
-    with the weights of ``checkpoint``, and its dataset meta (``classes``,
-    ``palette``).
-
-    The checkpoint is read weights-only
-    (:func:`~wgse_mmseg.utils.checkpoint.read_checkpoint`) and must fit the
-    model exactly: a ``ValueError`` names the file otherwise (one trained
-    with another ``T`` needs ``--cfg-options num_steps=T``).
-    """
-    model = MODELS.build(cfg.model)
-    state = read_checkpoint(checkpoint)
-    try:
-        load_state_dict(model, state.get('state_dict', state), strict=True)
-    except RuntimeError as err:
-        raise ValueError(
-            f'{checkpoint}: does not fit the model built from the config '
-            f'(num_steps={cfg.get("num_steps")}; a checkpoint trained with '
-            f'another T needs --cfg-options num_steps=T): {err}') from err
-    return model.eval(), _dataset_meta(state)
 
 
 def random_spikes(shape: Sequence[int], seed: int) -> torch.Tensor:
