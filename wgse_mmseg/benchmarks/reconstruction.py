@@ -19,7 +19,7 @@ each trained model of ``--models`` (named by its file's stem). Beside each
 method's PSNR margin over TFP the table gives its cost on the first sample's
 frame size: parameters, multiply-adds (torch's ``FlopCounterMode`` FLOPs / 2,
 the convention of Spike-Zoo's GFLOPs; a model's enhancer counted on its
-``torch`` backend, which computes what every backend computes) and the
+``reference`` backend, which computes what every backend computes) and the
 median wall time of ``--repeat`` reconstructions of one frame on this
 machine, which a line above the table names.
 
@@ -81,12 +81,13 @@ def _method(method: str, checkpoint: Optional[str], device: str):
 def multiply_adds(model: SpikeReconstructor, spikes: np.ndarray) -> int:
     """Multiply-adds of ``model.reconstruct(spikes)`` for one ``(T, H, W)``
     window: torch's ``FlopCounterMode`` FLOPs / 2, with a WGSE enhancer on
-    its ``torch`` backend (plain torch operators the counter sees; the
-    compiled and Triton backends compute the same products)."""
+    its ``reference`` backend (its band networks' own ``nn.Conv1d``, which
+    the counter sees; the ``torch`` backend's fused kernels and the compiled
+    and Triton ones compute the same products out of its sight)."""
     enhancer = model.enhancer
     backend = getattr(enhancer, 'backend', None)
     if backend is not None:
-        enhancer.backend = 'torch'
+        enhancer.backend = 'reference'
     try:
         with FlopCounterMode(display=False) as counter:
             model.reconstruct(spikes)
