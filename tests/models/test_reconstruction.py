@@ -326,36 +326,6 @@ def test_an_exported_config_loads_and_round_trips(tmp_path):
 
 
 
-def test_the_initialisation_a_run_began_from_is_never_followed(tmp_path):
-    """A fine-tuning run's config names the weights it began from
-    (``init_cfg``, Pretrained); its checkpoint's own weights replace them,
-    so loading and exporting drop that entry unread, whatever it holds."""
-    model = _tiny_model()
-    marker = tmp_path / 'ran'
-    config = dict(_exported_model_config(), init_cfg=dict(
-        type='os.system', checkpoint=f'touch {marker}'))
-    source = tmp_path / 'iter_1.pth'
-    torch.save(dict(state_dict=model.state_dict(), meta=dict(
-        cfg=f'model = {config!r}\n')), source)
-    out = tmp_path / 'exported.pth'
-    export_weights(str(source), str(out))
-    assert torch.load(out, weights_only=True)['meta']['model'] == \
-        _exported_model_config()
-    for path in (source, out):
-        loaded = load_reconstructor(str(path))
-        for name, value in model.state_dict().items():
-            torch.testing.assert_close(loaded.state_dict()[name], value)
-    assert not marker.exists()
-    # below the top level it is a key like any other: refused
-    nested = dict(_exported_model_config())
-    nested['enhancer'] = dict(nested['enhancer'], init_cfg=dict(
-        type='os.system', checkpoint=f'touch {marker}'))
-    torch.save(dict(state_dict=model.state_dict(), meta=dict(
-        cfg=f'model = {nested!r}\n')), source)
-    with pytest.raises(ConfigDataError, match='init_cfg'):
-        load_reconstructor(str(source))
-    assert not marker.exists()
-
 def test_cpu_config_trains_a_few_iterations(tmp_path):
     from mmengine.runner import Runner
     cfg = load_config(osp.join(CONFIGS, 'wgse_resnet_cpu.py'),

@@ -190,13 +190,7 @@ RECONSTRUCTION_BUILDS = {
 
 def _model_config(checkpoint: dict, path: str) -> Tuple[Any, str]:
     """The checkpoint's model config, as read (unchecked), and where in the
-    file it lies (for errors).
-
-    Its top-level ``init_cfg`` is dropped, never checked, built or followed:
-    it says how the training run began (``Pretrained`` weights a fine-tuning
-    started from, ``configs/reconstruction/wgse_resnet_cpu_finetune.py``),
-    and the checkpoint's own weights replace whatever it made.
-    """
+    file it lies (for errors)."""
     meta = checkpoint.get('meta') or {}
     if not isinstance(meta, dict):
         raise ConfigDataError(f'{path}: meta is a {type(meta).__name__}, '
@@ -211,8 +205,6 @@ def _model_config(checkpoint: dict, path: str) -> Tuple[Any, str]:
         raise ValueError(
             f'{path}: holds no model config (neither meta["model"] of '
             f'export_weights nor meta["cfg"] of an mmengine checkpoint)')
-    if isinstance(config, dict):
-        config = {k: v for k, v in config.items() if k != 'init_cfg'}
     return config, where
 
 

@@ -7,7 +7,7 @@
 #       --cfg-options train_dataloader.dataset.datasets.1.dataset.data_root=REDS_TRAIN
 # docs/reconstruction.md ("Ablations") has the results and the commands.
 _base_ = ['../wgse_resnet_cpu_finetune.py']
-model = dict(init_cfg=None)
+load_from = None
 max_iters = 300
 warmup_iters = 30
 optim_wrapper = dict(optimizer=dict(lr=1e-3))
