@@ -84,3 +84,11 @@ def test_the_command_line(tmp_path):
          str(tmp_path / 'out'), '--sources', 'flickr'],
         capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and '--sources' in bad.stderr
+
+
+def test_an_out_dir_that_is_a_file_is_named(tmp_path):
+    taken = tmp_path / 'taken'
+    taken.write_text('x')
+    with pytest.raises(ValueError, match=f"out_dir='{taken}'"):
+        export_training_images(str(taken), ('matplotlib',))
+    assert taken.read_text() == 'x'

@@ -115,7 +115,8 @@ def export_training_images(out_dir: str,
         a source whose package is not installed maps to an empty list.
 
     Raises:
-        ValueError: when no source is installed.
+        ValueError: when no source is installed, or ``out_dir`` cannot be
+            made a folder (a file is there).
     """
     written: Dict[str, List[str]] = {}
     for source in sources:
@@ -124,7 +125,11 @@ def export_training_images(out_dir: str,
         if _package_dir(package) is None:
             continue
         folder = osp.join(os.fspath(out_dir), source)
-        os.makedirs(folder, exist_ok=True)
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError as err:
+            raise ValueError(f'out_dir={os.fspath(out_dir)!r}: cannot make '
+                             f'the folder {folder}: {err.strerror}') from err
         for name, image in tqdm(images(video_stride), desc=source,
                                 unit='image', file=sys.stderr):
             path = osp.join(folder, osp.splitext(name)[0] + '.png')
