@@ -1,5 +1,6 @@
 """Shared test configuration for wgse_mmseg."""
 import contextlib
+import importlib.util
 import os
 import os.path as osp
 import resource
@@ -36,6 +37,21 @@ def shared_dir():
     if not osp.isdir(path):
         pytest.skip(f'shared data directory {path} is absent (fresh clone)')
     return path
+
+
+@pytest.fixture(scope='session')
+def load_tool():
+    """A function: a script's path from the repository root
+    (``'tools/demo.py'``) -> the script imported as a fresh module, to call
+    its ``main`` or helpers in-process."""
+    def load(relative: str):
+        name = 'tool_' + osp.splitext(relative)[0].replace('/', '_')
+        spec = importlib.util.spec_from_file_location(
+            name, osp.join(REPO_ROOT, relative))
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+    return load
 
 
 @pytest.fixture(scope='module')

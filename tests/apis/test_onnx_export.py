@@ -10,7 +10,6 @@ needs no training); the checkpoint route is tested once through the tool.
 Each export takes 5 to 20 s on a 2-core CPU at 32x64 (the six agreement
 cases about 80 s in all).
 """
-import importlib.util
 import os.path as osp
 
 import cv2
@@ -199,22 +198,7 @@ def test_a_model_that_does_not_export_leaves_no_file(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
-def _demo_module():
-    spec = importlib.util.spec_from_file_location(
-        'wgse_demo', osp.join(ROOT, 'tools', 'demo.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def _tool():
-    spec = importlib.util.spec_from_file_location('pytorch2onnx', TOOL)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys):
+def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys, load_tool):
     """CONFIG CKPT --shape T H W: weights from the checkpoint (read weights
     only), the check printed; a checkpoint of another T, a shape that is
     not the config's T, refused naming what to change."""
@@ -226,7 +210,7 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys):
                     meta=dict(dataset_meta=dict(classes=classes,
                                                 palette=palette))),
                checkpoint)
-    tool = _tool()
+    tool = load_tool('tools/deployment/pytorch2onnx.py')
     config = osp.join(ROOT, 'configs', 'segformer_b0_wgse.py')
     out = str(tmp_path / 'model.onnx')
     code = tool.main([config, checkpoint, '--shape', str(T), str(H),
@@ -257,7 +241,7 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys):
 
     # the walk of tools/demo.py runs the exported file: the same labels as
     # the torch model's walk on >= 99.9% of pixels, in the file's palette
-    demo = _demo_module()
+    demo = load_tool('tools/demo.py')
     recording = tmp_path / 'walk' / 'rec.npy'
     recording.parent.mkdir()
     save_spikes(str(recording), random_spikes((1, 3 * T, H, W), 7)[0]
@@ -279,12 +263,12 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys):
             map(tuple, palette))
 
 
-def test_the_tool_refuses_a_failed_check(tmp_path, capsys, monkeypatch):
+def test_the_tool_refuses_a_failed_check(tmp_path, capsys, monkeypatch, load_tool):
     """Beyond the tolerance the tool exits with 1 and says FAILED."""
     model = _model('segformer_b0_raw.py')
     checkpoint = str(tmp_path / 'model.pth')
     torch.save(dict(state_dict=model.state_dict()), checkpoint)
-    tool = _tool()
+    tool = load_tool('tools/deployment/pytorch2onnx.py')
     real = tool.compare_with_onnx
 
     def skewed(graph, path, spikes):

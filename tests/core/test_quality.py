@@ -6,7 +6,6 @@ Uses scikit-image's photographs (``skimage.data``, shipped in its wheel; no
 download) as test images: scikit-image is needed by these tests only.
 """
 import hashlib
-import importlib.util
 import io
 import json
 import os.path as osp
@@ -229,16 +228,8 @@ def test_the_measures_need_no_openmmlab(without_openmmlab, tmp_path):
 
 
 # ------------------------------------------- the model files' extraction
-def _extraction_tool():
-    path = osp.join(ROOT, 'tools', 'misc', 'extract_quality_models.py')
-    spec = importlib.util.spec_from_file_location('extract_quality', path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_extraction_refuses_a_pickle_that_imports():
-    tool = _extraction_tool()
+def test_extraction_refuses_a_pickle_that_imports(load_tool):
+    tool = load_tool('tools/misc/extract_quality_models.py')
     plain = {'min_': [0.5] * 36, 'max_': [1.5] * 36}
     assert tool.feature_range(pickle.dumps(plain)) == {
         'min': [0.5] * 36, 'max': [1.5] * 36}
@@ -248,8 +239,8 @@ def test_extraction_refuses_a_pickle_that_imports():
         tool.feature_range(pickle.dumps({'min_': [1.0], 'max_': [2.0]}))
 
 
-def test_extraction_parses_libsvm_text_and_writes_a_fixed_npz():
-    tool = _extraction_tool()
+def test_extraction_parses_libsvm_text_and_writes_a_fixed_npz(load_tool):
+    tool = load_tool('tools/misc/extract_quality_models.py')
     text = ('svm_type epsilon_svr\nkernel_type rbf\ngamma 0.05\nnr_class 2\n'
             'total_sv 2\nrho -1.5\nSV\n-1024 1:0.25 36:-0.5 \n'
             '3.5 2:0.125 \n')

@@ -1,6 +1,5 @@
 """Image reconstruction from spikes: model, configs, datasets, metrics,
 baselines, tools and the shipped weights."""
-import importlib.util
 import os
 import os.path as osp
 import resource
@@ -66,15 +65,6 @@ def _tiny_model(**kwargs):
                        enhancer=dict(type='WGSE', wavelet='haar', level=1,
                                      hidden_channels=4)), **kwargs)
     return SpikeReconstructor(**kwargs)
-
-
-def _tool(name):
-    """Import tools/<name>.py as a module, to call its ``main``."""
-    spec = importlib.util.spec_from_file_location(
-        name, osp.join(TOOLS, name + '.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _reds_folder(root, steps=9, size=(16, 24), count=2, seed=0):
@@ -558,7 +548,7 @@ def test_render_trajectory_moves_by_the_velocity():
 
 
 # ----------------------------------------------------------------- tools
-def test_reconstruct_cli_makes_a_dark_recording_visible(tmp_path, capsys):
+def test_reconstruct_cli_makes_a_dark_recording_visible(tmp_path, capsys, load_tool):
     """A stream of at most 1 spike in 50 steps per pixel (TFP about 0.03)
     is black as it is; by default its brightest pixels become white."""
     rng = np.random.default_rng(1)
@@ -566,7 +556,7 @@ def test_reconstruct_cli_makes_a_dark_recording_visible(tmp_path, capsys):
     spikes = (rng.random((60, 8, 12)) < rates).astype(np.uint8)
     path = str(tmp_path / 'dark.npy')
     save_spikes(path, spikes)
-    tool = _tool('reconstruct')
+    tool = load_tool('tools/misc/reconstruct.py')
     outputs = {}
     for exposure in ('none', 'auto', '4'):
         out = tmp_path / exposure
@@ -592,12 +582,12 @@ def test_reconstruct_cli_makes_a_dark_recording_visible(tmp_path, capsys):
         tool.main([path, '--out', str(tmp_path), '--exposure', '-1'])
 
 
-def test_reconstruct_cli_writes_one_png_per_frame(tmp_path, capsys):
+def test_reconstruct_cli_writes_one_png_per_frame(tmp_path, capsys, load_tool):
     spikes = (np.random.default_rng(0).random((50, 8, 12)) < 0.3).astype(
         np.uint8)
     path = str(tmp_path / 'clip.npy')
     save_spikes(path, spikes)
-    tool = _tool('reconstruct')
+    tool = load_tool('tools/misc/reconstruct.py')
     tool.main([path, '--out', str(tmp_path / 'out'), '--method', 'tfp',
                '--frames', '20,29', '--exposure', 'none'])
     for frame in (20, 29):
@@ -626,14 +616,14 @@ def test_reconstruct_windows_is_reconstruct_batched():
 
 @pytest.mark.parametrize('method', ['tfp', 'wgse'])
 def test_reconstruct_cli_walk_gives_the_one_frame_images(tmp_path, capsys,
-                                                         method):
+                                                         method, load_tool):
     """``--stride`` writes, for each centre 0, 30, 60, ... whose window
     fits, the image the tool writes for that centre frame alone."""
     spikes = (np.random.default_rng(0).random((200, 16, 24)) <
               np.linspace(0.05, 0.6, 24)).astype(np.uint8)
     path = str(tmp_path / 'rec.npy')
     save_spikes(path, spikes)
-    tool = _tool('reconstruct')
+    tool = load_tool('tools/misc/reconstruct.py')
     video = tmp_path / 'walk' / 'rec.mp4'
     tool.main([path, '--out', str(video), '--method', method, '--stride',
                '30', '--batch-size', '2', '--save-frames'])
@@ -659,12 +649,12 @@ def test_reconstruct_cli_walk_gives_the_one_frame_images(tmp_path, capsys,
         assert (walked == alone).mean() > 0.99
 
 
-def test_figure_tool_grid(tmp_path):
+def test_figure_tool_grid(tmp_path, load_tool):
     spikes = (np.random.default_rng(0).random((45, 8, 10)) < 0.3).astype(
         np.uint8)
     save_spikes(str(tmp_path / 'clip.npy'), spikes)
     out = str(tmp_path / 'fig.png')
-    _tool('make_reconstruction_figure').main(
+    load_tool('tools/misc/make_reconstruction_figure.py').main(
         [str(tmp_path / 'clip.npy'), '--out', out, '--methods', 'tfp,tfi',
          '--count', '3', '--scale', '2'])
     figure = cv2.imread(out, cv2.IMREAD_UNCHANGED)
@@ -672,7 +662,7 @@ def test_figure_tool_grid(tmp_path):
     assert figure.shape == (2 * tile_h + 4, 3 * tile_w + 2 * 4)
 
 
-def test_recording_table_scores_what_reconstruct_writes(tmp_path, capsys):
+def test_recording_table_scores_what_reconstruct_writes(tmp_path, capsys, load_tool):
     """The benchmark's real-data mode on a recording without ground truth
     (a dark .npz with Spike-Zoo's key): each method's scores are those of
     the image tools/misc/reconstruct.py writes, meaned over the frames."""
@@ -682,7 +672,7 @@ def test_recording_table_scores_what_reconstruct_writes(tmp_path, capsys):
     path = str(tmp_path / 'dark.npz')
     np.savez(path, spk=spikes, label=np.array(1))
     results = score_recording(path, ['tfp', 'tfi'], frames=[25, 30])
-    _tool('reconstruct').main([path, '--out', str(tmp_path / 'o'),
+    load_tool('tools/misc/reconstruct.py').main([path, '--out', str(tmp_path / 'o'),
                                '--method', 'tfp', '--frames', '25,30'])
     written = [no_reference_scores(cv2.imread(
         str(tmp_path / 'o' / f'dark_{f}.png'), cv2.IMREAD_UNCHANGED))
@@ -799,14 +789,14 @@ def test_shipped_weights_reach_33_db_on_the_held_out_reds_stream(shared_dir):
                                          ('reds_train',
                                           '203_part3_key_id151')])
 def test_the_default_exposure_keeps_a_calibrated_stream(shared_dir, tmp_path,
-                                                        capsys, split, name):
+                                                        capsys, split, name, load_tool):
     """``reconstruct.py`` with its defaults scores what ``--exposure none``
     scores on a synthetic REDS stream: auto exposure leaves a stream of
     normal brightness alone (it used to apply a gain of 1.29 and clip)."""
     spike = osp.join(shared_dir, 'data', split, 'spike', name + '.dat')
     gt = cv2.imread(osp.join(shared_dir, 'data', split, 'gt', name + '.png'),
                     0).astype(np.float64) / 255
-    tool = _tool('reconstruct')
+    tool = load_tool('tools/misc/reconstruct.py')
     scores = {}
     for exposure in (None, 'none'):
         out = tmp_path / str(exposure)

@@ -1,6 +1,5 @@
 """The worked example config (DeepLabV3+-R18 + WGSE) and tools/demo.py."""
 import csv
-import importlib.util
 import json
 import os.path as osp
 import subprocess
@@ -127,15 +126,8 @@ def test_demo_rejects_short_stream(tmp_path, checkpoint):
     assert not (tmp_path / 'short_seg.png').exists()
 
 
-def _demo_module():
-    spec = importlib.util.spec_from_file_location('wgse_demo', DEMO)
-    demo = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(demo)
-    return demo
-
-
-def test_demo_grey_image_and_blend():
-    demo = _demo_module()
+def test_demo_grey_image_and_blend(load_tool):
+    demo = load_tool('tools/demo.py')
 
     spikes = torch.zeros(10, 2, 3, dtype=torch.uint8)
     spikes[:3, 0, 0] = 1  # rate 0.3: TFP 0.5
@@ -242,13 +234,13 @@ class FakeOnnxSegmentor:
 
 
 def test_demo_onnxruntime_backend_runs_the_exported_model(
-        tmp_path, checkpoint, monkeypatch):
+        tmp_path, checkpoint, monkeypatch, load_tool):
     """The plumbing of --backend onnxruntime, with a stand-in for the
     exported model (the class is imported only when asked)."""
     fake = types.ModuleType('wgse_mmseg.apis.onnx_segmentor')
     fake.OnnxSpikeSegmentor = FakeOnnxSegmentor
     monkeypatch.setitem(sys.modules, 'wgse_mmseg.apis.onnx_segmentor', fake)
-    demo = _demo_module()
+    demo = load_tool('tools/demo.py')
     recording = _dat_recording(tmp_path / 'rec.dat', 60, 16, 24)
     onnx = tmp_path / 'model.onnx'
     onnx.write_bytes(b'stand-in')

@@ -3,7 +3,6 @@ tools write them, read identically through the pipeline's loader, the
 reconstruction tools and benchmark, and the demo's pipeline, given each
 file's layout; without one, an array that does not record its layout is an
 error that names the file and says how to pass it."""
-import importlib.util
 import os
 import os.path as osp
 
@@ -22,14 +21,6 @@ wgse_mmseg.register_all_modules()
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 STEPS, HEIGHT, WIDTH = 45, 16, 24  # SSIM (the benchmark) needs 11x11
-
-
-def _tool(relative):
-    spec = importlib.util.spec_from_file_location(
-        'tool_' + osp.basename(relative)[:-3], osp.join(ROOT, relative))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _clip(seed=0):
@@ -77,9 +68,9 @@ def test_load_spike_from_file_reads_both_layouts(both_ways):
             dict(img_path=paths['HWT']))
 
 
-def test_reconstruct_tool_reads_both_layouts(both_ways, tmp_path, capsys):
+def test_reconstruct_tool_reads_both_layouts(both_ways, tmp_path, capsys, load_tool):
     paths, clip = both_ways
-    tool = _tool('tools/misc/reconstruct.py')
+    tool = load_tool('tools/misc/reconstruct.py')
     images = {}
     for layout, path in paths.items():
         out = tmp_path / layout
@@ -98,9 +89,9 @@ def test_reconstruct_tool_reads_both_layouts(both_ways, tmp_path, capsys):
     assert not (tmp_path / 'no').exists()
 
 
-def test_figure_tool_reads_both_layouts(both_ways, tmp_path):
+def test_figure_tool_reads_both_layouts(both_ways, tmp_path, load_tool):
     paths, _ = both_ways
-    tool = _tool('tools/misc/make_reconstruction_figure.py')
+    tool = load_tool('tools/misc/make_reconstruction_figure.py')
     figures = {}
     for layout, path in paths.items():
         out = str(tmp_path / f'{layout}.png')
@@ -130,9 +121,9 @@ def test_reconstruction_benchmark_reads_both_layouts(tmp_path, capsys):
                                  spike_suffix='.npz', progress=False)
 
 
-def test_demo_pipeline_takes_the_layout(both_ways):
+def test_demo_pipeline_takes_the_layout(both_ways, load_tool):
     paths, clip = both_ways
-    demo = _tool('tools/demo.py')
+    demo = load_tool('tools/demo.py')
     cfg = load_config(osp.join(ROOT, 'configs', 'segformer_b0_wgse.py'),
                       dict(num_steps=9))
     init_default_scope(cfg.get('default_scope', 'mmseg'))
