@@ -231,12 +231,7 @@ def walk(args, cfg) -> None:
         args.spikes, args.out_file, segment, render, length, args.stride,
         args.batch_size, args.fps, settings, args.save_frames, args.height,
         args.width, pipeline_loader(pipeline).layout)
-    print(report.plan.describe())
-    if report.resumed:
-        print(f'resumed an interrupted walk: {report.resumed} windows were '
-              f'done, {report.computed} segmented now')
-    print('\n'.join([report.outputs.video, report.outputs.csv] +
-                    ([report.outputs.frames] if args.save_frames else [])))
+    print(report.summary('segmented', args.save_frames))
 
 
 def main(argv=None):

@@ -21,8 +21,9 @@ import numpy as np
 
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.core.arguments import (LAYOUT, SIDE, Choice, Integer,
-                                       Number, Path, Sequence, Text)
+from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, SIDE, Choice,
+                                       Integer, Number, Path, Sequence,
+                                       Text)
 from wgse_mmseg.core.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
                                 spike_shape, to_uint8, write_png)
@@ -56,9 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--width', type=SIDE, help='frame width of a .dat')
     parser.add_argument(
         '--layout', type=LAYOUT,
-        help='THW or HWT: how a .npy/.npz that does not record its '
-        'layout stores its frames, (T, H, W) or (H, W, T) (default: what '
-        'the file records; an error where it records none)')
+        help=LAYOUT_HELP)
     parser.add_argument('--scale', default=1.0,
                         type=Number(0, MAX_TILE_SCALE, strict_minimum=True),
                         help='tile scale factor')

@@ -53,8 +53,8 @@ import torch
 
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.core.arguments import (LAYOUT, NUM_STEPS, SIDE, Choice,
-                                       Integer, Path, Sequence, Text)
+from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, SIDE,
+                                       Choice, Integer, Path, Sequence, Text)
 from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
 from wgse_mmseg.core.quality import no_reference_scores
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
@@ -85,9 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help='frame width of a .dat file')
     parser.add_argument(
         '--layout', type=LAYOUT,
-        help='THW or HWT: how a .npy/.npz that does not record its '
-        'layout stores its frames, (T, H, W) or (H, W, T) (default: what '
-        'the file records; an error where it records none)')
+        help=LAYOUT_HELP)
     parser.add_argument(
         '--frames', type=Sequence(Integer()),
         help='comma-separated centre frames (default: the middle frame)')
@@ -141,12 +139,7 @@ def walk(args) -> None:
         args.spikes, args.out, reconstruct, render, length, args.stride,
         args.batch_size, args.fps, settings, args.save_frames, args.height,
         args.width, args.layout)
-    print(report.plan.describe())
-    if report.resumed:
-        print(f'resumed an interrupted walk: {report.resumed} windows were '
-              f'done, {report.computed} reconstructed now')
-    print('\n'.join([report.outputs.video, report.outputs.csv] +
-                    ([report.outputs.frames] if args.save_frames else [])))
+    print(report.summary('reconstructed', args.save_frames))
 
 
 def main(argv=None):

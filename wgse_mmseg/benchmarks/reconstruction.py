@@ -48,8 +48,8 @@ from .. import register_all_modules
 # as the tools make it, before the layer's packages are imported
 register_all_modules()
 from ..core import arguments
-from ..core.arguments import (LAYOUT, NUM_STEPS, SIDE, Choice, Integer, Path, Text,
-                              declare)
+from ..core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, SIDE, Choice,
+                              Integer, Path, Text, declare)
 from ..core.exposure import EXPOSURE, apply_exposure
 from ..core.io import (SpikeFileError, centered_window, load_spikes,
                        spike_shape, to_uint8)
@@ -69,12 +69,13 @@ __all__ = ['benchmark', 'format_table', 'score_recording',
 
 
 def _method(method: str, checkpoint: Optional[str], device: str):
-    """``(function, window length)`` of a method: ``(T, H, W)`` spikes to an
-    ``(H, W)`` image; the length is the model's for ``wgse``, else
-    ``None`` (any)."""
+    """``(function, model)`` of a method: the function maps ``(T, H, W)``
+    spikes to an ``(H, W)`` image; the model (whose ``num_steps`` is the
+    window length) is ``wgse``'s, ``None`` for a classical method (any
+    length)."""
     if method == 'wgse':
         model = load_reconstructor(checkpoint, device)
-        return model.reconstruct, model.num_steps
+        return model.reconstruct, model
     return reconstruction_method(method), None
 
 
@@ -130,23 +131,20 @@ def benchmark(data_root: str, methods: Sequence[str] = METHODS,
     one untimed).
     """
     functions, networks = {}, {}
+    sources = dict(wgse=checkpoint or 'shipped weights')
     for method in methods:
-        functions[method], length = _method(method, checkpoint, device)
-        networks[method] = (getattr(functions[method], '__self__', None)
-                            if method == 'wgse' else None)
-        if length not in (None, num_steps):
-            raise ValueError(
-                f'{checkpoint or "shipped weights"}: the model takes '
-                f'{length}-frame windows, not {num_steps}')
+        functions[method], networks[method] = _method(method, checkpoint,
+                                                      device)
     for path in models:
         name = osp.splitext(osp.basename(path))[0]
         if name in functions:
             raise ValueError(f'{path}: a second entry named {name!r}')
         networks[name] = load_reconstructor(path, device)
-        functions[name] = networks[name].reconstruct
-        if networks[name].num_steps != num_steps:
+        functions[name], sources[name] = networks[name].reconstruct, path
+    for name, network in networks.items():
+        if network is not None and network.num_steps != num_steps:
             raise ValueError(
-                f'{path}: the model takes {networks[name].num_steps}-frame '
+                f'{sources[name]}: the model takes {network.num_steps}-frame '
                 f'windows, not {num_steps}')
     dataset = REDSSpikeDataset(
         data_root=data_root, spike_suffix=spike_suffix,
@@ -236,8 +234,8 @@ def score_recording(path: str, methods: Sequence[str] = METHODS,
     frames = list(frames) if frames else [total // 2]
     results = {}
     for method in methods:
-        function, length = _method(method, checkpoint, device)
-        length = length or num_steps
+        function, model = _method(method, checkpoint, device)
+        length = num_steps if model is None else model.num_steps
         starts = [centered_window(path, total, f, length) for f in frames]
         scores: Dict[str, List[Optional[float]]] = {
             name: [] for name in list(NO_REFERENCE_METRICS) + ['gain']}
@@ -303,9 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--device', type=Text(empty=False), default='cpu')
     parser.add_argument(
         '--layout', type=LAYOUT,
-        help='THW or HWT: how a .npy/.npz that does not record its '
-        'layout stores its frames, (T, H, W) or (H, W, T) (default: what '
-        'the file records; an error where it records none)')
+        help=LAYOUT_HELP)
     parser.add_argument(
         '--frames', type=arguments.Sequence(Integer()),
         help='a recording\'s comma-separated centre frames (default: the '

@@ -460,3 +460,7 @@ PROBABILITY = Number(0, 1)
 #: ``(T, H, W)``) or ``'HWT'`` (frames last, ``(H, W, T)``, as some
 #: simulators and viewers store them); see :mod:`.io`
 LAYOUT = Choice(('THW', 'HWT'))
+#: the help of a tool's ``--layout`` option
+LAYOUT_HELP = ('THW or HWT: how a .npy/.npz that does not record its layout '
+               'stores its frames, (T, H, W) or (H, W, T) (default: what the '
+               'file records; an error where it records none)')

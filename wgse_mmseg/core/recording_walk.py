@@ -197,6 +197,19 @@ class WalkReport(NamedTuple):
     #: windows the model ran on in this call
     computed: int
 
+    def summary(self, verb: str, save_frames: bool) -> str:
+        """What a tool prints after a walk: the plan, whether it resumed
+        (``verb``: what the model did to a window, ``'segmented'``), and
+        the files written (the frames folder with ``save_frames``)."""
+        lines = [self.plan.describe()]
+        if self.resumed:
+            lines.append(f'resumed an interrupted walk: {self.resumed} '
+                         f'windows were done, {self.computed} {verb} now')
+        lines += [self.outputs.video, self.outputs.csv]
+        if save_frames:
+            lines.append(self.outputs.frames)
+        return '\n'.join(lines)
+
 
 def _identity(path: str, height: Optional[int], width: Optional[int],
               layout: Optional[str], plan: WalkPlan,
