@@ -150,6 +150,10 @@ def test_a_link_at_the_lock_is_not_followed(tmp_path):
         assert record['pid'] == os.getpid()
     assert outside.read_text() == 'keep me'
     assert os.listdir(folder) == []
+    os.mkfifo(folder / '.lock')  # opened, it would not be a lock file
+    with own_folder(str(folder)):
+        assert os.path.isfile(folder / '.lock')
+    assert os.listdir(folder) == []
 
 
 def test_a_folder_the_package_names_replaces_a_link_or_file(tmp_path):
@@ -218,6 +222,9 @@ def test_state_is_never_appended_to_through_a_link(tmp_path):
     os.link(outside, tmp_path / 'hard.csv')
     with pytest.raises(OutputFolderError, match='hard.csv'):
         open_append(str(tmp_path / 'hard.csv'))
+    os.mkfifo(tmp_path / 'fifo.csv')  # no reader: refused, not waited on
+    with pytest.raises(OutputFolderError, match='fifo.csv'):
+        open_append(str(tmp_path / 'fifo.csv'))
     assert outside.read_text() == 'keep me\n'
     with open_append(str(tmp_path / 'new.csv')) as f:
         f.write(b'row\n')

@@ -203,6 +203,10 @@ def _take_lock(folder: str, lock: str, wait: bool, replace: bool) -> int:
                 continue
             raise OutputFolderError(f'{folder}: cannot make its lock file '
                                     f'{lock}: {err.strerror}') from err
+        if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO put there
+            os.close(fd)
+            discard(lock)
+            continue
         try:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -280,8 +284,8 @@ def open_append(path: str) -> BinaryIO:
     (never followed), a file with other names (hard links) or anything but
     a regular file is an :class:`OutputFolderError` naming it."""
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW,
-                     0o666)
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW
+                     | os.O_NONBLOCK, 0o666)  # a FIFO: an error, no wait
     except OSError as err:
         raise OutputFolderError(f'{path}: cannot append to it (a link?): '
                                 f'{err.strerror}') from err
