@@ -112,12 +112,23 @@ class OwnedFolder:
     """Paths inside a folder the package writes (its writer holds the
     lock: :func:`own_folder`). ``whole``: the package named the folder and
     everything in it is its own (a walk's state), so a folder where a file
-    belongs is removed too."""
+    belongs is removed too; ``lock``: its writer's lock file, which
+    :meth:`clear` keeps."""
 
-    def __init__(self, root: str, whole: bool = False):
+    def __init__(self, root: str, whole: bool = False,
+                 lock: Optional[str] = None):
         #: the folder
         self.root = root
         self.whole = whole
+        self._lock = lock
+
+    def clear(self) -> None:
+        """Remove everything in the folder but its writer's lock file (a
+        state that cannot be trusted, started over)."""
+        for name in os.listdir(self.root):
+            path = osp.join(self.root, name)
+            if path != self._lock:
+                discard(path)
 
     def _inside(self, path: str) -> str:
         """``path`` relative to the root; it must lie inside it."""
@@ -274,7 +285,7 @@ def own_folder(folder: str, job: Optional[str] = None, wait: bool = False,
     lock = _lock_path(folder, job)
     fd = _take_lock(folder, lock, wait, replace)
     try:
-        yield OwnedFolder(folder, whole=replace)
+        yield OwnedFolder(folder, whole=replace, lock=lock)
     finally:
         _release(fd, lock)
 

@@ -297,9 +297,7 @@ def _open_state(state: OwnedFolder, identity: dict, plan: WalkPlan) -> int:
         except (OSError, ValueError):
             pass  # damaged: nothing in the folder can be trusted
     if recorded is None:
-        for name in os.listdir(state.root):
-            if not name.startswith('.lock'):
-                discard(osp.join(state.root, name))
+        state.clear()
         write_bytes(osp.join(state.root, _PROGRESS), b'')
         write_bytes(settings, json.dumps(identity, indent=1).encode())
         return 0
