@@ -32,8 +32,10 @@ segments its window, and its overlay becomes a frame of the video
 ``<out stem>.csv`` (window, centre readout, start, end, batch, time_ms) and,
 with ``--save-frames``, ``<out stem>_frames/*.png``. A progress bar goes to
 stderr. An interrupted walk re-run with the same arguments continues where
-it stopped (its state is in ``<out-file>.partial/``); with other arguments
-it is refused, naming the differences.
+it stopped (its state is in ``<out-file>.partial/``; a damaged frame there
+is made again); with other arguments it is refused, naming the differences.
+A second walk into the same video while one runs stops at once naming the
+first (process, host, command, start), or with ``--wait`` waits for it.
 
 ``--backend onnxruntime`` runs an exported model: CHECKPOINT is then the
 ``.onnx`` file (``OnnxSpikeSegmentor`` of ``wgse_mmseg.apis.onnx_segmentor``,
@@ -230,7 +232,7 @@ def walk(args, cfg) -> None:
     report = walk_recording(
         args.spikes, args.out_file, segment, render, length, args.stride,
         args.batch_size, args.fps, settings, args.save_frames, args.height,
-        args.width, pipeline_loader(pipeline).layout)
+        args.width, pipeline_loader(pipeline).layout, wait=args.wait)
     print(report.summary('segmented', args.save_frames))
 
 

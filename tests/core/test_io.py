@@ -363,6 +363,47 @@ def test_failure_mid_write_keeps_old_file_and_no_temp(tmp_path, monkeypatch,
     assert open(path, 'rb').read() == before
 
 
+@pytest.mark.parametrize('umask', [0o022, 0o077, 0o002])
+def test_atomic_writes_leave_the_process_umask_alone(tmp_path, monkeypatch,
+                                                    umask):
+    """A written file gets the mode ``open`` gives under the umask, and
+    the umask is never changed, not even for a moment (``os.umask`` sets
+    the process-wide mask: a file another thread made meanwhile would be
+    world-writable)."""
+    import threading
+    set_umask = os.umask
+    previous = set_umask(umask)
+    try:
+        with open(tmp_path / 'reference', 'w'):
+            pass
+        changes = []
+        monkeypatch.setattr(os, 'umask', lambda mask: changes.append(mask)
+                            or umask)
+        made = []
+
+        def other_thread():  # files made while the writes run
+            for index in range(200):
+                path = tmp_path / f'other{index}'
+                with open(path, 'w'):
+                    pass
+                made.append(path)
+        thread = threading.Thread(target=other_thread)
+        thread.start()
+        for index in range(50):
+            spike_io.write_bytes(str(tmp_path / f'written{index}.bin'), b'x')
+        save_spikes(str(tmp_path / 'spikes.npy'),
+                    _random_spikes((2, 3, 3), seed=15))
+        thread.join()
+    finally:
+        set_umask(previous)
+    assert changes == []
+    expected = os.stat(tmp_path / 'reference').st_mode & 0o777
+    assert expected == 0o666 & ~umask
+    for path in [tmp_path / f'written{i}.bin' for i in range(50)] + [
+            tmp_path / 'spikes.npy', tmp_path / 'spikes.npy.json'] + made:
+        assert os.stat(path).st_mode & 0o777 == expected, path
+
+
 def test_save_creates_directories(tmp_path):
     path = str(tmp_path / 'a' / 'b' / 'c.spk')
     spikes = _random_spikes((2, 3, 3), seed=14)

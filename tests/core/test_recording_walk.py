@@ -5,6 +5,9 @@ interruption, refusing mixed settings, and memory bounded by the batch."""
 import csv
 import json
 import os
+import shutil
+import subprocess
+import sys
 import tracemalloc
 
 import cv2
@@ -335,3 +338,182 @@ def test_bad_walks_are_named_errors(tmp_path):
         walk_recording(path, str(tmp_path / 'bad.mp4'), RateModel(),
                        bad_frame, LENGTH, 10, progress=False)
     assert not os.path.exists(tmp_path / 'bad.mp4')
+
+
+# ------------------------------------------------ the walk owns its state
+WALKER = '''
+import os, sys, time
+import numpy as np
+from wgse_mmseg.core.io import to_uint8
+from wgse_mmseg.core.recording_walk import walk_recording
+recording, video, go = sys.argv[1:4]
+print('ready', flush=True)
+while not os.path.exists(go):
+    time.sleep(0.005)
+def model(spikes):
+    time.sleep(0.02)
+    return spikes.mean(1)
+walk_recording(recording, video, model, lambda w, r: to_uint8(np.asarray(r)),
+               41, 10, batch_size=2, save_frames=True, progress=False)
+'''
+
+
+def test_two_walks_started_together_give_one_walk(tmp_path):
+    """Two processes walking one recording into one video, released at
+    the same instant: one walks, the other is refused naming it; the CSV
+    holds one walk's rows, and nothing else is left."""
+    path = _recording(str(tmp_path / 'rec.dat'), 1200)
+    reference = str(tmp_path / 'ref' / 'walk.mp4')
+    walk_recording(path, reference, RateModel(), rate_frame, LENGTH, 10,
+                   batch_size=2, save_frames=True, progress=False)
+    out = tmp_path / 'out'
+    go = tmp_path / 'go'
+    env = dict(os.environ, PYTHONPATH=os.getcwd(), OMP_NUM_THREADS='1')
+    walkers = [subprocess.Popen(
+        [sys.executable, '-c', WALKER, path, str(out / 'walk.mp4'), str(go)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        for _ in range(2)]
+    for walker in walkers:
+        assert walker.stdout.readline().strip() == 'ready'
+    go.touch()
+    results = [walker.communicate(timeout=600) for walker in walkers]
+    codes = sorted(walker.returncode for walker in walkers)
+    assert codes[0] == 0 and codes[1] != 0, results
+    refused = next(err for walker, (_, err) in zip(walkers, results)
+                   if walker.returncode)
+    winner = next(walker for walker in walkers if walker.returncode == 0)
+    assert 'another process is writing this output' in refused
+    assert f'process {winner.pid} on host' in refused
+    _same_walk(tmp_path / 'ref', out)
+    assert [int(r['window']) for r in _rows(out / 'walk.csv')] == list(
+        range(len(plan_walk(1200, LENGTH, 10).centres)))
+    assert sorted(os.listdir(out)) == ['walk.csv', 'walk.mp4', 'walk_frames']
+
+
+def _interrupted(tmp_path, name, fail_on_call=3):
+    """A recording, a whole walk of it to ``whole/walk.mp4`` and the state
+    of the same walk to ``<name>/walk.mp4`` interrupted after
+    ``fail_on_call`` model calls of 5 windows."""
+    path = str(tmp_path / 'rec.dat')
+    if not os.path.exists(path):
+        _recording(path, 1500)
+        walk_recording(path, str(tmp_path / 'whole' / 'walk.mp4'),
+                       RateModel(), rate_frame, LENGTH, 40, batch_size=5,
+                       save_frames=True, progress=False)
+    video = str(tmp_path / name / 'walk.mp4')
+    with pytest.raises(KeyboardInterrupt):
+        walk_recording(path, video, RateModel(fail_on_call=fail_on_call),
+                       rate_frame, LENGTH, 40, batch_size=5,
+                       save_frames=True, progress=False)
+    return path, video, walk_outputs(video).partial
+
+
+def _resume(path, video):
+    return walk_recording(path, video, RateModel(), rate_frame, LENGTH, 40,
+                          batch_size=5, save_frames=True, progress=False)
+
+
+@pytest.mark.parametrize('damage', ['garbage', 'truncated', 'other frame',
+                                    'folder', 'link'])
+def test_a_damaged_frame_is_made_again(tmp_path, damage):
+    """A frame of an interrupted walk damaged in any way (the same size of
+    garbage, cut short, another window's valid PNG, a folder, a link) is
+    made again with the windows after it: the walk ends as an
+    uninterrupted one, at the first re-run."""
+    path, video, partial = _interrupted(tmp_path, 'cut')
+    frame = os.path.join(partial, '000007.png')
+    size = os.path.getsize(frame)
+    os.remove(frame)
+    if damage == 'garbage':
+        with open(frame, 'wb') as f:
+            f.write(np.random.default_rng(0).bytes(size))
+    elif damage == 'truncated':
+        with open(os.path.join(partial, '000008.png'), 'rb') as f:
+            data = f.read()
+        with open(frame, 'wb') as f:
+            f.write(data[:size // 2])
+    elif damage == 'other frame':
+        shutil.copy(os.path.join(partial, '000008.png'), frame)
+    elif damage == 'folder':
+        os.mkdir(frame)
+    else:
+        os.symlink(os.path.join(partial, '000008.png'), frame)
+    report = _resume(path, video)
+    assert report.resumed == 7
+    _same_walk(tmp_path / 'whole', tmp_path / 'cut')
+
+
+def test_a_linked_progress_file_is_replaced_not_followed(tmp_path):
+    """progress.csv made a link to a file outside: that file is neither
+    truncated nor appended to, and the walk ends as an uninterrupted one
+    (its rows no longer verify: done again)."""
+    path, video, partial = _interrupted(tmp_path, 'cut')
+    outside = tmp_path / 'precious.csv'
+    progress = os.path.join(partial, 'progress.csv')
+    shutil.copy(progress, outside)
+    before = outside.read_bytes()
+    os.remove(progress)
+    os.symlink(outside, progress)
+    report = _resume(path, video)
+    assert report.resumed == 0  # a link is not read: the windows redone
+    assert outside.read_bytes() == before
+    _same_walk(tmp_path / 'whole', tmp_path / 'cut')
+    # a hard link: rewritten as a new file, the other name untouched
+    path, video, partial = _interrupted(tmp_path, 'hard')
+    progress = os.path.join(partial, 'progress.csv')
+    os.remove(outside)
+    os.link(progress, outside)
+    before = outside.read_bytes()
+    _resume(path, video)
+    assert outside.read_bytes() == before
+    _same_walk(tmp_path / 'whole', tmp_path / 'hard')
+
+
+@pytest.mark.parametrize('damage', ['garbage', 'link', 'folder', 'missing'])
+def test_unreadable_settings_start_the_walk_over(tmp_path, damage):
+    path, video, partial = _interrupted(tmp_path, 'cut')
+    settings_file = os.path.join(partial, 'settings.json')
+    os.remove(settings_file)
+    outside = tmp_path / 'outside.json'
+    outside.write_text('{"not": "mine"}')
+    if damage == 'garbage':
+        with open(settings_file, 'w') as f:
+            f.write('{"recording": ')
+    elif damage == 'link':
+        os.symlink(outside, settings_file)
+    elif damage == 'folder':
+        os.mkdir(settings_file)
+    report = _resume(path, video)
+    assert report.resumed == 0
+    assert outside.read_text() == '{"not": "mine"}'
+    _same_walk(tmp_path / 'whole', tmp_path / 'cut')
+
+
+def test_links_at_the_state_folder_and_outputs_are_not_followed(tmp_path):
+    """The state folder, the frames folder and the video made links to
+    folders and files outside: nothing outside changes, the walk's files
+    are real files and folders."""
+    path = _recording(str(tmp_path / 'rec.dat'), 600)
+    outside = tmp_path / 'outside'
+    outside.mkdir()
+    (outside / 'keep.txt').write_text('keep me')
+    out = tmp_path / 'out'
+    out.mkdir()
+    for name in ('walk.mp4.partial', 'walk_frames', 'walk.mp4', 'walk.csv'):
+        target = outside if name in ('walk.mp4.partial', 'walk_frames') \
+            else outside / 'keep.txt'
+        os.symlink(target, out / name)
+    walk_recording(path, str(out / 'walk.mp4'), RateModel(), rate_frame,
+                   LENGTH, 40, batch_size=4, save_frames=True,
+                   progress=False)
+    assert sorted(os.listdir(outside)) == ['keep.txt']
+    assert (outside / 'keep.txt').read_text() == 'keep me'
+    for name in ('walk_frames', 'walk.mp4', 'walk.csv'):
+        assert not os.path.islink(out / name)
+    assert len(os.listdir(out / 'walk_frames')) == len(
+        plan_walk(600, LENGTH, 40).centres)
+    (out / 'walk.csv').unlink()
+    (out / 'walk.csv').mkdir()
+    with pytest.raises(WalkError, match=r'walk\.csv: a folder'):
+        walk_recording(path, str(out / 'walk.mp4'), RateModel(), rate_frame,
+                       LENGTH, 40, progress=False)

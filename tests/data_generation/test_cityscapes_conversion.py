@@ -570,3 +570,47 @@ def test_shards_on_a_slurm_array_equal_one_run(tmp_path, cityscapes,
     counts = convert_cityscapes(root, out, settings, progress=False,
                                 shard=Shard(2, 2))
     assert counts == dict(sequence=0, static=0, skipped=1)
+
+
+def test_a_shard_has_one_writer_and_no_link_is_followed(tmp_path, cityscapes,
+                                                        calls):
+    """A process converting a shard excludes another on the same shard
+    (named), not one on another shard; a link at a sample's file is
+    replaced with the sample, its target untouched; the Cityscapes input
+    and the dataset's listing take each image once whatever links lead to
+    it, and a folder linking to itself does not stop the listing."""
+    from wgse_mmseg.core.output_folder import OutputFolderError, own_folder
+    root, _ = cityscapes
+    out = str(tmp_path / 'out')
+    with own_folder(out, 'shard-1-of-2'):
+        with pytest.raises(OutputFolderError,
+                           match=r'out: another process is writing this '
+                           rf'output \(process {os.getpid()} on host'):
+            convert_cityscapes(root, out, SETTINGS, progress=False,
+                               shard=(1, 2))
+        # shard 2/2 (aachen_000001) is another job
+        assert convert_cityscapes(root, out, SETTINGS, progress=False,
+                                  shard=(2, 2))['static'] == 1
+    outside = tmp_path / 'precious.png'
+    outside.write_bytes(b'keep me')
+    label = osp.join(out, 'gtFine', 'val', 'bonn',
+                     'bonn_000000_000019_gtFine_labelTrainIds.png')
+    os.makedirs(osp.dirname(label))
+    os.symlink(outside, label)
+    # links in the input: a city linked twice, a folder linking to itself
+    os.symlink('aachen', osp.join(root, 'leftImg8bit', 'train', 'zz_again'))
+    os.symlink('.', osp.join(root, 'leftImg8bit', 'train', 'aachen', 'l1'))
+    os.symlink('.', osp.join(root, 'leftImg8bit', 'train', 'aachen', 'l2'))
+    counts = convert_cityscapes(root, out, SETTINGS, progress=False)
+    assert counts == dict(sequence=1, static=1, skipped=1)
+    assert outside.read_bytes() == b'keep me' and not osp.islink(label)
+    assert _files(out) == _expected_files()
+    os.symlink('.', osp.join(out, 'spike', 'train', 'aachen', 'loop'))
+    os.symlink('aachen', osp.join(out, 'spike', 'train', 'twin'))
+    dataset = SpikeCityscapesDataset(
+        data_root=out, data_prefix=dict(img_path='spike/train',
+                                        seg_map_path='gtFine/train'),
+        pipeline=[], lazy_init=False)
+    assert sorted(osp.basename(dataset.get_data_info(i)['img_path'])
+                  for i in range(len(dataset))) == [
+        'aachen_000000_000123_spike.spk', 'aachen_000001_000019_spike.spk']

@@ -30,3 +30,37 @@ def test_resume_keeps_done_samples_and_redoes_stale_ones(tmp_path):
     assert make_synthetic_dataset(out, num_steps=11, **args) == 3
     assert spike_shape(spike) == (11, 16, 32)
     assert _tree(out) == tree
+
+
+def test_the_dataset_folder_is_owned(tmp_path):
+    """A link at a sample's file is replaced (its target kept), a linked
+    folder inside is refused naming it, a second writer is refused naming
+    the first, and no lock file is left."""
+    import pytest
+    from wgse_mmseg.core.output_folder import OutputFolderError, own_folder
+    out = tmp_path / 'synth'
+    args = dict(num_train=1, num_val=1, height=16, width=32, num_steps=9,
+                progress=False)
+    outside = tmp_path / 'precious.spk'
+    outside.write_bytes(b'keep me')
+    folder = out / 'spike' / 'train' / 'synth'
+    folder.mkdir(parents=True)
+    spike = folder / 'synth_000000_000019_spike.spk'
+    os.symlink(outside, spike)
+    assert make_synthetic_dataset(str(out), **args) == 2
+    assert outside.read_bytes() == b'keep me'
+    assert not os.path.islink(spike) and spike_shape(str(spike)) == (9, 16,
+                                                                     32)
+    assert sorted(os.listdir(out)) == ['gtFine', 'spike']
+    with own_folder(str(out)):
+        with pytest.raises(OutputFolderError,
+                           match=f'process {os.getpid()} on host'):
+            make_synthetic_dataset(str(out), **args)
+    elsewhere = tmp_path / 'elsewhere'
+    elsewhere.mkdir()
+    os.rename(out / 'gtFine' / 'val', elsewhere / 'val')
+    os.symlink(elsewhere / 'val', out / 'gtFine' / 'val')
+    with pytest.raises(OutputFolderError,
+                       match=r'gtFine/val: a symbolic link'):
+        make_synthetic_dataset(str(out), **dict(args, num_steps=11))
+    assert len(os.listdir(elsewhere / 'val' / 'synth')) == 1

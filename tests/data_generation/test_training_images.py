@@ -92,3 +92,33 @@ def test_an_out_dir_that_is_a_file_is_named(tmp_path):
     with pytest.raises(ValueError, match=f"out_dir='{taken}'"):
         export_training_images(str(taken), ('matplotlib',))
     assert taken.read_text() == 'x'
+
+
+def test_a_damaged_or_linked_image_is_written_again(tmp_path):
+    """A re-run keeps an image only when it holds its pixels: a truncated
+    PNG, another image's PNG and a link (its target untouched) are
+    written again; a linked source folder is refused naming it."""
+    from wgse_mmseg.core.output_folder import OutputFolderError
+    out = tmp_path / 'images'
+    first = export_training_images(str(out), ('matplotlib',))['matplotlib']
+    expected = {p: open(p, 'rb').read() for p in first}
+    with open(first[0], 'r+b') as f:
+        f.truncate(40)
+    if len(first) > 2:
+        with open(first[1], 'wb') as f:
+            f.write(expected[first[2]])
+    outside = tmp_path / 'precious.png'
+    outside.write_bytes(b'keep me')
+    os.remove(first[-1])
+    os.symlink(outside, first[-1])
+    again = export_training_images(str(out), ('matplotlib',))['matplotlib']
+    assert again == first
+    for path in first:
+        assert not osp.islink(path) and open(path, 'rb').read() == \
+            expected[path]
+    assert outside.read_bytes() == b'keep me'
+    assert sorted(os.listdir(out)) == ['matplotlib']  # no lock left
+    os.rename(out / 'matplotlib', tmp_path / 'moved')
+    os.symlink(tmp_path / 'moved', out / 'matplotlib')
+    with pytest.raises(OutputFolderError, match='matplotlib: a symbolic'):
+        export_training_images(str(out), ('matplotlib',))

@@ -528,3 +528,29 @@ def test_tiny_grid_end_to_end_and_resume(tmp_path):
         rows = list(csv.DictReader(f))
     assert [(r['name'], r['seeds']) for r in rows] == [
         ('segformer_b0_tfi', '1')]
+
+
+def test_a_run_another_process_runs_is_not_run_twice(tmp_path, capsys,
+                                                     monkeypatch):
+    """Two grid commands at once: a run whose folder another process owns
+    is reported failed, naming it, and not trained a second time."""
+    from wgse_mmseg.core.output_folder import own_folder
+    (tmp_path / 'data' / 'spike' / 'train').mkdir(parents=True)
+    grid, entries = runner.load_grid(GRID_CPU)
+    settings = ExperimentSettings(GRID_CPU, str(tmp_path / 'data'),
+                                  str(tmp_path / 'work'), seeds=[0],
+                                  epochs=1)
+    run, = runner.plan(runner.select(entries, ['segformer_b0_tfp']),
+                       settings, grid)
+    started = []
+    monkeypatch.setattr(cli, 'run_one', lambda *args: started.append(args))
+    monkeypatch.setattr(cli, 'report', lambda *args: None)
+    with own_folder(run.run_dir):
+        code = cli.main([GRID_CPU, '--data-root', str(tmp_path / 'data'),
+                         '--work-dir', str(tmp_path / 'work'), '--seeds',
+                         '0', '--epochs', '1', '--only', 'segformer_b0_tfp'])
+    printed = capsys.readouterr().out
+    assert code == 1 and started == []
+    assert 'segformer_b0_tfp seed 0: FAILED' in printed
+    assert f'another process is writing this output (process ' \
+        f'{os.getpid()}' in printed

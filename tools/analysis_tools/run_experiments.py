@@ -13,7 +13,10 @@ tools/test.py, each in its own process with the grid's ``--cfg-options``,
 then times batch-1 inference on a validation-sized stream. A run is done
 when ``WORK_DIR/<entry>/seed_<seed>/result.json`` exists (written
 atomically): re-running the command skips finished runs and resumes an
-interrupted one from its last checkpoint. At the end, every finished run of
+interrupted one from its last checkpoint. A run another process is running
+(two grid commands at once) is not run twice: it is reported failed, naming
+that process (:func:`~wgse_mmseg.core.output_folder.own_folder` of its
+folder). At the end, every finished run of
 the selected entries and seeds is aggregated into ``results.csv``,
 ``results.md``, ``accuracy_vs_time.png`` and ``loss_curves.png`` in
 ``--report-dir`` (default: the work dir). ``--benchmark`` first measures
@@ -38,6 +41,7 @@ from wgse_mmseg.apis.experiments import (ExperimentSettings, RunFailed,
                                          report, run_one, schedule_options,
                                          select)
 from wgse_mmseg.core.arguments import SEED, Path, Text
+from wgse_mmseg.core.output_folder import OutputFolderError, own_folder
 
 #: the declarations of the training length
 SCHEDULE = schedule_options.declaration.arguments
@@ -165,8 +169,10 @@ def main(argv=None):
         print(f'{prefix} running ...', flush=True)
         start = time.perf_counter()
         try:
-            result = run_one(run, settings.keep_checkpoints, grid.latency)
-        except RunFailed as error:
+            with own_folder(run.run_dir):
+                result = run_one(run, settings.keep_checkpoints,
+                                 grid.latency)
+        except (RunFailed, OutputFolderError) as error:
             print(f'{prefix} FAILED: {error}', flush=True)
             failures.append(f'{run.entry.name} seed {run.seed}')
             continue

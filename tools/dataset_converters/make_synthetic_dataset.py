@@ -9,6 +9,7 @@ import argparse
 import os.path as osp
 import sys
 
+from wgse_mmseg.core.output_folder import add_wait_option
 from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
 
 
@@ -29,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--threshold', type=DECLARED['threshold'],
                         default=1 / 0.6)
     parser.add_argument('--seed', type=DECLARED['seed'], default=0)
+    add_wait_option(parser)
     return parser
 
 
@@ -38,7 +40,7 @@ def main():
         written = make_synthetic_dataset(
             args.out_dir, args.num_train, args.num_val, args.height,
             args.width, args.num_steps, threshold=args.threshold,
-            seed=args.seed)
+            seed=args.seed, wait=args.wait)
     except (ValueError, OSError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     print(f'{written} samples written to {args.out_dir} '

@@ -13,6 +13,7 @@ import argparse
 import time
 
 from wgse_mmseg.core.arguments import Text
+from wgse_mmseg.core.output_folder import add_wait_option
 from wgse_mmseg.data_generation.cityscapes_conversion import (
     ConversionSettings, convert_cityscapes, load_scene)
 from wgse_mmseg.data_generation.shards import SHARD, WHOLE
@@ -58,6 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help='convert only the K-th of N disjoint parts '
                         '(every N-th sample, sorted by name); the N parts '
                         'of one job, same other arguments, make the whole')
+    add_wait_option(parser)
     return parser
 
 
@@ -71,7 +73,8 @@ def main():
             scene=load_scene(args.scene), seed=args.seed)
         counts = convert_cityscapes(args.cityscapes_root, args.out_dir,
                                     settings, args.splits, args.nproc,
-                                    args.limit, shard=args.shard)
+                                    args.limit, shard=args.shard,
+                                    wait=args.wait)
     except (OSError, ValueError) as err:  # each names the file or option
         raise SystemExit(f'error: {err}') from err
     part = '' if args.shard == WHOLE else f' (shard {args.shard})'

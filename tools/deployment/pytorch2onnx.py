@@ -1,7 +1,7 @@
 """Export a trained spike segmentor, enhancer included, to ONNX.
 
     python tools/deployment/pytorch2onnx.py CONFIG CHECKPOINT --shape T H W
-        [--out FILE] [--opset 18] [--no-verify] [--seed 1]
+        [--out FILE] [--opset 18] [--no-verify] [--seed 1] [--wait]
         [--cfg-options num_steps=41 ...]
 
 One graph maps float spikes ``(batch, T, H, W)`` to logits ``(batch, K, H,
@@ -10,11 +10,15 @@ and the final resize (``wgse_mmseg.apis.onnx_export``). ``T``, ``H`` and
 ``W`` are fixed; the batch is dynamic. The checkpoint is read weights-only
 and must fit the config exactly (``--cfg-options num_steps=T`` for another
 ``T``). The file (default ``<config name>.onnx``) is written whole or not
-at all. Then, unless ``--no-verify``, ONNX Runtime (CPU) runs it on two
-random Bernoulli streams beside the torch model; the largest logit
+at all, by one export at a time (a second export to the same file stops
+naming the first, or waits with ``--wait``:
+:func:`~wgse_mmseg.core.output_folder.own_folder`). Unless
+``--no-verify``, ONNX Runtime (CPU) first runs it, still a temporary file,
+on two random Bernoulli streams beside the torch model; the largest logit
 difference and the share of pixels with the same class are printed, and
-the tool exits with status 1 (the file kept, for inspection) beyond
-``LOGITS_TOLERANCE`` or below ``MIN_ARGMAX_AGREEMENT``.
+beyond ``LOGITS_TOLERANCE`` or below ``MIN_ARGMAX_AGREEMENT`` the tool exits
+with status 1 and the file is not written (one already at ``--out`` is left
+as it was).
 """
 import argparse
 import os.path as osp
@@ -28,6 +32,9 @@ from wgse_mmseg.apis.onnx_export import (  # noqa: E402
     SpikeSegmentorGraph, compare_with_onnx, export_onnx, random_spikes)
 from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor  # noqa
 from wgse_mmseg.core.arguments import SEED, Path  # noqa: E402
+from wgse_mmseg.core.io import atomic_path  # noqa: E402
+from wgse_mmseg.core.output_folder import (  # noqa: E402
+    add_wait_option, own_folder)
 from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
                                      load_config)
 
@@ -54,6 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
                         'ONNX Runtime')
     parser.add_argument('--seed', type=SEED, default=1,
                         help='seed of the random spikes of the check')
+    add_wait_option(parser)
     add_config_options(parser)
     return parser
 
@@ -74,23 +82,39 @@ def main(argv=None) -> int:
         sys.exit(f'pytorch2onnx.py: error: {err}')
     graph = SpikeSegmentorGraph(model)
     try:
-        export_onnx(graph, out, num_steps, height, width, opset=args.opset,
-                    dataset_meta=dataset_meta)
+        with own_folder(osp.dirname(osp.abspath(out)), osp.basename(out),
+                        args.wait), atomic_path(out) as written:
+            export_onnx(graph, written, num_steps, height, width,
+                        opset=args.opset, dataset_meta=dataset_meta)
+            if not (args.no_verify or _verified(graph, written, args.seed,
+                                                num_steps, height, width)):
+                raise _Refused
+    except _Refused:
+        print(f'{out}: not written, the exported graph fails the check')
+        return 1
     except ValueError as err:
         sys.exit(f'pytorch2onnx.py: error: {err}')
     print(f'{out}\tinput spikes (batch, {num_steps}, {height}, {width})')
-    if args.no_verify:
-        return 0
-    spikes = random_spikes((VERIFY_BATCH, num_steps, height, width),
-                           args.seed)
-    found = compare_with_onnx(graph, out, spikes)
+    return 0
+
+
+class _Refused(Exception):
+    """The exported file failed the check: it is not kept."""
+
+
+def _verified(graph, path: str, seed: int, num_steps: int, height: int,
+              width: int) -> bool:
+    """Run the ONNX file ``path`` beside ``graph`` on random streams,
+    print the agreement, and say whether it passes."""
+    spikes = random_spikes((VERIFY_BATCH, num_steps, height, width), seed)
+    found = compare_with_onnx(graph, path, spikes)
     verdict = 'ok' if found['ok'] else 'FAILED'
     print(f"onnxruntime against torch: max |logits difference| "
           f"{found['max_abs_diff']:.3g} (tolerance "
           f"{LOGITS_TOLERANCE * found['scale']:.3g}), argmax agreement "
           f"{100 * found['argmax_agreement']:.3f}% (at least "
           f'{100 * MIN_ARGMAX_AGREEMENT:.1f}%): {verdict}')
-    return 0 if found['ok'] else 1
+    return found['ok']
 
 
 if __name__ == '__main__':

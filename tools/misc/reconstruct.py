@@ -42,8 +42,11 @@ own), and becomes a frame of the video ``--out`` (``.mp4`` or ``.gif``),
 with ``<out stem>.csv`` (window, centre readout, start, end, batch,
 time_ms) and, with ``--save-frames``, ``<out stem>_frames/*.png``. A
 progress bar goes to stderr. An interrupted walk re-run with the same
-arguments continues (its state is in ``<out>.partial/``); with other
-arguments it is refused, naming the differences.
+arguments continues (its state is in ``<out>.partial/``; a damaged frame
+there is made again); with other arguments it is refused, naming the
+differences. A second walk into the same video while one runs stops at once
+naming the first (process, host, command, start), or with ``--wait`` waits
+for it.
 """
 import argparse
 import os.path as osp
@@ -138,7 +141,7 @@ def walk(args) -> None:
     report = walk_recording(
         args.spikes, args.out, reconstruct, render, length, args.stride,
         args.batch_size, args.fps, settings, args.save_frames, args.height,
-        args.width, args.layout)
+        args.width, args.layout, wait=args.wait)
     print(report.summary('reconstructed', args.save_frames))
 
 

@@ -61,8 +61,8 @@ import math
 import os
 import os.path as osp
 import re
+import secrets
 import struct
-import tempfile
 import zipfile
 from typing import (BinaryIO, Callable, Dict, Iterator, List, NamedTuple,
                     Optional, Sequence, Tuple)
@@ -97,28 +97,41 @@ def atomic_path(path: str) -> Iterator[str]:
 
     The temporary file lies beside ``path``, is named after it,
     ``.tmp-<name>.<random><ext>`` (:func:`temporaries_of`), and is renamed
-    over ``path`` when the block ends without error (with the permissions
-    ``open`` would give); on error it is removed and ``path`` is untouched.
-    A process killed mid-write leaves one that the next run for that
-    target can find and remove, without touching the temporaries of other
-    processes writing beside it.
+    over ``path`` when the block ends without error; on error it is
+    removed and ``path`` is untouched. It is created with the permissions
+    ``open`` would give (mode ``0o666`` less the umask, applied by the
+    kernel: no process-wide setting is read or changed), exclusively, never
+    through a link. A process killed mid-write leaves one that the next run
+    for that target can find and remove, without touching the temporaries
+    of other processes writing beside it.
     """
     directory = osp.dirname(osp.abspath(path))
     os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory,
-                               prefix=f'.tmp-{osp.basename(path)}.',
-                               suffix=osp.splitext(path)[1])
-    os.close(fd)
+    tmp = _create_temporary(directory, osp.basename(path),
+                            osp.splitext(path)[1])
     try:
         yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600
         os.replace(tmp, path)
     except BaseException:
-        if osp.exists(tmp):
+        with contextlib.suppress(FileNotFoundError):
             os.remove(tmp)
         raise
+
+
+def _create_temporary(directory: str, name: str, suffix: str) -> str:
+    """Create, empty, the temporary file ``.tmp-<name>.<random><suffix>``
+    in ``directory`` and return its path: ``O_EXCL`` (a new file, never an
+    existing one or a link's target), mode ``0o666`` less the umask."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, 'O_NOFOLLOW',
+                                                           0)
+    while True:
+        tmp = osp.join(directory,
+                       f'.tmp-{name}.{secrets.token_hex(6)}{suffix}')
+        try:
+            os.close(os.open(tmp, flags, 0o666))
+            return tmp
+        except FileExistsError:
+            continue
 
 
 @contextlib.contextmanager

@@ -36,15 +36,20 @@ Outputs, beside ``video`` (:func:`walk_outputs`)
     with ``save_frames``, ``<video stem>_frames/<window>.png``. Each appears
     complete or not at all.
 Resuming
-    Until the walk ends, its state lies in ``<video>.partial/``: the
-    settings it was started with, a PNG per window done, and
-    ``progress.csv``, a row appended per window once its PNG is written. A
-    walk re-run with the same recording and settings continues after the
-    last complete row (a torn last row, a missing PNG: that window is
-    done again); one with other settings is refused, naming the
-    differences and the folder to remove to start over, so results never
-    mix. The video, CSV and frames are assembled from that folder at the
-    end, and the folder is removed.
+    Until the walk ends, its state lies in ``<video>.partial/``, a folder
+    the walk owns (:func:`~wgse_mmseg.core.output_folder.own_folder`: one
+    walk of a video at a time, a second refused naming the first, or
+    waiting with ``wait``; no link in it followed): the settings it was
+    started with, a PNG per window done, and ``progress.csv``, a row
+    appended per window once its PNG is written, recording the PNG's size
+    and SHA-256. A walk re-run with the same recording and settings keeps
+    the leading rows whose PNG still holds those bytes and continues after
+    them (a torn row, a missing or damaged PNG: that window and those
+    after it are done again); state that cannot be read (its settings
+    file damaged) is discarded and the walk starts over. One with other
+    settings is refused, naming the differences and the folder to remove
+    to start over, so results never mix. The video, CSV and frames are
+    assembled from that folder at the end, and the folder is removed.
 
 An MP4 of odd height or width is padded by one replicated row or column
 (the codec needs even sides). A GIF is assembled in memory by Pillow (about
@@ -68,6 +73,9 @@ from .arguments import (LAYOUT, NUM_STEPS, SIDE, Flag, Integer, Number, Path,
 from .io import (atomic_output, atomic_path, load_spikes, spike_shape,
                  write_bytes, write_png)
 from .limits import MAX_BATCH_SIZE, load_json_file
+from .markers import file_digest
+from .output_folder import (OwnedFolder, add_wait_option, discard,
+                            open_append, own_folder)
 
 __all__ = ['WalkError', 'WalkPlan', 'WalkOutputs', 'WalkReport',
            'VIDEO_EXTENSIONS', 'CSV_COLUMNS', 'STRIDE', 'BATCH_SIZE', 'FPS',
@@ -87,6 +95,11 @@ FPS = Number(0, 1000, strict_minimum=True)
 
 _SETTINGS = 'settings.json'
 _PROGRESS = 'progress.csv'
+#: a row of ``progress.csv``: the CSV's, then the size and SHA-256 of the
+#: window's PNG as written
+_PROGRESS_COLUMNS = CSV_COLUMNS + ('size', 'sha256')
+#: the longest row ``progress.csv`` holds (a longer one is damage)
+_ROW_BYTES = 256
 
 
 class WalkError(ValueError):
@@ -227,27 +240,44 @@ def _frame_name(index: int) -> str:
     return f'{index:06d}.png'
 
 
-def _windows_done(outputs: WalkOutputs, plan: WalkPlan) -> int:
+def _frame_verifies(state: OwnedFolder, index: int, size: str,
+                    sha256: str) -> bool:
+    """Whether window ``index``'s PNG is a regular file holding the
+    ``size`` bytes of SHA-256 ``sha256`` its row records."""
+    path = state.file(osp.join(state.root, _frame_name(index)))
+    return (osp.exists(path) and str(os.stat(path).st_size) == size
+            and file_digest(path) == sha256)
+
+
+def _windows_done(state: OwnedFolder, plan: WalkPlan) -> int:
     """How many leading rows of ``progress.csv`` are complete, in order,
-    match ``plan`` and have their PNG; the file is cut back to them."""
-    progress = osp.join(outputs.partial, _PROGRESS)
-    if not osp.exists(progress):
-        return 0
-    done = kept = 0
-    with open(progress, 'rb') as f:
-        for line in f:
-            if not line.endswith(b'\n'):
-                break  # torn by an interruption
-            row = line.decode('utf-8', 'replace').rstrip('\n').split(',')
-            if (len(row) != len(CSV_COLUMNS) or done >= len(plan.centres)
-                    or row[:2] != [str(done), str(plan.centres[done])]
-                    or not osp.exists(osp.join(outputs.partial,
-                                               _frame_name(done)))):
-                break
-            done, kept = done + 1, kept + len(line)
-    with open(progress, 'r+b') as f:  # drop what follows the last good row
-        f.truncate(kept)
+    match ``plan`` and have their PNG as recorded; the file is rewritten
+    (a new file, whatever was at its path) with just them."""
+    progress = state.file(osp.join(state.root, _PROGRESS))
+    done = 0
+    with atomic_output(progress) as kept:
+        if osp.exists(progress):
+            with open(progress, 'rb') as f:
+                for line in iter(lambda: f.readline(_ROW_BYTES), b''):
+                    row = line.decode('utf-8', 'replace').rstrip('\n')
+                    row = row.split(',')
+                    if (not line.endswith(b'\n')  # torn by an interruption
+                            or len(row) != len(_PROGRESS_COLUMNS)
+                            or done >= len(plan.centres)
+                            or row[:4] != _row_start(plan, done)
+                            or not _frame_verifies(state, done, *row[-2:])):
+                        break
+                    kept.write(line)
+                    done += 1
     return done
+
+
+def _row_start(plan: WalkPlan, index: int) -> List[str]:
+    """The first columns of window ``index``'s row: index, centre, start,
+    end."""
+    centre = plan.centres[index]
+    return [str(index), str(centre), str(plan.start(centre)),
+            str(plan.start(centre) + plan.length)]
 
 
 def _csv_line(row: Sequence[Any]) -> bytes:
@@ -255,36 +285,34 @@ def _csv_line(row: Sequence[Any]) -> bytes:
     return (','.join(map(str, row)) + '\n').encode()
 
 
-def _open_state(outputs: WalkOutputs, identity: dict, plan: WalkPlan) -> int:
-    """The state folder, created or checked against ``identity``; the
-    number of windows already done."""
-    settings = osp.join(outputs.partial, _SETTINGS)
-    if osp.isdir(outputs.partial) and osp.exists(settings):
+def _open_state(state: OwnedFolder, identity: dict, plan: WalkPlan) -> int:
+    """The state folder, checked against ``identity`` or started afresh
+    (when empty, or its settings file cannot be read); the number of
+    windows already done."""
+    settings = state.file(osp.join(state.root, _SETTINGS))
+    recorded = None
+    if osp.exists(settings):
         try:
             recorded = load_json_file(settings, 'walk settings file')
-        except (OSError, ValueError) as err:
-            raise WalkError(f'{outputs.partial}: the state of an interrupted '
-                            f'walk is unreadable ({err}); remove the folder '
-                            f'to start over') from err
-        if recorded != identity:
-            keys = sorted(set(identity) | set(recorded if isinstance(
-                recorded, dict) else {}))
-            changed = [k for k in keys if not isinstance(recorded, dict)
-                       or recorded.get(k) != identity.get(k)]
-            raise WalkError(
-                f'{outputs.partial}: holds an interrupted walk with other '
-                f'settings ({", ".join(changed)} differ: '
-                f'{_differences(recorded, identity, changed)}); its frames '
-                f'are not mixed with these: re-run with its settings to '
-                f'finish it, or remove the folder to start over')
-        return _windows_done(outputs, plan)
-    if osp.exists(outputs.partial) and not osp.isdir(outputs.partial):
-        raise WalkError(f'{outputs.partial}: exists and is not a folder; '
-                        f'a walk keeps its state there')
-    os.makedirs(outputs.partial, exist_ok=True)
-    write_bytes(osp.join(outputs.partial, _PROGRESS), b'')
-    write_bytes(settings, json.dumps(identity, indent=1).encode())
-    return 0
+        except (OSError, ValueError):
+            pass  # damaged: nothing in the folder can be trusted
+    if recorded is None:
+        state.clear()
+        write_bytes(osp.join(state.root, _PROGRESS), b'')
+        write_bytes(settings, json.dumps(identity, indent=1).encode())
+        return 0
+    if recorded != identity:
+        keys = sorted(set(identity) | set(recorded if isinstance(
+            recorded, dict) else {}))
+        changed = [k for k in keys if not isinstance(recorded, dict)
+                   or recorded.get(k) != identity.get(k)]
+        raise WalkError(
+            f'{state.root}: holds an interrupted walk with other '
+            f'settings ({", ".join(changed)} differ: '
+            f'{_differences(recorded, identity, changed)}); its frames '
+            f'are not mixed with these: re-run with its settings to '
+            f'finish it, or remove the folder to start over')
+    return _windows_done(state, plan)
 
 
 def _differences(recorded: Any, identity: dict, keys: List[str]) -> str:
@@ -358,20 +386,22 @@ def _write_video(outputs: WalkOutputs, count: int, fps: float) -> None:
 def _finish(outputs: WalkOutputs, count: int, fps: float,
             save_frames: bool) -> None:
     """Video, CSV and frames of the ``count`` windows from the state
-    folder; the folder removed."""
+    folder (whatever was at their paths replaced, a link never followed);
+    the folder removed."""
     _write_video(outputs, count, fps)
     with atomic_output(outputs.csv) as out, \
             open(osp.join(outputs.partial, _PROGRESS), 'rb') as rows:
         out.write(_csv_line(CSV_COLUMNS))
-        shutil.copyfileobj(rows, out)
+        for line in rows:
+            out.write(b','.join(line.split(b',')[:len(CSV_COLUMNS)]) + b'\n')
     if save_frames:
         frames = osp.join(outputs.partial, 'frames')
-        os.makedirs(frames, exist_ok=True)
+        discard(frames)
+        os.mkdir(frames)
         for index in range(count):
             name = _frame_name(index)
             os.replace(osp.join(outputs.partial, name), osp.join(frames, name))
-        if osp.isdir(outputs.frames):
-            shutil.rmtree(outputs.frames)
+        discard(outputs.frames)
         os.replace(frames, outputs.frames)
     shutil.rmtree(outputs.partial)
 
@@ -379,7 +409,7 @@ def _finish(outputs: WalkOutputs, count: int, fps: float,
 @declare(path=Path(), video=Path(), length=NUM_STEPS, stride=STRIDE,
          batch_size=BATCH_SIZE, fps=FPS, save_frames=Flag(),
          height=SIDE.or_none(), width=SIDE.or_none(),
-         layout=LAYOUT.or_none(), progress=Flag())
+         layout=LAYOUT.or_none(), progress=Flag(), wait=Flag())
 def walk_recording(path: str, video: str,
                    model: Callable[[torch.Tensor], Sequence[Any]],
                    render: Callable[[np.ndarray, Any], np.ndarray],
@@ -388,7 +418,7 @@ def walk_recording(path: str, video: str,
                    save_frames: bool = False, height: Optional[int] = None,
                    width: Optional[int] = None,
                    layout: Optional[str] = None,
-                   progress: bool = True) -> WalkReport:
+                   progress: bool = True, wait: bool = False) -> WalkReport:
     """Walk the recording ``path`` into ``video`` (see the module).
 
     Args:
@@ -408,11 +438,15 @@ def walk_recording(path: str, video: str,
         layout: ``'THW'``/``'HWT'`` of an ``.npy``/``.npz`` that does not
             record it (:func:`~wgse_mmseg.core.io.load_spikes`).
         progress: a progress bar on stderr.
+        wait: wait for another walk of ``video`` to finish instead of
+            raising.
 
     Raises:
         WalkError: for a video path that is not ``.mp4``/``.gif``, a
-            recording shorter than one window, or the state of an
-            interrupted walk with other settings.
+            recording shorter than one window, the state of an
+            interrupted walk with other settings, or a folder where the
+            video or the CSV goes.
+        OutputFolderError: another process walks into ``video``.
         SpikeFileError: for a recording that cannot be read.
     """
     outputs = walk_outputs(video)
@@ -423,32 +457,48 @@ def walk_recording(path: str, video: str,
             f'{path}: no window of length={length} readouts centred on a '
             f'multiple of stride={stride} fits in the recording\'s {total} '
             f'readouts')
+    for output in (outputs.video, outputs.csv):
+        if osp.isdir(output) and not osp.islink(output):
+            raise WalkError(f'{output}: a folder where the walk writes a '
+                            f'file; move it away')
     identity = _identity(path, height, width, layout, plan, settings or {})
-    resumed = _open_state(outputs, identity, plan)
+    with own_folder(outputs.partial, wait=wait, replace=True) as state:
+        resumed = _open_state(state, identity, plan)
+        _walk(path, outputs, model, render, plan, resumed, batch_size,
+              (height, width, layout), progress)
+        _finish(outputs, len(plan.centres), fps, save_frames)
+    return WalkReport(plan, outputs, resumed, len(plan.centres) - resumed)
+
+
+def _walk(path: str, outputs: WalkOutputs, model, render, plan: WalkPlan,
+          resumed: int, batch_size: int, reading: tuple,
+          progress: bool) -> None:
+    """Run ``model`` on the windows of ``plan`` after the first
+    ``resumed``, each frame written to the state folder and logged in
+    ``progress.csv`` (``reading``: ``height``, ``width``, ``layout`` of
+    the recording)."""
     todo = plan.centres[resumed:]
     bar = tqdm(total=len(plan.centres), initial=resumed, unit='window',
                desc=osp.basename(path), file=sys.stderr,
                disable=not progress)
-    with bar, open(osp.join(outputs.partial, _PROGRESS), 'ab') as log:
+    with bar, open_append(osp.join(outputs.partial, _PROGRESS)) as log:
         for first in range(0, len(todo), batch_size):
             centres = todo[first:first + batch_size]
-            windows = read_windows(path, plan, centres, height, width,
-                                   layout)
+            windows = read_windows(path, plan, centres, *reading)
             began = time.perf_counter()
             results = model(torch.from_numpy(windows).float())
             per_window = (time.perf_counter() - began) * 1000 / len(centres)
             for offset, centre in enumerate(centres):
                 index = resumed + first + offset
-                write_png(osp.join(outputs.partial, _frame_name(index)),
-                          _png_image(render(windows[offset], results[offset])))
+                written = write_png(
+                    osp.join(outputs.partial, _frame_name(index)),
+                    _png_image(render(windows[offset], results[offset])))
                 log.write(_csv_line([
                     index, centre, plan.start(centre),
-                    plan.start(centre) + length, resumed + first,
-                    f'{per_window:.3f}']))
+                    plan.start(centre) + plan.length, resumed + first,
+                    f'{per_window:.3f}', written.size, written.sha256]))
                 log.flush()
             bar.update(len(centres))
-    _finish(outputs, len(plan.centres), fps, save_frames)
-    return WalkReport(plan, outputs, resumed, len(todo))
 
 
 def add_walk_options(parser) -> None:
@@ -467,3 +517,4 @@ def add_walk_options(parser) -> None:
     parser.add_argument('--save-frames', action='store_true',
                         help='also keep a walk\'s frames as PNGs in '
                         '<output stem>_frames/')
+    add_wait_option(parser)

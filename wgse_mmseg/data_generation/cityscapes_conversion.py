@@ -42,6 +42,13 @@ its own samples. Each sample's seed is derived from the base seed and its
 name (:func:`~wgse_mmseg.core.seeding.derive_seed`), so reruns give
 identical files.
 
+One writer per shard. A conversion owns ``out_dir``
+(:func:`~wgse_mmseg.core.output_folder.own_folder`, job ``shard-K-of-N``):
+a second process converting the same shard into it is refused at once,
+naming the first, or waits (``wait``, ``--wait``); a link inside
+``out_dir`` is never written through (a linked folder is refused, a link
+at a sample's file replaced).
+
 Shards. ``convert_cityscapes(..., shard=Shard(K, N))`` (``--shard K/N``)
 converts every ``N``-th sample of the sorted list from the ``K``-th on
 (:mod:`.shards`): the shards of a job are disjoint, may run at the same time
@@ -57,7 +64,6 @@ import os.path as osp
 import re
 from dataclasses import dataclass, field
 from functools import partial
-from glob import glob
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import cv2
@@ -68,10 +74,12 @@ from tqdm import tqdm
 from ..core import arguments
 from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
                               Number, Path, declare, declare_fields)
+from ..core.folder_walk import files_under
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
 from ..core.io import save_spikes, temporaries_of, write_png
 from ..core.limits import MAX_SAMPLES, MAX_WORKERS
 from ..core.markers import invalidate, is_complete, write_marker
+from ..core.output_folder import OwnedFolder, own_folder
 from ..core.seeding import derive_seed
 from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 from .shards import SHARD, WHOLE, Shard
@@ -227,7 +235,7 @@ def find_samples(root: str, splits: Sequence[str] = ('train', 'val'),
         _require_dir(osp.join(root, 'gtFine', split),
                      f'Cityscapes labels gtFine/{split}/<city>/'
                      f'*_gtFine_labelIds.png')
-        images = sorted(glob(osp.join(image_dir, '*', '*' + _IMAGE_SUFFIX)))
+        images = files_under(image_dir, (_IMAGE_SUFFIX, ), depth=2)
         if not images:
             raise FileNotFoundError(
                 f'{image_dir}: holds no <city>/*{_IMAGE_SUFFIX} images')
@@ -405,9 +413,12 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
     size and SHA-256 of the bytes written to both files, the simulator's
     metadata) last, each file atomically (:mod:`wgse_mmseg.core.markers`). Returns ``'skipped'`` when
     the sample is already done, else its model, ``'sequence'`` or
-    ``'static'``.
+    ``'static'``. A link at a sample's file is replaced, a linked folder
+    refused (:class:`~wgse_mmseg.core.output_folder.OwnedFolder`).
     """
-    paths = output_paths(out_dir, sample)
+    owned = OwnedFolder(out_dir)
+    paths = {name: owned.file(path)
+             for name, path in output_paths(out_dir, sample).items()}
     recipe = _recipe(sample, settings, root)
     if is_complete(paths['meta'], recipe, _marked_files(paths)):
         return 'skipped'
@@ -445,13 +456,14 @@ def _init_worker() -> None:
          splits=arguments.Sequence(Choice(CITYSCAPES_SPLITS)),
          nproc=Integer(1, MAX_WORKERS),
          limit=Integer(1, MAX_SAMPLES, optional=True), progress=Flag(),
-         shard=SHARD)
+         shard=SHARD, wait=Flag())
 def convert_cityscapes(root: str, out_dir: str,
                        settings: Optional[ConversionSettings] = None,
                        splits: Sequence[str] = ('train', 'val'),
                        nproc: int = 1, limit: Optional[int] = None,
                        progress: bool = True,
-                       shard: Shard = WHOLE) -> Dict[str, int]:
+                       shard: Shard = WHOLE,
+                       wait: bool = False) -> Dict[str, int]:
     """Convert the Cityscapes ``root`` into Spike-Cityscapes at ``out_dir``.
 
     Args:
@@ -467,6 +479,8 @@ def convert_cityscapes(root: str, out_dir: str,
             ``K - 1 + N``, ... of the job's list (``splits`` in order, each
             sorted by name, cut to ``limit``); the ``N`` shards of a job
             (same root, settings, splits and limit) together convert it.
+        wait: wait for another process converting this shard into
+            ``out_dir`` instead of raising ``OutputFolderError``.
 
     Returns:
         How many samples were made from a ``'sequence'``, made by the
@@ -478,11 +492,12 @@ def convert_cityscapes(root: str, out_dir: str,
         samples = [s for split in splits
                    for s in [s for s in samples if s.split == split][:limit]]
     samples = Shard(*shard).select(samples)
-    _remove_stale_temporaries(out_dir, samples)
     convert = partial(convert_sample, root=root, out_dir=out_dir,
                       settings=settings)
     counts = dict(sequence=0, static=0, skipped=0)
-    with contextlib.ExitStack() as stack:
+    job = 'shard-{}-of-{}'.format(*shard)
+    with own_folder(out_dir, job, wait), contextlib.ExitStack() as stack:
+        _remove_stale_temporaries(out_dir, samples)
         if nproc == 1:
             outcomes = map(convert, samples)
         else:

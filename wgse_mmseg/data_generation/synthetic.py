@@ -23,6 +23,7 @@ from ..core.limits import MAX_SAMPLES
 from ..core.constants import REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
 from ..core.markers import invalidate, is_complete, write_marker
+from ..core.output_folder import own_folder
 from ..core.seeding import derive_generator, derive_seed
 from ..core.simulation import simulate_spikes
 
@@ -134,13 +135,14 @@ _COUNT = Integer(0, MAX_SAMPLES)
 @declare(out_dir=Path(), num_train=_COUNT, num_val=_COUNT, height=SIDE,
          width=SIDE, num_steps=NUM_STEPS, num_frames=Integer(1, 1024),
          threshold=Number(0, strict_minimum=True), seed=SEED,
-         progress=Flag())
+         progress=Flag(), wait=Flag())
 def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                            num_val: int = 12, height: int = 128,
                            width: int = 256, num_steps: int = 41,
                            num_frames: int = 5,
                            threshold: float = REDS_THRESHOLD, seed: int = 0,
-                           progress: bool = True) -> int:
+                           progress: bool = True,
+                           wait: bool = False) -> int:
     """Write a Spike-Cityscapes-layout dataset to ``out_dir``.
 
     Files: ``spike/{train,val}/synth/synth_<scene>_000019_spike.spk``,
@@ -149,33 +151,38 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
     and SHA-256 of the bytes written, written last:
     :mod:`wgse_mmseg.core.markers`). A sample whose
     marker matches these settings and its files is kept, so an interrupted
-    run resumes; any other is made again. Returns the number of samples
-    written now.
+    run resumes; any other is made again. The run owns ``out_dir``
+    (:func:`~wgse_mmseg.core.output_folder.own_folder`): another run into
+    it is refused naming this one, or waits for it with ``wait``; a link
+    at a sample's file is replaced, a linked folder refused. Returns the
+    number of samples written now.
     """
     written = 0
     recipe = dict(height=height, width=width, num_steps=num_steps,
                   num_frames=num_frames, threshold=threshold, seed=seed)
     jobs = [('train', i) for i in range(num_train)] + [
         ('val', num_train + i) for i in range(num_val)]
-    for split, scene in tqdm(jobs, desc='synthetic scenes',
-                             disable=not progress):
-        stem = f'synth_{scene:06d}_000019'
-        spike_path = osp.join(out_dir, 'spike', split, 'synth',
-                              f'{stem}_spike.spk')
-        label_path = osp.join(out_dir, 'gtFine', split, 'synth',
-                              f'{stem}_gtFine_labelTrainIds.png')
-        marker = osp.join(out_dir, 'spike', split, 'synth',
-                          f'{stem}_spike.json')
-        files = dict(spike=spike_path, label=label_path)
-        if is_complete(marker, recipe, files):
-            continue
-        frames, label = render_street_scene(
-            derive_generator(seed, scene), height, width, num_frames)
-        spikes, _ = simulate_spikes(frames, num_steps, threshold=threshold,
-                                    seed=derive_seed(seed, scene, 'spikes'))
-        invalidate(marker)
-        records = dict(label=write_png(label_path, label),
-                       spike=save_spikes(spike_path, spikes))
-        write_marker(marker, recipe, records)
-        written += 1
+    with own_folder(out_dir, wait=wait) as owned:
+        for split, scene in tqdm(jobs, desc='synthetic scenes',
+                                 disable=not progress):
+            stem = f'synth_{scene:06d}_000019'
+            folder = osp.join(out_dir, 'spike', split, 'synth')
+            marker = owned.file(osp.join(folder, f'{stem}_spike.json'))
+            files = dict(
+                spike=owned.file(osp.join(folder, f'{stem}_spike.spk')),
+                label=owned.file(osp.join(
+                    out_dir, 'gtFine', split, 'synth',
+                    f'{stem}_gtFine_labelTrainIds.png')))
+            if is_complete(marker, recipe, files):
+                continue
+            frames, label = render_street_scene(
+                derive_generator(seed, scene), height, width, num_frames)
+            spikes, _ = simulate_spikes(
+                frames, num_steps, threshold=threshold,
+                seed=derive_seed(seed, scene, 'spikes'))
+            invalidate(marker)
+            records = dict(label=write_png(files['label'], label),
+                           spike=save_spikes(files['spike'], spikes))
+            write_marker(marker, recipe, records)
+            written += 1
     return written

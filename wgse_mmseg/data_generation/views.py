@@ -6,14 +6,13 @@ samples from, usable without OpenMMLab: images read as grey
 random smooth trajectory (shift, rotation, zoom) over one of them
 (:func:`render_trajectory`), the frames the simulator turns into spikes.
 """
-import glob
-import os.path as osp
 from typing import List, Tuple
 
 import cv2
 import numpy as np
 import torch
 
+from ..core.folder_walk import files_under
 from ..core.simulation import trajectory_source_maps
 
 __all__ = ['IMAGE_EXTENSIONS', 'read_grey_image', 'load_images',
@@ -34,12 +33,12 @@ def read_grey_image(path: str) -> np.ndarray:
 
 def load_images(image_dir: str, max_side: int) -> Tuple[List[str],
                                                         List[np.ndarray]]:
-    """Every image under ``image_dir`` (recursively, sorted by path), as
-    ``(H, W)`` float32 grey in [0, 1], downscaled to at most ``max_side``
-    pixels per side; returns the paths and the images."""
-    paths = sorted(p for p in glob.glob(osp.join(image_dir, '**', '*'),
-                                        recursive=True)
-                   if p.lower().endswith(IMAGE_EXTENSIONS))
+    """Every image under ``image_dir`` (recursively, sorted by path; each
+    file once, however many links lead to it, and a tree with links to
+    itself walked to its end: :func:`~wgse_mmseg.core.folder_walk.
+    files_under`), as ``(H, W)`` float32 grey in [0, 1], downscaled to at
+    most ``max_side`` pixels per side; returns the paths and the images."""
+    paths = files_under(image_dir, IMAGE_EXTENSIONS)
     if not paths:
         raise FileNotFoundError(
             f'{image_dir}: no images ({", ".join(IMAGE_EXTENSIONS)})')

@@ -20,7 +20,6 @@ in ``seg_fields`` so that crops and flips move it with the spikes.
 :class:`PackReconstructionInputs` turns both into the model's inputs
 ``(T, H, W)`` and a data sample holding ``gt_image`` ``(1, H, W)``.
 """
-import glob
 import os.path as osp
 from typing import List, Optional, Sequence, Tuple
 
@@ -34,6 +33,7 @@ from mmseg.registry import DATASETS, TRANSFORMS
 from ..core.arguments import (FRAME_SIZE, LAYOUT, NUM_STEPS, SEED, SIDE,
                               Integer, Number, Path, Sequence as Values,
                               Text, declare)
+from ..core.folder_walk import files_under
 from ..core.limits import MAX_SAMPLES
 from ..core.seeding import derive_generator, derive_seed
 from ..core.constants import REDS_WHITE_RATE
@@ -163,7 +163,7 @@ class REDSSpikeDataset(BaseDataset):
     def load_data_list(self) -> List[dict]:
         spike_dir = self.data_prefix['spike_path']
         gt_dir = self.data_prefix['gt_path']
-        paths = sorted(glob.glob(osp.join(spike_dir, '*' + self.spike_suffix)))
+        paths = files_under(spike_dir, (self.spike_suffix, ), depth=1)
         if not paths:
             raise FileNotFoundError(
                 f'{spike_dir}: no spike files *{self.spike_suffix} (REDS '

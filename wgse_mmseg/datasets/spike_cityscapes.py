@@ -9,6 +9,7 @@ from mmseg.datasets import CityscapesDataset
 from mmseg.registry import DATASETS
 
 from ..core.arguments import Choice, Text, declare
+from ..core.folder_walk import files_under
 from ..core.markers import sample_problem
 
 __all__ = ['SpikeCityscapesDataset']
@@ -70,7 +71,7 @@ class SpikeCityscapesDataset(CityscapesDataset):
                     f'data_root to a Spike-Cityscapes root (README, '
                     f'"Spike-Cityscapes layout") or make one with '
                     f'tools/dataset_converters/spike_cityscapes.py')
-        listed = super().load_data_list()
+        listed = self._listing()
         served, problems = [], Counter()
         for info in listed:
             problem = None if self.verify == 'none' else sample_problem(
@@ -100,6 +101,27 @@ class SpikeCityscapesDataset(CityscapesDataset):
                    f"verify='none' serves folders not written by the "
                    f'converter)' if problems else ''))
         return served
+
+    def _listing(self) -> List[dict]:
+        """MMSeg's data list; from a folder (no ``ann_file``), its spike
+        files found by :func:`~wgse_mmseg.core.folder_walk.files_under`
+        (each once, a tree with links to itself walked to its end; MMSeg's
+        own listing follows such links forever)."""
+        if self.ann_file and not osp.isdir(self.ann_file):
+            return super().load_data_list()
+        img_dir = self.data_prefix.get('img_path', '')
+        ann_dir = self.data_prefix.get('seg_map_path')
+        listed = []
+        for path in files_under(img_dir, (self.img_suffix, )):
+            info = dict(img_path=path, label_map=self.label_map,
+                        reduce_zero_label=self.reduce_zero_label,
+                        seg_fields=[])
+            if ann_dir is not None:
+                name = osp.relpath(path, img_dir)[:-len(self.img_suffix)]
+                info['seg_map_path'] = osp.join(
+                    ann_dir, name + self.seg_map_suffix)
+            listed.append(info)
+        return listed
 
     def _reasons(self) -> str:
         return ', '.join(f'{count} {reason}'

@@ -1,0 +1,231 @@
+"""Owning an output folder (wgse_mmseg.core.output_folder) with real
+processes: a second writer refused naming the first, or waiting for it; a
+killed writer's lock freed by the kernel; links at the lock, at files and
+on the way never followed; state files never appended to through a link."""
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+import threading
+
+import pytest
+
+from wgse_mmseg.core import output_folder
+from wgse_mmseg.core.output_folder import (OutputFolderError, discard,
+                                           open_append, own_folder)
+
+#: a process that owns FOLDER (job JOB, or None), says 'held', and keeps it
+#: until its stdin closes; with WAIT, says 'trying' first and waits
+HOLDER = textwrap.dedent('''
+    import importlib.util, sys
+    spec = importlib.util.spec_from_file_location('output_folder', sys.argv[6])
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)  # alone: no torch to import
+    own_folder = module.own_folder
+    folder, job, wait, log = sys.argv[1:5]
+    print('trying', flush=True)
+    with own_folder(folder, None if job == '-' else job, wait == 'wait'):
+        with open(log, 'a') as f:
+            f.write('start %s\\n' % sys.argv[5])
+        print('held', flush=True)
+        sys.stdin.read()
+        with open(log, 'a') as f:
+            f.write('end %s\\n' % sys.argv[5])
+''')
+
+
+def _holder(folder, log, name, job='-', wait='nowait'):
+    return subprocess.Popen(
+        [sys.executable, '-c', HOLDER, str(folder), job, wait, str(log),
+         name, output_folder.__file__], stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for(process, word):
+    for line in process.stdout:
+        if line.strip() == word:
+            return
+    raise AssertionError(process.stderr.read())
+
+
+def test_a_second_writer_is_refused_naming_the_first(tmp_path):
+    folder, log = tmp_path / 'out', tmp_path / 'log'
+    first = _holder(folder, log, 'first')
+    _wait_for(first, 'held')
+    with pytest.raises(OutputFolderError) as info:
+        with own_folder(str(folder)):
+            pass
+    message = str(info.value)
+    assert str(folder) in message
+    assert f'process {first.pid} on host {socket.gethostname()}' in message
+    assert 'started 20' in message
+    assert '-c' in message  # the first writer's command line
+    second = _holder(folder, log, 'second')  # another process: refused too
+    assert second.wait(60) == 1
+    assert f'process {first.pid}' in second.stderr.read()
+    first.communicate('', timeout=60)
+    assert log.read_text() == 'start first\nend first\n'
+    assert os.listdir(folder) == []  # the lock file goes with its writer
+    with own_folder(str(folder)):  # free again
+        pass
+
+
+def test_with_wait_the_second_writer_follows_the_first(tmp_path):
+    folder, log = tmp_path / 'out', tmp_path / 'log'
+    first = _holder(folder, log, 'first')
+    _wait_for(first, 'held')
+    second = _holder(folder, log, 'second', wait='wait')
+    _wait_for(second, 'trying')
+    second.stdin.close()  # it leaves as soon as it holds the folder
+    first.communicate('', timeout=60)
+    assert second.wait(60) == 0, second.stderr.read()
+    assert log.read_text().splitlines() == [
+        'start first', 'end first', 'start second', 'end second']
+    assert os.listdir(folder) == []
+
+
+def test_jobs_of_one_folder_run_together_and_exclude_their_twins(tmp_path):
+    folder, log = tmp_path / 'out', tmp_path / 'log'
+    one = _holder(folder, log, 'one', job='shard-1-of-2')
+    _wait_for(one, 'held')
+    with own_folder(str(folder), job='shard-2-of-2'):  # another job: free
+        with pytest.raises(OutputFolderError, match=f'process {one.pid}'):
+            with own_folder(str(folder), job='shard-1-of-2'):
+                pass
+    one.communicate('', timeout=60)
+
+
+def test_a_killed_writer_leaves_no_lock_held(tmp_path):
+    folder, log = tmp_path / 'out', tmp_path / 'log'
+    first = _holder(folder, log, 'first')
+    _wait_for(first, 'held')
+    os.kill(first.pid, signal.SIGKILL)
+    first.wait(60)
+    with own_folder(str(folder)):  # the kernel released it
+        pass
+    assert os.listdir(folder) == []
+
+
+def test_many_threads_and_processes_one_at_a_time(tmp_path):
+    """Eight writers (four processes, four threads of this one) each
+    append start/end to a log inside the lock: the log never interleaves."""
+    folder, log = tmp_path / 'out', tmp_path / 'log'
+    processes = [_holder(folder, log, f'p{i}', wait='wait') for i in range(4)]
+    for process in processes:
+        process.stdin.close()
+
+    def thread_writer(name):
+        with own_folder(str(folder), wait=True):
+            with open(log, 'a') as f:
+                f.write(f'start {name}\n')
+            with open(log, 'a') as f:
+                f.write(f'end {name}\n')
+    threads = [threading.Thread(target=thread_writer, args=(f't{i}', ))
+               for i in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(120)
+    for process in processes:
+        assert process.wait(120) == 0, process.stderr.read()
+    lines = log.read_text().splitlines()
+    assert len(lines) == 16
+    for start, end in zip(lines[::2], lines[1::2]):
+        assert start.split()[0] == 'start' and end == 'end ' + \
+            start.split()[1]
+
+
+def test_a_link_at_the_lock_is_not_followed(tmp_path):
+    outside = tmp_path / 'precious.txt'
+    outside.write_text('keep me')
+    folder = tmp_path / 'out'
+    folder.mkdir()
+    os.symlink(outside, folder / '.lock')
+    with own_folder(str(folder)):
+        assert not os.path.islink(folder / '.lock')
+        record = json.loads((folder / '.lock').read_text())
+        assert record['pid'] == os.getpid()
+    assert outside.read_text() == 'keep me'
+    assert os.listdir(folder) == []
+    os.mkfifo(folder / '.lock')  # opened, it would not be a lock file
+    with own_folder(str(folder)):
+        assert os.path.isfile(folder / '.lock')
+    assert os.listdir(folder) == []
+
+
+def test_a_folder_the_package_names_replaces_a_link_or_file(tmp_path):
+    outside = tmp_path / 'elsewhere'
+    outside.mkdir()
+    (outside / 'data').write_text('keep me')
+    state = tmp_path / 'walk.mp4.partial'
+    os.symlink(outside, state)
+    with own_folder(str(state), replace=True) as owned:
+        assert os.path.isdir(state) and not os.path.islink(state)
+        assert owned.root == str(state)
+    assert (outside / 'data').read_text() == 'keep me'
+    discard(str(state))
+    state.write_text('a file')
+    with own_folder(str(state), replace=True):
+        assert os.path.isdir(state)
+    # a folder the user names is followed, not replaced
+    target = tmp_path / 'target'
+    target.mkdir()
+    os.symlink(target, tmp_path / 'given')
+    with own_folder(str(tmp_path / 'given')) as owned:
+        owned.file(os.path.join(owned.root, 'a', 'b.txt'))
+    assert (target / 'a').is_dir()
+    (tmp_path / 'plain').write_text('x')
+    with pytest.raises(OutputFolderError, match='plain: cannot be made'):
+        with own_folder(str(tmp_path / 'plain')):
+            pass
+
+
+def test_paths_inside_never_lead_out(tmp_path):
+    outside = tmp_path / 'outside'
+    outside.mkdir()
+    (outside / 'secret.txt').write_text('keep me')
+    root = tmp_path / 'out'
+    with own_folder(str(root)) as owned:
+        # a link at a file's path is removed, its target kept
+        os.symlink(outside / 'secret.txt', root / 'sample.png')
+        path = owned.file(str(root / 'sample.png'))
+        assert not os.path.lexists(path)
+        # a FIFO (a read would block) is removed too
+        os.mkfifo(root / 'fifo.json')
+        assert not os.path.lexists(owned.file(str(root / 'fifo.json')))
+        # a regular file stays for its writer to verify
+        (root / 'kept.txt').write_text('mine')
+        assert owned.file(str(root / 'kept.txt')) == str(root / 'kept.txt')
+        assert (root / 'kept.txt').read_text() == 'mine'
+        # a linked folder on the way is refused, naming it
+        os.symlink(outside, root / 'city')
+        with pytest.raises(OutputFolderError, match=r'city: a symbolic link'):
+            owned.file(str(root / 'city' / 'a.png'))
+        (root / 'dir.png').mkdir()
+        with pytest.raises(OutputFolderError, match='dir.png: a folder'):
+            owned.file(str(root / 'dir.png'))
+        with pytest.raises(OutputFolderError, match='not inside'):
+            owned.file(str(tmp_path / 'elsewhere.png'))
+    assert sorted(os.listdir(outside)) == ['secret.txt']
+    assert (outside / 'secret.txt').read_text() == 'keep me'
+
+
+def test_state_is_never_appended_to_through_a_link(tmp_path):
+    outside = tmp_path / 'precious.csv'
+    outside.write_text('keep me\n')
+    os.symlink(outside, tmp_path / 'progress.csv')
+    with pytest.raises(OutputFolderError, match='progress.csv'):
+        open_append(str(tmp_path / 'progress.csv'))
+    os.link(outside, tmp_path / 'hard.csv')
+    with pytest.raises(OutputFolderError, match='hard.csv'):
+        open_append(str(tmp_path / 'hard.csv'))
+    os.mkfifo(tmp_path / 'fifo.csv')  # no reader: refused, not waited on
+    with pytest.raises(OutputFolderError, match='fifo.csv'):
+        open_append(str(tmp_path / 'fifo.csv'))
+    assert outside.read_text() == 'keep me\n'
+    with open_append(str(tmp_path / 'new.csv')) as f:
+        f.write(b'row\n')
+    assert (tmp_path / 'new.csv').read_bytes() == b'row\n'

@@ -1,0 +1,318 @@
+"""The package owns its output folders: one writer, no link followed out.
+
+Every tool that writes an output a re-run may resume (a walk's state
+folder, a conversion, the synthetic dataset, the training images, the ONNX
+export) writes it inside :func:`own_folder`:
+
+One writer at a time
+    The folder's lock file ``<folder>/.lock`` (``.lock-<job>`` for one job
+    of several that may share a folder: a shard of a conversion, one file
+    of an export) is locked exclusively (``fcntl.flock``) for as long as
+    the output is written, and records its writer: process id, host,
+    command and start time. A second writer of the same output is refused
+    at once with an :class:`OutputFolderError` naming the first, or, with
+    ``wait=True`` (the tools' ``--wait``), waits for it to finish. The
+    kernel releases the lock of a killed process, so a lock is never stale;
+    the lock file is removed when its writer is done.
+No link followed out of the folder
+    Paths inside the folder are reached through :meth:`OwnedFolder.folder`
+    and :meth:`OwnedFolder.file`: a folder on the way that is a symbolic
+    link is refused (it could send writes anywhere), and what lies at a
+    file's own path, when it is a link or no regular file (a FIFO, a
+    socket), is removed, never its target, so it is neither read nor
+    written through. Files are written by rename
+    (:func:`~wgse_mmseg.core.io.atomic_output`), which replaces a path,
+    never writes through it; a state file appended to in place is opened
+    by :func:`open_append`, which refuses a link or a file with other
+    names. A folder the package names itself (``<video>.partial``) is
+    owned with ``replace=True``: a link or file at its path is replaced by
+    a folder.
+State verified before use
+    What a tool finds in its folder is checked before it is trusted (a
+    frame against the size and SHA-256 its writer recorded, a sample
+    against its marker, an image against what it is made from), and what
+    does not verify is made again: resume state is rebuilt from what
+    verifies, never a dead end.
+
+Needs no OpenMMLab.
+"""
+import contextlib
+import datetime
+import fcntl
+import hashlib
+import json
+import os
+import os.path as osp
+import shutil
+import socket
+import stat
+import sys
+from typing import BinaryIO, Iterator, Optional
+
+__all__ = ['OutputFolderError', 'OwnedFolder', 'own_folder', 'discard',
+           'open_append', 'add_wait_option']
+
+#: the lock file of a folder's (only) job; ``.lock-<job>`` for a named one
+LOCK_NAME = '.lock'
+_NOFOLLOW = getattr(os, 'O_NOFOLLOW', 0)
+
+
+class OutputFolderError(ValueError):
+    """An output folder this package cannot own as asked: another process
+    writes it, or a path in it is a link or not what it must be; names the
+    path."""
+
+
+def _lock_path(folder: str, job: Optional[str]) -> str:
+    if job is None:
+        return osp.join(folder, LOCK_NAME)
+    name = ''.join(c if c.isalnum() or c in '._-' else '_' for c in job)
+    if len(name) > 200:
+        name = hashlib.sha256(job.encode()).hexdigest()
+    return osp.join(folder, f'{LOCK_NAME}-{name}')
+
+
+def _writer_record() -> bytes:
+    """Who writes: process id, host, command and start time, as JSON."""
+    return json.dumps(dict(
+        pid=os.getpid(), host=socket.gethostname(),
+        command=' '.join([osp.basename(sys.executable)] + sys.argv),
+        started=datetime.datetime.now(datetime.timezone.utc).isoformat(
+            timespec='seconds'))).encode()
+
+
+def _describe_writer(fd: int) -> str:
+    """The writer recorded in the lock file ``fd``, in words."""
+    try:
+        record = json.loads(os.pread(fd, 4096, 0) or b'null')
+        return (f'process {int(record["pid"])} on host '
+                f'{str(record["host"])[:100]}, started '
+                f'{str(record["started"])[:40]}: '
+                f'{str(record["command"])[:300]}')
+    except (OSError, ValueError, TypeError, KeyError):
+        return 'a process that has not yet recorded itself'
+
+
+def discard(path: str) -> None:
+    """Remove what lies at ``path`` without following a link: a file, a
+    link (never its target), a FIFO or a folder with its content; nothing
+    when nothing is there."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    if stat.S_ISDIR(mode):
+        shutil.rmtree(path)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
+
+
+class OwnedFolder:
+    """Paths inside a folder the package writes (its writer holds the
+    lock: :func:`own_folder`). ``whole``: the package named the folder and
+    everything in it is its own (a walk's state), so a folder where a file
+    belongs is removed too; ``lock``: its writer's lock file, which
+    :meth:`clear` keeps."""
+
+    def __init__(self, root: str, whole: bool = False,
+                 lock: Optional[str] = None):
+        #: the folder
+        self.root = root
+        self.whole = whole
+        self._lock = lock
+
+    def clear(self) -> None:
+        """Remove everything in the folder but its writer's lock file (a
+        state that cannot be trusted, started over)."""
+        for name in os.listdir(self.root):
+            path = osp.join(self.root, name)
+            if path != self._lock:
+                discard(path)
+
+    def _inside(self, path: str) -> str:
+        """``path`` relative to the root; it must lie inside it."""
+        relative = osp.relpath(osp.abspath(path), osp.abspath(self.root))
+        if relative == '.' or relative.startswith(os.pardir + os.sep) or \
+                relative == os.pardir:
+            raise OutputFolderError(f'{path}: not inside the output folder '
+                                    f'{self.root}')
+        return relative
+
+    def folder(self, path: str) -> str:
+        """``path``, a folder inside the root, made with every folder on
+        the way; a link or a file on the way is an
+        :class:`OutputFolderError` naming it."""
+        current = self.root
+        for part in self._inside(path).split(os.sep):
+            current = osp.join(current, part)
+            try:
+                mode = os.lstat(current).st_mode
+            except FileNotFoundError:
+                with contextlib.suppress(FileExistsError):
+                    os.mkdir(current)
+                mode = os.lstat(current).st_mode
+            if stat.S_ISLNK(mode):
+                raise OutputFolderError(
+                    f'{current}: a symbolic link inside the output folder '
+                    f'{self.root}; writes are not sent through links (they '
+                    f'could land anywhere): make it a folder, or write to '
+                    f'an output folder on that disk')
+            if not stat.S_ISDIR(mode):
+                raise OutputFolderError(
+                    f'{current}: a file where the output folder '
+                    f'{self.root} needs a folder; move it away')
+        return path
+
+    def file(self, path: str) -> str:
+        """``path``, a file inside the root, its folder made
+        (:meth:`folder`), and what lies at it removed when it is a link or
+        no regular file: afterwards it is absent or a regular file, safe
+        to read or replace. A folder there is an
+        :class:`OutputFolderError` naming it, unless the whole folder is
+        the package's (then it is removed)."""
+        parent = osp.dirname(self._inside(path))
+        if parent:
+            self.folder(osp.join(self.root, parent))
+        try:
+            mode = os.lstat(path).st_mode
+        except FileNotFoundError:
+            return path
+        if stat.S_ISDIR(mode) and not self.whole:
+            raise OutputFolderError(f'{path}: a folder where the output '
+                                    f'folder {self.root} needs a file; '
+                                    f'move it away')
+        if not stat.S_ISREG(mode):
+            discard(path)
+        return path
+
+
+def _take_lock(folder: str, lock: str, wait: bool, replace: bool) -> int:
+    """The open, exclusively locked lock file ``lock`` of ``folder``,
+    recording this process; made again where another process removed it
+    meanwhile."""
+    while True:
+        if replace:
+            try:
+                if not stat.S_ISDIR(os.lstat(folder).st_mode):
+                    discard(folder)  # a link or a file where ours belongs
+            except FileNotFoundError:
+                pass
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError as err:
+            raise OutputFolderError(
+                f'{folder}: cannot be made the output folder '
+                f'({err.strerror}: a file is there, or on the way)') from err
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | _NOFOLLOW, 0o666)
+        except FileNotFoundError:
+            continue  # the folder was removed meanwhile: its writer is done
+        except OSError as err:
+            if osp.islink(lock):  # O_NOFOLLOW: not our lock file
+                discard(lock)
+                continue
+            raise OutputFolderError(f'{folder}: cannot make its lock file '
+                                    f'{lock}: {err.strerror}') from err
+        if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO put there
+            os.close(fd)
+            discard(lock)
+            continue
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                if not wait:
+                    raise OutputFolderError(
+                        f'{folder}: another process is writing this output '
+                        f'({_describe_writer(fd)}); wait for it to end (or '
+                        f'pass --wait), or stop it') from None
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            try:  # the lock counts only on the file the path still names
+                current = os.lstat(lock)
+            except FileNotFoundError:
+                current = None
+            mine = os.fstat(fd)
+            if current is None or (current.st_dev, current.st_ino) != (
+                    mine.st_dev, mine.st_ino):
+                os.close(fd)
+                continue
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, _writer_record(), 0)
+            return fd
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+            raise
+
+
+def _release(fd: int, lock: str) -> None:
+    """Remove the lock file if it is still ``fd``'s, then unlock."""
+    try:
+        current, mine = os.lstat(lock), os.fstat(fd)
+        if (current.st_dev, current.st_ino) == (mine.st_dev, mine.st_ino):
+            os.unlink(lock)
+    except FileNotFoundError:
+        pass  # the folder was removed with its lock (a walk's state)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def own_folder(folder: str, job: Optional[str] = None, wait: bool = False,
+               replace: bool = False) -> Iterator[OwnedFolder]:
+    """Hold ``folder`` (made if missing) for writing, for the block.
+
+    Args:
+        folder: the output folder (a link given by the user as the folder
+            itself is followed; links inside it are not).
+        job: which of several jobs that may write the folder at the same
+            time this is (a shard, an output file's name); ``None`` for the
+            folder's only job. Writers of the same job exclude each other.
+        wait: wait for another writer of the job to finish instead of
+            raising.
+        replace: the package names this folder itself and all in it is
+            its own: a link, file or FIFO at its path is removed and a
+            folder made instead, and a folder inside where a file belongs
+            is removed (:class:`OwnedFolder`'s ``whole``).
+
+    Raises:
+        OutputFolderError: another process writes the job (naming its
+            process id, host, command and start time), or ``folder``
+            cannot be made a folder.
+    """
+    folder = os.fspath(folder)
+    lock = _lock_path(folder, job)
+    fd = _take_lock(folder, lock, wait, replace)
+    try:
+        yield OwnedFolder(folder, whole=replace, lock=lock)
+    finally:
+        _release(fd, lock)
+
+
+def open_append(path: str) -> BinaryIO:
+    """Open the state file ``path`` for appending: made if missing; a link
+    (never followed), a file with other names (hard links) or anything but
+    a regular file is an :class:`OutputFolderError` naming it."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW
+                     | os.O_NONBLOCK, 0o666)  # a FIFO: an error, no wait
+    except OSError as err:
+        raise OutputFolderError(f'{path}: cannot append to it (a link?): '
+                                f'{err.strerror}') from err
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
+        os.close(fd)
+        raise OutputFolderError(f'{path}: not a regular file of one name; '
+                                f'a state file is not appended to through '
+                                f'a link')
+    return os.fdopen(fd, 'ab')
+
+
+def add_wait_option(parser) -> None:
+    """A tool's ``--wait``: wait for another writer of the same output
+    instead of stopping (:func:`own_folder`)."""
+    parser.add_argument(
+        '--wait', action='store_true',
+        help='if another process is writing the same output, wait for it '
+        'to finish instead of stopping with its name')
