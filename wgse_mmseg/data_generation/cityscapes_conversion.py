@@ -65,9 +65,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from ..core import arguments
 from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
-                              Number, Path, declare, declare_fields)
+                              Number, Path, SequenceOf, declare,
+                              declare_fields)
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
 from ..core.io import save_spikes, temporaries_of, write_png
 from ..core.limits import MAX_SAMPLES, MAX_WORKERS
@@ -442,7 +442,7 @@ def _init_worker() -> None:
 
 
 @declare(root=Path(), out_dir=Path(),
-         splits=arguments.Sequence(Choice(CITYSCAPES_SPLITS)),
+         splits=SequenceOf(Choice(CITYSCAPES_SPLITS)),
          nproc=Integer(1, MAX_WORKERS),
          limit=Integer(1, MAX_SAMPLES, optional=True), progress=Flag(),
          shard=SHARD)

@@ -30,8 +30,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from ..core.arguments import Choice, Integer, Path, Sequence as SequenceOf
-from ..core.arguments import declare
+from ..core.arguments import Choice, Integer, Path, SequenceOf, declare
 from ..core.io import write_png
 
 __all__ = ['SOURCES', 'SCIKIT_IMAGE_PHOTOGRAPHS', 'export_training_images',

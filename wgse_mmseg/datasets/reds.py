@@ -32,7 +32,7 @@ from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
 from ..core.arguments import (FRAME_SIZE, LAYOUT, NUM_STEPS, SEED, SIDE,
-                              Integer, Number, Path, Sequence as Values,
+                              Integer, Number, Path, SequenceOf,
                               Text, declare)
 from ..core.limits import MAX_SAMPLES
 from ..core.seeding import derive_generator, derive_seed
@@ -192,8 +192,8 @@ def default_image_dir() -> str:
 
 
 #: a ``(low, high)`` range of positive numbers
-_POSITIVE_RANGE = Values(Number(0, strict_minimum=True), names=('low', 'high'),
-                         ordered=True)
+_POSITIVE_RANGE = SequenceOf(Number(0, strict_minimum=True),
+                             names=('low', 'high'), ordered=True)
 
 
 @DATASETS.register_module()
