@@ -56,4 +56,4 @@ def __getattr__(name):
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
-__all__ = ['__version__', 'core', 'register_all_modules', 'MMSEG_LAYER']
+__all__ = ['__version__', 'register_all_modules']

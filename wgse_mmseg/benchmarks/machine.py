@@ -12,8 +12,7 @@ from typing import Any, Callable, Dict
 
 import torch
 
-__all__ = ['cpu_model', 'package_version', 'machine_record',
-           'run_isolated']
+__all__ = []
 
 #: record key -> the distributions whose version it states, the first
 #: installed of them (``'not installed'`` where none is)

@@ -63,8 +63,7 @@ from ..models.reconstruction import (METHODS, SpikeReconstructor,
                                      reconstruction_method)
 from ..evaluation.metrics import ReconstructionMetric
 
-__all__ = ['benchmark', 'format_table', 'score_recording',
-           'format_recording_table', 'multiply_adds']
+__all__ = ['benchmark', 'score_recording']
 
 
 def _method(method: str, checkpoint: Optional[str], device: str):

@@ -31,12 +31,7 @@ from typing import Any, Callable, Dict, Optional, Sequence
 from .limits import (MAX_CLASSES, MAX_IMAGE_SIDE, MAX_NUM_STEPS,
                      MAX_PARAMETERS, MAX_SEED, excerpt)
 
-__all__ = [
-    'ArgumentError', 'Argument', 'Integer', 'Number', 'Flag', 'Text',
-    'Choice', 'Path', 'SequenceOf', 'OneOf', 'Declaration', 'declare',
-    'declare_fields', 'check_parameter_count', 'NUM_STEPS', 'SIDE',
-    'FRAME_SIZE', 'SEED', 'NUM_CLASSES', 'PROBABILITY', 'LAYOUT'
-]
+__all__ = ['ArgumentError']
 
 class ArgumentError(ValueError):
     """An argument is not what its entry point declares.

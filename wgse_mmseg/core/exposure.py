@@ -19,8 +19,7 @@ import numpy as np
 
 from .arguments import Choice, Number, OneOf, declare
 
-__all__ = ['EXPOSURE_CHOICES', 'EXPOSURE', 'UNDER_EXPOSED_BELOW', 'Exposed',
-           'auto_exposure', 'exposure_gain', 'apply_exposure']
+__all__ = ['apply_exposure']
 
 #: the non-numeric values of an ``exposure`` argument
 EXPOSURE_CHOICES = ('auto', 'none')

@@ -11,7 +11,7 @@ from typing import Callable, List, TypeVar
 
 import torch
 
-__all__ = ['for_each_on_threads']
+__all__ = []
 
 State = TypeVar('State')
 

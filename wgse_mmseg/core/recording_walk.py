@@ -69,10 +69,7 @@ from .io import (atomic_output, atomic_path, load_spikes, spike_shape,
                  write_bytes, write_png)
 from .limits import MAX_BATCH_SIZE, load_json_file
 
-__all__ = ['WalkError', 'WalkPlan', 'WalkOutputs', 'WalkReport',
-           'VIDEO_EXTENSIONS', 'CSV_COLUMNS', 'STRIDE', 'BATCH_SIZE', 'FPS',
-           'plan_walk', 'walk_outputs', 'read_windows', 'walk_recording',
-           'add_walk_options']
+__all__ = ['WalkError', 'WalkReport', 'walk_recording']
 
 #: the video formats, by lower-case extension of ``video``
 VIDEO_EXTENSIONS = ('.mp4', '.gif')

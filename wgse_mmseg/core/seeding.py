@@ -30,8 +30,7 @@ import numpy as np
 from .arguments import SEED
 from .limits import MAX_SEED
 
-__all__ = ['MAX_SEED', 'check_seed', 'derive_seed', 'derive_generator',
-           'draw_seed']
+__all__ = []
 
 #: a key of a derived seed
 Key = Union[str, int]

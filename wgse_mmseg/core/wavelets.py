@@ -29,10 +29,7 @@ import torch
 from .arguments import Choice, Integer, declare
 from .limits import MAX_LEVEL, MAX_NUM_STEPS
 
-__all__ = [
-    'SUPPORTED_MODES', 'get_wavelet', 'band_lengths', 'analysis_matrix',
-    'synthesis_matrix', 'wavedec', 'waverec'
-]
+__all__ = ['wavedec', 'waverec']
 
 #: Boundary modes with an exact matrix form here (``pywt.Modes`` names).
 SUPPORTED_MODES = ('zero', 'constant', 'symmetric', 'reflect', 'periodic',

@@ -76,12 +76,7 @@ from ..core.seeding import derive_seed
 from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 from .shards import SHARD, WHOLE, Shard
 
-__all__ = [
-    'CITYSCAPES_LABELS', 'LABEL_ID_TO_TRAIN_ID', 'CityscapesSample',
-    'ConversionSettings', 'find_samples', 'labelids_to_trainids',
-    'resize_nearest', 'sample_effects', 'output_paths',
-    'convert_sample', 'convert_cityscapes', 'load_scene'
-]
+__all__ = ['ConversionSettings', 'convert_cityscapes']
 
 CITYSCAPES_FPS = 17.0  # leftImg8bit_sequence frame rate
 ANNOTATED_INDEX = 19  # the annotated frame is the 20th of a 30-frame snippet

@@ -11,7 +11,7 @@ from typing import List, NamedTuple, Sequence, TypeVar
 from ..core.arguments import Argument
 from ..core.limits import MAX_SAMPLES
 
-__all__ = ['Shard', 'SHARD', 'WHOLE']
+__all__ = []
 
 Item = TypeVar('Item')
 

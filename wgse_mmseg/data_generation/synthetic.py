@@ -26,7 +26,7 @@ from ..core.markers import invalidate, is_complete, write_marker
 from ..core.seeding import derive_generator, derive_seed
 from ..core.simulation import simulate_spikes
 
-__all__ = ['render_street_scene', 'make_synthetic_dataset']
+__all__ = ['make_synthetic_dataset']
 
 # Cityscapes train ids of the classes the scenes draw.
 ROAD, SIDEWALK, BUILDING, POLE, SIGN, VEGETATION, SKY, PERSON, CAR = (

@@ -33,8 +33,7 @@ from tqdm import tqdm
 from ..core.arguments import Choice, Integer, Path, SequenceOf, declare
 from ..core.io import write_png
 
-__all__ = ['SOURCES', 'SCIKIT_IMAGE_PHOTOGRAPHS', 'export_training_images',
-           'build_parser', 'main']
+__all__ = ['export_training_images']
 
 #: the photographs of ``skimage/data`` (scikit-image 0.26); its charts,
 #: binary masks, text pages and synthetic phantoms are not used

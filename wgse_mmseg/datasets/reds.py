@@ -44,7 +44,7 @@ from .transforms import LoadSpikeFromFile
 
 __all__ = [
     'REDSSpikeDataset', 'SimulatedSpikeImageDataset', 'LoadSpikeImagePair',
-    'PackReconstructionInputs', 'default_image_dir'
+    'PackReconstructionInputs'
 ]
 
 @TRANSFORMS.register_module()

@@ -41,8 +41,7 @@ from typing import Any, Dict, FrozenSet, Mapping, Optional
 from ..core.arguments import ArgumentError
 from .config_data import ConfigDataError
 
-__all__ = ['AllowList', 'MAX_DEPTH', 'check_file_config',
-           'build_from_file_config']
+__all__ = []
 
 #: class -> {argument holding a config of its own -> the AllowList of that
 #: config}; arguments not named take plain data only

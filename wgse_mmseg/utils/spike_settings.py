@@ -35,8 +35,7 @@ from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf,
                               Path)
 from ..core.limits import excerpt
 
-__all__ = ['SpikeSettingsError', 'SpikeSetting', 'SPIKE_SETTINGS',
-           'apply_spike_settings', 'check_setting']
+__all__ = []
 
 
 class SpikeSettingsError(ValueError):

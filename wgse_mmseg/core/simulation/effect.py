@@ -32,11 +32,7 @@ from ..arguments import Choice, Number, SequenceOf
 from ..limits import excerpt
 from ..seeding import derive_seed
 
-__all__ = [
-    'SimulationContext', 'Effect', 'LightEffect', 'SensorEffect',
-    'ChargeEffect', 'EFFECTS', 'register_effect', 'check_number',
-    'check_choice', 'check_pair'
-]
+__all__ = []
 
 
 #: the entry point errors about effect parameters name

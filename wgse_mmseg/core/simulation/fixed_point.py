@@ -53,10 +53,7 @@ try:
 except ImportError:  # installed without a C compiler: the torch path runs
     _integrate_and_fire = None
 
-__all__ = ['FRACTION_BITS', 'ONE', 'MAX_STEP_CHARGE', 'MAX_BLOCK_STEPS',
-           'MAX_LINEAR_BLOCK_STEPS', 'BACKENDS', 'CHOICES',
-           'compiled_unavailable', 'resolve_backend', 'initial_charge',
-           'quantise', 'LinearCharge', 'Integrator']
+__all__ = []
 
 #: the backends that integrate (see the module docstring)
 BACKENDS = ('torch', 'compiled')

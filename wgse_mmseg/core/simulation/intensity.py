@@ -2,7 +2,7 @@
 import numpy as np
 import torch
 
-__all__ = ['frames_to_intensity', 'LUMA']
+__all__ = []
 
 # ITU-R BT.601 luma weights of R, G, B.
 LUMA = (0.299, 0.587, 0.114)
