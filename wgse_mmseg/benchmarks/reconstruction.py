@@ -250,9 +250,9 @@ def score_recording(path: str, methods: Sequence[str] = METHODS,
     return results
 
 
-def format_recording_table(results: Dict[str, Dict[str, Optional[float]]],
-                           recording: str, frames: Sequence[int],
-                           exposure, device: str = 'cpu') -> str:
+def _format_recording_table(results: Dict[str, Dict[str, Optional[float]]],
+                            recording: str, frames: Sequence[int],
+                            exposure, device: str = 'cpu') -> str:
     """Markdown table of :func:`score_recording`'s results, under a line
     naming the recording, frames, exposure and machine."""
     def cell(value, digits):
@@ -333,8 +333,8 @@ def main(argv=None):
                 args.layout)
         except (SpikeFileError, ValueError) as err:
             sys.exit(f'{parser.prog}: error: {err}')
-        print(format_recording_table(results, args.data_root, frames,
-                                     args.exposure, args.device))
+        print(_format_recording_table(results, args.data_root, frames,
+                                      args.exposure, args.device))
         return
     results = benchmark(args.data_root, methods, args.checkpoint,
                         args.num_steps, args.spike_suffix, args.device,
