@@ -11,6 +11,7 @@ memory bounds.
 import importlib
 import inspect
 import math
+import pkgutil
 
 import numpy as np
 import pytest
@@ -19,24 +20,37 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import wgse_mmseg
-from wgse_mmseg.core.arguments import (DECLARATIONS, LAYOUT, ArgumentError,
-                                       Choice, Path)
+from wgse_mmseg.core.arguments import LAYOUT, ArgumentError, Choice, Path
 from wgse_mmseg.data_generation.cityscapes_conversion import ConversionSettings
 
 wgse_mmseg.register_all_modules()
-# the modules whose entry points are declared but not imported above
-for _module in ('wgse_mmseg.data_generation.synthetic',
-                'wgse_mmseg.data_generation.cityscapes_conversion',
-                'wgse_mmseg.core.io', 'wgse_mmseg.models.reconstruction',
-                'wgse_mmseg.core.exposure', 'wgse_mmseg.benchmarks.timing',
-                'wgse_mmseg.apis.experiments', 'wgse_mmseg.core.wavelets',
-                'wgse_mmseg.core.reconstruction_baselines',
-                'wgse_mmseg.data_generation.training_images',
-                'wgse_mmseg.benchmarks.reconstruction',
-                'wgse_mmseg.core.recording_walk',
-                'wgse_mmseg.apis.onnx_export',
-                'wgse_mmseg.benchmarks.deployment'):
-    importlib.import_module(_module)
+
+
+def _declared_entry_points():
+    """``(callable, declaration)`` of every entry point that :func:`declare`
+    checks, found in every module of the package: a function, or a class
+    whose ``__init__`` is declared, defined in the module that holds it (a
+    module whose optional dependency is absent is skipped)."""
+    found = []
+    for info in pkgutil.walk_packages(wgse_mmseg.__path__, 'wgse_mmseg.'):
+        try:
+            module = importlib.import_module(info.name)
+        except ModuleNotFoundError as err:
+            if err.name and err.name.split('.')[0] != 'wgse_mmseg':
+                continue
+            raise
+        for value in vars(module).values():
+            function = (vars(value).get('__init__')
+                        if inspect.isclass(value) else value)
+            declaration = getattr(function, 'declaration', None)
+            if declaration is not None and \
+                    getattr(value, '__module__', None) == info.name:
+                found.append((value, declaration))
+    return sorted(found, key=lambda pair: (pair[0].__module__,
+                                           pair[1].entry))
+
+
+DECLARED = _declared_entry_points()
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
 #: takes microseconds, and accepted values build small modules)
@@ -137,19 +151,14 @@ def _required(entry):
     }.get(entry, {})
 
 
-def _entries():
-    for key, declaration in sorted(DECLARATIONS.items()):
-        module = key[:-len(declaration.entry) - 1]
-        for name in declaration.arguments:
-            yield pytest.param(module, declaration, name,
-                               id=f'{declaration.entry}.{name}')
-
-
-ENTRIES = list(_entries())
+ENTRIES = [pytest.param(call, declaration, name,
+                        id=f'{declaration.entry}.{name}')
+           for call, declaration in DECLARED
+           for name in declaration.arguments]
 
 
 def test_the_public_entry_points_are_declared():
-    entries = {declaration.entry for declaration in DECLARATIONS.values()}
+    entries = {declaration.entry for _, declaration in DECLARED}
     assert {
         'WGSE', 'BandNetwork', 'TFP', 'TemporalMeanFilter',
         'SpatialMeanFilter', 'SpikeSegDataPreProcessor', 'LoadSpikeFromFile',
@@ -164,7 +173,7 @@ def test_the_public_entry_points_are_declared():
         'tfi_spatial_mean', 'tfi_temporal_mean', 'export_training_images',
         'ExperimentSettings', 'score_recording'
     } <= entries
-    for declaration in DECLARATIONS.values():
+    for _, declaration in DECLARED:
         parameters = inspect.signature(declaration.function).parameters
         required = {n for n, p in parameters.items()
                     if p.default is p.empty and n != 'self' and
@@ -180,10 +189,10 @@ def test_every_reader_of_a_recording_declares_the_layout():
     that reads one."""
     readers = {'load_spikes', 'spike_shape', 'LoadSpikeFromFile',
                'LoadSpikeImagePair', 'score_recording', 'walk_recording'}
-    declaring = {declaration.entry for declaration in DECLARATIONS.values()
+    declaring = {declaration.entry for _, declaration in DECLARED
                  if 'layout' in declaration.arguments}
     assert declaring == readers
-    for declaration in DECLARATIONS.values():
+    for _, declaration in DECLARED:
         if declaration.entry in readers:
             layout = declaration.arguments['layout']
             assert isinstance(layout, Choice) and layout.optional
@@ -212,12 +221,11 @@ def _bad_values(argument):
     return st.one_of(numbers, others, files)
 
 
-@pytest.mark.parametrize('module, declaration, name', ENTRIES)
-def test_bad_arguments(module, declaration, name, single_thread,
+@pytest.mark.parametrize('call, declaration, name', ENTRIES)
+def test_bad_arguments(call, declaration, name, single_thread,
                        monkeypatch, bounded):
     # relative paths drawn for outputs land in the fixture folder
     monkeypatch.chdir(FIXTURE_FILES['root'])
-    call = getattr(importlib.import_module(module), declaration.entry)
     argument = declaration.arguments[name]
 
     @settings(max_examples=6, deadline=None, database=None,

@@ -10,8 +10,6 @@ import importlib.util
 import os.path as osp
 import re
 
-import pytest
-
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 ROLE = re.compile(r':(?:mod|func|class|data|meth|attr):`~?([A-Za-z_.][\w.]*)`')
 PATH = re.compile(r'(?<![\w./-])((?:tests|tools|docs|configs|wgse_mmseg)'
@@ -99,12 +97,3 @@ def test_docstrings_and_docs_reference_what_exists():
                 not glob.glob(osp.join(ROOT, ref.rstrip('.'))):
             broken.append(f'{where}: {ref}')
     assert not broken, 'broken references:\n' + '\n'.join(sorted(set(broken)))
-
-
-@pytest.mark.parametrize('path', [p for p in SOURCES
-                                  if p.endswith('__init__.py')],
-                         ids=lambda p: osp.relpath(p, ROOT))
-def test_package_all_lists_what_exists(path):
-    module = importlib.import_module(_module_name(path))
-    for name in getattr(module, '__all__', []):
-        assert hasattr(module, name), f'{module.__name__}.{name}'

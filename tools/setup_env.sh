@@ -53,7 +53,7 @@ esac
 
 # The rest of the stack; the torch constraint stops any dependency from upgrading torch.
 echo "$TORCH_PIN" > "$VENV/torch-constraint.txt"
-"${PIP[@]}" install -q -c "$VENV/torch-constraint.txt" -r requirements/runtime.txt -r requirements/tests.txt
+"${PIP[@]}" install -q -c "$VENV/torch-constraint.txt" -r requirements/runtime.txt -r requirements/tests.txt -r requirements/docs.txt
 # Editable, as `setup.py develop` (an egg-link to this checkout), not PEP 660:
 # mim finds configs/ and tools/ through pkg_resources' location of the package,
 # which is this checkout for an egg-link but site-packages for a PEP 660 install.

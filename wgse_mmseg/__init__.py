@@ -32,8 +32,8 @@ from . import core
 from .version import __version__
 
 #: the packages that register with MMSeg
-MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
-               'wgse_mmseg.evaluation', 'wgse_mmseg.models')
+_MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
+                'wgse_mmseg.evaluation', 'wgse_mmseg.models')
 _LAZY = ('apis', 'benchmarks', 'compat', 'data_generation', 'datasets',
          'engine', 'evaluation', 'models', 'utils')
 
@@ -42,11 +42,11 @@ def register_all_modules() -> None:
     """Set up the MMSeg layer: apply the compatibility patches (once per
     process; :func:`wgse_mmseg._openmmlab.prepare_mmseg_layer`), then
     register every module of the package with MMSeg's registries (import
-    :data:`MMSEG_LAYER`). Call it before importing MMSeg or a layer
+    :data:`_MMSEG_LAYER`). Call it before importing MMSeg or a layer
     package."""
     from ._openmmlab import prepare_mmseg_layer
     prepare_mmseg_layer()
-    for name in MMSEG_LAYER:
+    for name in _MMSEG_LAYER:
         importlib.import_module(name)
 
 
@@ -56,4 +56,4 @@ def __getattr__(name):
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
-__all__ = ['__version__', 'core', 'register_all_modules', 'MMSEG_LAYER']
+__all__ = ['__version__', 'register_all_modules']

@@ -20,8 +20,7 @@ import os
 import sys
 from typing import List
 
-__all__ = ['OPENMMLAB', 'missing_openmmlab', 'require_openmmlab',
-           'check_mmseg_layer', 'prepare_mmseg_layer']
+__all__ = []
 
 #: import name -> distribution to install
 OPENMMLAB = {'mmengine': 'mmengine', 'mmcv': 'mmcv-lite',

@@ -311,10 +311,6 @@ def test_missing_file(tmp_path):
         load_spikes(path)
 
 
-def test_spike_file_error_is_value_error():
-    assert issubclass(SpikeFileError, ValueError)
-
-
 # ------------------------------------------------------- atomic writes
 def _listing(directory):
     return sorted(os.listdir(directory))

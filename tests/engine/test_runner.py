@@ -14,12 +14,14 @@ wgse_mmseg.register_all_modules()
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 
 
-@pytest.fixture
-def runner(tmp_path):
+@pytest.fixture(scope='module')
+def runner(tmp_path_factory):
+    """One runner for the module: neither test changes it (the refused
+    resume stops before loading; the other loads the model's own state)."""
     cfg = load_config(osp.join(ROOT, 'configs', 'reconstruction',
                                'wgse_resnet_cpu.py'),
                       {'model.channels': 4, 'model.mid_channels': 4})
-    cfg.work_dir = str(tmp_path / 'work')
+    cfg.work_dir = str(tmp_path_factory.mktemp('work'))
     runner = build_runner(cfg)
     assert type(runner).__name__ == 'SpikeRunner'
     return runner

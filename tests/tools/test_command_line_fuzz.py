@@ -28,7 +28,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wgse_mmseg.core.arguments import (LAYOUT, Argument, Choice, Integer,
-                                       Number, OneOf, Path, Sequence, Text)
+                                       Number, OneOf, Path, SequenceOf, Text)
 from wgse_mmseg.core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
 from wgse_mmseg.data_generation.shards import Shard, ShardArgument
 from wgse_mmseg.utils.config import SPIKE_SETTING_KINDS, ConfigOptions
@@ -170,7 +170,7 @@ def _accepted(kind, word):
             if ok:
                 return ok, value
         return no
-    if isinstance(kind, Sequence):
+    if isinstance(kind, SequenceOf):
         parts = word.split(kind.separator)
         if len(parts) < kind.min_length or (
                 kind.max_length is not None and len(parts) > kind.max_length):
@@ -221,7 +221,7 @@ def _boundaries(kind):
             str(c).upper() + ' ' for c in kind.choices]
     if isinstance(kind, OneOf):
         return [w for a in kind.alternatives for w in _boundaries(a)]
-    if isinstance(kind, Sequence):
+    if isinstance(kind, SequenceOf):
         items = (kind.item if isinstance(kind.item, (list, tuple)) else
                  [kind.item] * max(kind.min_length, 2))
         per_item = [_boundaries(item) or ['1'] for item in items]

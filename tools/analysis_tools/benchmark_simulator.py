@@ -28,7 +28,8 @@ import argparse
 import numpy as np
 import torch
 
-from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, Sequence, Text
+from wgse_mmseg.core.arguments import (NUM_STEPS, SIDE, Integer, SequenceOf,
+                                       Text)
 from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
 from wgse_mmseg.benchmarks.simulator import header, load_rows, simulator_rows
 from wgse_mmseg.data_generation.synthetic import render_street_scene
@@ -46,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--threads', type=Integer(0, MAX_WORKERS), default=1,
                         help='torch intra-op threads (0: torch default)')
     parser.add_argument('--load-shape', default=(129, 512, 1024),
-                        type=Sequence(SIDE, names=('T', 'H', 'W')),
+                        type=SequenceOf(SIDE, names=('T', 'H', 'W')),
                         help='T,H,W of the load-time sample')
     parser.add_argument('--skip-load', action='store_true')
     return parser

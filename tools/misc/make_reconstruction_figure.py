@@ -22,7 +22,7 @@ import numpy as np
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, SIDE, Choice,
-                                       Integer, Number, Path, Sequence,
+                                       Integer, Number, Path, SequenceOf,
                                        Text)
 from wgse_mmseg.core.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
@@ -42,11 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', type=Path(), required=True,
                         help='output PNG')
     parser.add_argument('--methods', default=('wgse',),
-                        type=Sequence(Choice(METHODS),
-                                      max_length=len(METHODS)),
+                        type=SequenceOf(Choice(METHODS),
+                                        max_length=len(METHODS)),
                         help=f'comma-separated rows, of {list(METHODS)}')
     parser.add_argument('--frames',
-                        type=Sequence(Integer(), max_length=MAX_FIGURE_TILES),
+                        type=SequenceOf(Integer(),
+                                        max_length=MAX_FIGURE_TILES),
                         help='comma-separated centre frames')
     parser.add_argument('--count', type=Integer(1, MAX_FIGURE_TILES),
                         default=5,

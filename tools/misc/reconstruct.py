@@ -57,7 +57,8 @@ import torch
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, SIDE,
-                                       Choice, Integer, Path, Sequence, Text)
+                                       Choice, Integer, Path, SequenceOf,
+                                       Text)
 from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
 from wgse_mmseg.core.quality import no_reference_scores
 from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
@@ -90,7 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
         '--layout', type=LAYOUT,
         help=LAYOUT_HELP)
     parser.add_argument(
-        '--frames', type=Sequence(Integer()),
+        '--frames', type=SequenceOf(Integer()),
         help='comma-separated centre frames (default: the middle frame)')
     parser.add_argument(
         '--num-steps', type=NUM_STEPS, default=41,

@@ -40,10 +40,7 @@ from ..core.limits import MAX_NUM_STEPS
 from ..core.wgse import WGSE
 from .segmentor_checkpoint import load_segmentor
 
-__all__ = ['LOGITS_TOLERANCE', 'MIN_ARGMAX_AGREEMENT', 'OPSETS', 'OPSET',
-           'SHAPE_ENTRY',
-           'SpikeSegmentorGraph', 'random_spikes',
-           'export_onnx', 'compare_with_onnx']
+__all__ = ['export_onnx']
 
 #: the largest ``|logits_onnx - logits_torch|`` accepted, relative to
 #: ``max(1, max |logits_torch|)``: float32 rounding through a different

@@ -23,7 +23,7 @@ from mmengine.dataset import Compose
 
 from ..datasets.transforms import LoadSpikeFromFile
 
-__all__ = ['PipelineSegmentor', 'pipeline_loader']
+__all__ = []
 
 
 def pipeline_loader(pipeline: Compose) -> LoadSpikeFromFile:

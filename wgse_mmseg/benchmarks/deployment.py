@@ -35,7 +35,7 @@ from .machine import machine_record
 from .markdown import markdown_table
 from .timing import summarize, time_calls
 
-__all__ = ['BACKENDS', 'measure_deployment', 'format_deployment']
+__all__ = ['measure_deployment']
 
 #: the two ways of running a model that are timed
 BACKENDS = ('torch_eager', 'onnxruntime')

@@ -12,8 +12,7 @@ from typing import Any, Callable, Dict
 
 import torch
 
-__all__ = ['cpu_model', 'package_version', 'machine_record',
-           'run_isolated']
+__all__ = []
 
 #: record key -> the distributions whose version it states, the first
 #: installed of them (``'not installed'`` where none is)
@@ -30,7 +29,7 @@ PACKAGES = {
 }
 
 
-def cpu_model() -> str:
+def _cpu_model() -> str:
     """The CPU's model name (``/proc/cpuinfo``), else what platform says."""
     try:
         with open('/proc/cpuinfo') as f:
@@ -42,7 +41,7 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
-def package_version(name: str, *alternatives: str) -> str:
+def _package_version(name: str, *alternatives: str) -> str:
     """Version of distribution ``name``, or of the first installed
     alternative (named then, e.g. ``2.1.0 (mmcv-lite)``)."""
     for candidate in (name, ) + alternatives:
@@ -78,14 +77,14 @@ def machine_record(device: str = 'cpu') -> Dict[str, Any]:
     OpenMMLab.
     """
     record = dict(
-        device=device, cpu=cpu_model(), cpu_count=os.cpu_count(),
+        device=device, cpu=_cpu_model(), cpu_count=os.cpu_count(),
         torch_threads=torch.get_num_threads(),
         load_average=os.getloadavg()[0] if hasattr(os, 'getloadavg')
         else None,
         python=platform.python_version(), platform=platform.platform(),
         torch=torch.__version__)
     for key, names in PACKAGES.items():
-        record[key] = package_version(*names)
+        record[key] = _package_version(*names)
     if device.startswith('cuda'):
         props = torch.cuda.get_device_properties(torch.device(device))
         record.update(gpu=props.name,

@@ -1,7 +1,7 @@
 """Markdown tables for the benchmark reports."""
 from typing import Any, Sequence
 
-__all__ = ['markdown_table']
+__all__ = []
 
 
 def markdown_table(headers: Sequence[str],

@@ -47,9 +47,8 @@ from .. import register_all_modules
 # a command line (``python -m``): its own explicit set-up of the MMSeg layer,
 # as the tools make it, before the layer's packages are imported
 register_all_modules()
-from ..core import arguments
 from ..core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, SIDE, Choice,
-                              Integer, Path, Text, declare)
+                              Integer, Path, SequenceOf, Text, declare)
 from ..core.exposure import EXPOSURE, apply_exposure
 from ..core.io import (SpikeFileError, centered_window, load_spikes,
                        spike_shape, to_uint8)
@@ -64,8 +63,7 @@ from ..models.reconstruction import (METHODS, SpikeReconstructor,
                                      reconstruction_method)
 from ..evaluation.metrics import ReconstructionMetric
 
-__all__ = ['benchmark', 'format_table', 'score_recording',
-           'format_recording_table', 'multiply_adds']
+__all__ = ['benchmark', 'score_recording']
 
 
 def _method(method: str, checkpoint: Optional[str], device: str):
@@ -205,10 +203,10 @@ def format_table(results: Dict[str, Dict[str, float]],
             f'wgse_mmseg {machine["wgse_mmseg"]}\n\n' + table)
 
 
-@declare(path=Path(), methods=arguments.Sequence(Choice(METHODS),
-                                                 max_length=len(METHODS)),
+@declare(path=Path(), methods=SequenceOf(Choice(METHODS),
+                                            max_length=len(METHODS)),
          checkpoint=Path(optional=True), num_steps=NUM_STEPS,
-         frames=arguments.Sequence(Integer(), optional=True),
+         frames=SequenceOf(Integer(), optional=True),
          exposure=EXPOSURE, height=SIDE.or_none(), width=SIDE.or_none(),
          device=Text(empty=False), layout=LAYOUT.or_none())
 def score_recording(path: str, methods: Sequence[str] = METHODS,
@@ -252,9 +250,9 @@ def score_recording(path: str, methods: Sequence[str] = METHODS,
     return results
 
 
-def format_recording_table(results: Dict[str, Dict[str, Optional[float]]],
-                           recording: str, frames: Sequence[int],
-                           exposure, device: str = 'cpu') -> str:
+def _format_recording_table(results: Dict[str, Dict[str, Optional[float]]],
+                            recording: str, frames: Sequence[int],
+                            exposure, device: str = 'cpu') -> str:
     """Markdown table of :func:`score_recording`'s results, under a line
     naming the recording, frames, exposure and machine."""
     def cell(value, digits):
@@ -282,13 +280,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help='folder with spike/ and gt/, or a spike file '
                         '(.dat, .spk, .npy, .npz) without ground truth')
     parser.add_argument('--methods', default=METHODS,
-                        type=arguments.Sequence(Choice(METHODS),
-                                      max_length=len(METHODS)),
+                        type=SequenceOf(Choice(METHODS),
+                                        max_length=len(METHODS)),
                         help=f'comma-separated, of {list(METHODS)}')
     parser.add_argument('--checkpoint', type=Path(),
                         help='wgse model (default: shipped weights)')
     parser.add_argument(
-        '--models', type=arguments.Sequence(Path(), max_length=64),
+        '--models', type=SequenceOf(Path(), max_length=64),
         default=(), help='comma-separated checkpoints of more trained '
         'models, each scored under its file name (a folder of REDS streams)')
     parser.add_argument(
@@ -303,7 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
         '--layout', type=LAYOUT,
         help=LAYOUT_HELP)
     parser.add_argument(
-        '--frames', type=arguments.Sequence(Integer()),
+        '--frames', type=SequenceOf(Integer()),
         help='a recording\'s comma-separated centre frames (default: the '
         'middle frame)')
     parser.add_argument(
@@ -335,8 +333,8 @@ def main(argv=None):
                 args.layout)
         except (SpikeFileError, ValueError) as err:
             sys.exit(f'{parser.prog}: error: {err}')
-        print(format_recording_table(results, args.data_root, frames,
-                                     args.exposure, args.device))
+        print(_format_recording_table(results, args.data_root, frames,
+                                      args.exposure, args.device))
         return
     results = benchmark(args.data_root, methods, args.checkpoint,
                         args.num_steps, args.spike_suffix, args.device,

@@ -72,10 +72,8 @@ from .markdown import markdown_table
 from .timing import summarize, time_calls
 
 __all__ = [
-    'make_spike_batch', 'build_model', 'inference_parameters', 'count_flops',
-    'measure_latency', 'measure_throughput', 'measure_train_step',
-    'measure_enhancer_step', 'benchmark_config', 'validation_cost',
-    'format_results'
+    'count_flops', 'measure_latency', 'measure_throughput',
+    'measure_train_step', 'measure_enhancer_step', 'benchmark_config'
 ]
 
 SPIKE_PROBABILITY = 0.3

@@ -22,8 +22,8 @@ from .machine import machine_record
 from .timing import time_calls
 
 
-def numpy_step_loop(frames: np.ndarray, num_steps: int, threshold: float,
-                    seed: int) -> np.ndarray:
+def _numpy_step_loop(frames: np.ndarray, num_steps: int, threshold: float,
+                     seed: int) -> np.ndarray:
     """The plain reference: integrate-and-fire one readout step at a time.
 
     ``(N, H, W)`` float frames in [0, 1] (linearly interpolated when
@@ -50,19 +50,19 @@ def numpy_step_loop(frames: np.ndarray, num_steps: int, threshold: float,
     return spikes
 
 
-class Timing(NamedTuple):
+class _Timing(NamedTuple):
     wall: float  # median wall seconds
     cpu: float  # median CPU seconds of this process (all its threads)
     result: object  # the last call's
 
 
-def median_time(run: Callable[[], object], repeat: int,
-                device: str) -> Timing:
+def _median_time(run: Callable[[], object], repeat: int,
+                 device: str) -> _Timing:
     """Median wall and CPU time of ``repeat`` calls after a warm-up
     (:func:`~wgse_mmseg.benchmarks.timing.time_calls`)."""
     timings = time_calls(run, device, repeat, warmup=1)
-    return Timing(statistics.median(timings.wall),
-                  statistics.median(timings.cpu), timings.result)
+    return _Timing(statistics.median(timings.wall),
+                   statistics.median(timings.cpu), timings.result)
 
 
 def _compiled_runs(device: str) -> bool:
@@ -94,8 +94,8 @@ def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
     reference = {}
     rows = []
     for name, frames in inputs.items():
-        timing = median_time(
-            lambda: numpy_step_loop(frames, args.steps, REDS_THRESHOLD, 0),
+        timing = _median_time(
+            lambda: _numpy_step_loop(frames, args.steps, REDS_THRESHOLD, 0),
             args.repeat, 'cpu')
         reference[name] = timing.wall
         rows.append(('NumPy step loop', name, timing, timing.result))
@@ -121,7 +121,7 @@ def simulator_rows(args, still: np.ndarray, video: np.ndarray) -> List[str]:
     ]
     for case, name, effects in cases:
         backend = 'torch' if case.endswith('torch path') else 'auto'
-        timing = median_time(
+        timing = _median_time(
             lambda: simulate_spikes(inputs[name], args.steps, REDS_THRESHOLD,
                                     effects=effects, seed=0,
                                     device=args.device, backend=backend),
@@ -153,7 +153,7 @@ def load_rows(args, still: np.ndarray) -> List[str]:
     steps, height, width = args.load_shape
     frame = cv2.resize(still[0], (width, height),
                        interpolation=cv2.INTER_LINEAR)[None]
-    simulated = median_time(
+    simulated = _median_time(
         lambda: simulate_spikes(frame, steps, REDS_THRESHOLD, seed=0,
                                 device=args.device), args.repeat,
         args.device)
@@ -168,8 +168,8 @@ def load_rows(args, still: np.ndarray) -> List[str]:
         for ext in SPIKE_EXTENSIONS:
             path = osp.join(tmp, 'sample' + ext)
             save_spikes(path, spikes)
-            load = median_time(lambda: load_spikes(path, height, width),
-                               args.repeat, 'cpu')
+            load = _median_time(lambda: load_spikes(path, height, width),
+                                args.repeat, 'cpu')
             if not np.array_equal(load.result, spikes):
                 raise RuntimeError(f'{ext}: the loaded sample differs')
             lines.append(f'load {ext:24s} {osp.getsize(path) / 1e6:6.1f} '

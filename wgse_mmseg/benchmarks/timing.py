@@ -9,7 +9,7 @@ import torch
 from ..core.arguments import Integer, declare
 from ..core.limits import MAX_REPEAT
 
-__all__ = ['Timings', 'time_calls', 'summarize']
+__all__ = ['time_calls']
 
 
 class Timings(NamedTuple):

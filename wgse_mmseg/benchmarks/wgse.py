@@ -21,7 +21,7 @@ from typing import Dict, List, Optional
 
 import torch
 
-from ..core.arguments import NUM_STEPS, SIDE, Integer, Sequence
+from ..core.arguments import NUM_STEPS, SIDE, Integer, SequenceOf
 from ..core.io import atomic_output
 from ..core.limits import MAX_BATCH_SIZE
 from ..core.wgse import WGSE, band_network_backends, triton_band_networks
@@ -38,7 +38,7 @@ DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
 
 
 #: a batch's shape, ``BxTxHxW`` on a command line
-SHAPE = Sequence((Integer(1, MAX_BATCH_SIZE), NUM_STEPS, SIDE, SIDE),
+SHAPE = SequenceOf((Integer(1, MAX_BATCH_SIZE), NUM_STEPS, SIDE, SIDE),
                  names=('B', 'T', 'H', 'W'), separator='x')
 
 

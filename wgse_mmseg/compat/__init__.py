@@ -27,8 +27,7 @@ import warnings
 from .checkpoint_safety import allow_mmengine_checkpoints
 from .mmcv_ops_fallback import install_mmcv_ops_fallback
 
-__all__ = ['apply_compat', 'allow_mmengine_checkpoints',
-           'install_mmcv_ops_fallback', 'OPT_OUT', 'QUIETED_DEPRECATIONS']
+__all__ = []
 
 #: the environment variable that turns the patches off
 OPT_OUT = 'WGSE_MMSEG_NO_COMPAT'

@@ -25,10 +25,7 @@ from typing import List
 
 import torch
 
-__all__ = [
-    'MMENGINE_CHECKPOINT_GLOBALS', 'allow_mmengine_checkpoints',
-    'history_buffer_statistic'
-]
+__all__ = []
 
 #: ``module:qualname`` of every non-tensor class an mmengine 0.10.7
 #: checkpoint pickles (NumPy spells its core ``numpy.core`` or

@@ -24,8 +24,7 @@ import os.path as osp
 import sys
 import types
 
-__all__ = ['install_mmcv_ops_fallback', 'has_compiled_ops',
-           'MissingCompiledOpError', 'NOTICE_SHOWN']
+__all__ = []
 
 #: mmcv.ops modules that need no compiled extension, and the names they give.
 PURE_PYTHON_OPS = {'point_sample': ('point_sample', 'bilinear_grid_sample')}

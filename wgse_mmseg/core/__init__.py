@@ -36,8 +36,7 @@ from .wavelets import wavedec, waverec
 from .wgse import WGSE, BandNetwork
 
 __all__ = [
-    'READOUT_HZ', 'REDS_THRESHOLD', 'REDS_WHITE_RATE', 'SpikeFileError',
-    'load_spikes', 'save_spikes', 'spike_shape', 'TFI', 'TFP',
-    'SpatialMeanFilter', 'TemporalMeanFilter', 'simulate_spikes', 'wavedec',
-    'waverec', 'WGSE', 'BandNetwork', 'apply_exposure', 'exposure_gain'
+    'SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape', 'TFI',
+    'TFP', 'SpatialMeanFilter', 'TemporalMeanFilter', 'simulate_spikes',
+    'wavedec', 'waverec', 'WGSE', 'apply_exposure'
 ]

@@ -10,8 +10,9 @@ limit (:mod:`.limits`) with :func:`declare`::
 Every call then checks the bound arguments before the body runs (so before
 anything is allocated) and raises :class:`ArgumentError`, naming the entry
 point, the argument, what was expected and a bounded excerpt of what came.
-The declarations are recorded in :data:`DECLARATIONS` so that tests can
-enumerate every declared argument.
+The checked function keeps its :class:`Declaration` in its ``declaration``
+attribute (a class's in ``__init__.declaration``), for tools that reuse a
+declared kind on their command line and for tests that enumerate them.
 
 A tool's command line uses the same kinds as argparse ``type=`` functions
 (``parser.add_argument('--repeat', type=Integer(1, MAX_REPEAT))``): argparse
@@ -25,24 +26,20 @@ import math
 import os
 from dataclasses import dataclass
 from numbers import Integral, Real
-from typing import Any, Callable, Dict, Optional, Sequence as SequenceType
+from typing import Any, Callable, Dict, Optional, Sequence
 
 from .limits import (MAX_CLASSES, MAX_IMAGE_SIDE, MAX_NUM_STEPS,
                      MAX_PARAMETERS, MAX_SEED, excerpt)
 
-__all__ = [
-    'ArgumentError', 'Argument', 'Integer', 'Number', 'Flag', 'Text',
-    'Choice', 'Path', 'Sequence', 'OneOf', 'Declaration', 'DECLARATIONS',
-    'declare', 'declare_fields', 'check_parameter_count', 'NUM_STEPS', 'SIDE',
-    'FRAME_SIZE', 'SEED', 'NUM_CLASSES', 'PROBABILITY', 'LAYOUT'
-]
+__all__ = ['ArgumentError']
 
-class ArgumentError(ValueError, TypeError):
+class ArgumentError(ValueError):
     """An argument is not what its entry point declares.
 
-    Both a ``ValueError`` and a ``TypeError``: a wrong value and a wrong type
-    are the same mistake to the caller. Attributes ``entry``, ``argument``
-    and ``expected`` hold the parts of the message.
+    One ``ValueError`` for a wrong value and a wrong type alike: a declared
+    kind (``an integer >= 1``) states both, and the caller's mistake is the
+    same. Attributes ``entry``, ``argument`` and ``expected`` hold the parts
+    of the message.
     """
 
     def __init__(self, entry: str, argument: str, expected: str, value: Any):
@@ -118,17 +115,6 @@ class Argument:
         if value is None:
             raise argparse.ArgumentTypeError(
                 f'must be {self.describe()}, got {excerpt(text)}')
-        return value
-
-    def parse(self, value: Any, entry: str, name: str) -> Any:
-        """``value`` checked as :meth:`check` does, a string first read as
-        a command-line word (a config option's ``'41'`` or ``'128,256'``);
-        the accepted value."""
-        if isinstance(value, str):
-            read = self._read(value)
-            if read is not None:
-                return read
-        self.check(value, entry, name)
         return value
 
     def __repr__(self):
@@ -226,7 +212,7 @@ class Choice(Argument):
     """One of ``choices``, compared with its type (``True`` is not ``1``);
     ``description`` replaces the list in messages (for long lists)."""
 
-    def __init__(self, choices: SequenceType, optional: bool = False,
+    def __init__(self, choices: Sequence, optional: bool = False,
                  description: Optional[str] = None):
         super().__init__(optional)
         self.choices = tuple(choices)
@@ -274,7 +260,7 @@ class Path(Argument):
                            if self.exists else '')
 
 
-class Sequence(Argument):
+class SequenceOf(Argument):
     """A list or tuple of values each accepted by ``item``.
 
     Args:
@@ -286,7 +272,7 @@ class Sequence(Argument):
         separator: splits a command-line word into values.
     """
 
-    def __init__(self, item, names: Optional[SequenceType] = None,
+    def __init__(self, item, names: Optional[Sequence] = None,
                  ordered: bool = False, min_length: int = 1,
                  max_length: Optional[int] = None, separator: str = ',',
                  optional: bool = False):
@@ -384,9 +370,6 @@ class Declaration:
                 argument.check(values[name], self.entry, name)
 
 
-#: entry-point name -> its :class:`Declaration`, for every :func:`declare`
-DECLARATIONS: Dict[str, Declaration] = {}
-
 
 def declare(**arguments: Argument) -> Callable[[Callable], Callable]:
     """Declare ``arguments`` of a function or of a constructor
@@ -415,7 +398,6 @@ def declare(**arguments: Argument) -> Callable[[Callable], Callable]:
             return function(*args, **kwargs)
 
         checked.declaration = declaration
-        DECLARATIONS[f'{function.__module__}.{entry}'] = declaration
         return checked
 
     return wrap
@@ -449,7 +431,7 @@ NUM_STEPS = Integer(1, MAX_NUM_STEPS)
 #: a frame's height or width
 SIDE = Integer(1, MAX_IMAGE_SIDE)
 #: ``(h, w)`` of a frame, a crop or a padded batch
-FRAME_SIZE = Sequence(SIDE, names=('h', 'w'))
+FRAME_SIZE = SequenceOf(SIDE, names=('h', 'w'))
 #: a seed of a random generator
 SEED = Integer(0, MAX_SEED)
 #: the number of classes of a label map

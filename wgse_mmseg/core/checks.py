@@ -2,7 +2,7 @@
 (Arguments are checked by their declarations, :mod:`.arguments`.)"""
 import torch
 
-__all__ = ['check_finite']
+__all__ = []
 
 
 def check_finite(owner: str, name: str, tensor: torch.Tensor) -> None:

@@ -3,7 +3,7 @@
 Every other module takes these from here, so that a value is written once.
 """
 
-__all__ = ['READOUT_HZ', 'REDS_WHITE_RATE', 'REDS_THRESHOLD']
+__all__ = []
 
 #: The spike camera's readout rate: one step every 25 us.
 READOUT_HZ = 40_000.0

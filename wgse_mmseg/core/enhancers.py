@@ -12,7 +12,7 @@ from .representations import (TFI, TFP, SpatialMeanFilter,
                               TemporalMeanFilter)
 from .wgse import WGSE
 
-__all__ = ['ENHANCERS']
+__all__ = []
 
 #: WGSE and the classical representations, each refusing NaN and Inf
 #: (:func:`~wgse_mmseg.core.checks.check_finite`)

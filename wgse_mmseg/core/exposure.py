@@ -19,14 +19,13 @@ import numpy as np
 
 from .arguments import Choice, Number, OneOf, declare
 
-__all__ = ['EXPOSURE_CHOICES', 'EXPOSURE', 'UNDER_EXPOSED_BELOW', 'Exposed',
-           'auto_exposure', 'exposure_gain', 'apply_exposure']
+__all__ = ['apply_exposure']
 
 #: the non-numeric values of an ``exposure`` argument
-EXPOSURE_CHOICES = ('auto', 'none')
+_EXPOSURE_CHOICES = ('auto', 'none')
 #: an ``exposure`` argument (and the tools' ``--exposure``): ``'auto'``,
 #: ``'none'`` or a gain
-EXPOSURE = OneOf(Choice(EXPOSURE_CHOICES), Number(0, strict_minimum=True))
+EXPOSURE = OneOf(Choice(_EXPOSURE_CHOICES), Number(0, strict_minimum=True))
 
 #: ``'auto'`` brightens an image only when its bright end is below this
 #: fraction of white, i.e. when it would need a gain above 4. Calibrated

@@ -74,11 +74,7 @@ from .arguments import LAYOUT, Integer, Path, declare
 from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
 
-__all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape',
-           'centered_window', 'atomic_path', 'atomic_output', 'temporaries_of',
-           'WrittenFile', 'write_bytes',
-           'write_png', 'to_uint8', 'SpikeFormat', 'SPIKE_FORMATS',
-           'SPIKE_EXTENSIONS']
+__all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape']
 
 _MAGIC = b'WGSESPK1'
 _VERSION = 1

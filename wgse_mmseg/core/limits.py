@@ -127,6 +127,4 @@ def load_json_file(path: str, what: str) -> Any:
     except ValueError as err:
         raise ValueError(f'{path}: a {what} must be JSON ({err})') from err
 
-__all__ = [name for name in dir() if name.startswith('MAX_')] + [
-    'READ_LIMIT_BYTES', 'TEXT_FILE_LIMIT_BYTES', 'EXCERPT_CHARS', 'cut', 'excerpt',
-    'read_text_file', 'load_json_file']
+__all__ = []

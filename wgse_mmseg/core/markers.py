@@ -30,8 +30,7 @@ from typing import Any, Dict, Mapping, Optional
 from .io import WrittenFile, write_bytes
 from .limits import load_json_file
 
-__all__ = ['file_digest', 'is_complete', 'invalidate', 'write_marker',
-           'read_marker', 'sample_problem']
+__all__ = []
 
 
 def file_digest(path: str) -> str:

@@ -11,13 +11,13 @@ from typing import Callable, List, TypeVar
 
 import torch
 
-__all__ = ['for_each_on_threads']
+__all__ = []
 
-State = TypeVar('State')
+_State = TypeVar('_State')
 
 
-def for_each_on_threads(task: Callable[[int, State], None], count: int,
-                        make_state: Callable[[], State]) -> List[State]:
+def for_each_on_threads(task: Callable[[int, _State], None], count: int,
+                        make_state: Callable[[], _State]) -> List[_State]:
     """Run ``task(item, state)`` for items ``0 .. count-1``.
 
     With ``n = torch.get_num_threads() > 1`` (and more than one item) the

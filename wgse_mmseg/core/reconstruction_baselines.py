@@ -29,7 +29,7 @@ from .limits import MAX_WINDOW
 from .representations import (TFI, TFP, SpatialMeanFilter,
                               TemporalMeanFilter)
 
-__all__ = ['tfp', 'tfi', 'tfi_spatial_mean', 'tfi_temporal_mean']
+__all__ = ['tfp', 'tfi']
 
 #: the spike rate drawn as white
 _WHITE_RATE = Number(0, strict_minimum=True)

@@ -77,10 +77,7 @@ from .markers import file_digest
 from .output_folder import (OwnedFolder, add_wait_option, discard,
                             open_append, own_folder)
 
-__all__ = ['WalkError', 'WalkPlan', 'WalkOutputs', 'WalkReport',
-           'VIDEO_EXTENSIONS', 'CSV_COLUMNS', 'STRIDE', 'BATCH_SIZE', 'FPS',
-           'plan_walk', 'walk_outputs', 'read_windows', 'walk_recording',
-           'add_walk_options']
+__all__ = ['WalkError', 'WalkReport', 'walk_recording']
 
 #: the video formats, by lower-case extension of ``video``
 VIDEO_EXTENSIONS = ('.mp4', '.gif')

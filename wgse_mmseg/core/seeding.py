@@ -30,11 +30,10 @@ import numpy as np
 from .arguments import SEED
 from .limits import MAX_SEED
 
-__all__ = ['MAX_SEED', 'check_seed', 'derive_seed', 'derive_generator',
-           'draw_seed']
+__all__ = []
 
 #: a key of a derived seed
-Key = Union[str, int]
+_Key = Union[str, int]
 
 
 def check_seed(value: Any, name: str = 'seed', entry: str = 'seed',
@@ -57,7 +56,7 @@ def _entropy(seed: int, keys: tuple) -> List[int]:
     return entropy
 
 
-def derive_seed(seed: int, key: Key, *keys: Key) -> int:
+def derive_seed(seed: int, key: _Key, *keys: _Key) -> int:
     """The seed of the stream ``(key, *keys)`` of what ``seed`` seeds, in
     ``0 ..`` :data:`MAX_SEED`.
 
@@ -68,8 +67,8 @@ def derive_seed(seed: int, key: Key, *keys: Key) -> int:
     return int(sequence.generate_state(1, np.uint64)[0]) & MAX_SEED
 
 
-def derive_generator(seed: int, key: Key,
-                     *keys: Key) -> np.random.Generator:
+def derive_generator(seed: int, key: _Key,
+                     *keys: _Key) -> np.random.Generator:
     """A NumPy generator for the stream ``(key, *keys)`` of what ``seed``
     seeds (``np.random.default_rng([seed, key, *keys])`` for integer
     keys)."""

@@ -29,10 +29,7 @@ import torch
 from .arguments import Choice, Integer, declare
 from .limits import MAX_LEVEL, MAX_NUM_STEPS
 
-__all__ = [
-    'SUPPORTED_MODES', 'get_wavelet', 'band_lengths', 'analysis_matrix',
-    'synthesis_matrix', 'wavedec', 'waverec'
-]
+__all__ = ['wavedec', 'waverec']
 
 #: Boundary modes with an exact matrix form here (``pywt.Modes`` names).
 SUPPORTED_MODES = ('zero', 'constant', 'symmetric', 'reflect', 'periodic',
@@ -46,7 +43,7 @@ _LEVEL = Integer(0, MAX_LEVEL, optional=True)
 _LENGTH = Integer(1, MAX_NUM_STEPS)
 
 
-def get_wavelet(wavelet) -> pywt.Wavelet:
+def _get_wavelet(wavelet) -> pywt.Wavelet:
     """A ``pywt.Wavelet`` for a name or wavelet object; only discrete ones."""
     if isinstance(wavelet, pywt.Wavelet):
         return wavelet
@@ -205,7 +202,7 @@ def _synthesis(wavelet_name: str, mode: str,
 def band_lengths(length: int, wavelet, level: Optional[int] = None,
                  mode: str = 'symmetric') -> Tuple[int, ...]:
     """Coefficient counts ``(len(cA_n), len(cD_n), ..., len(cD_1))``."""
-    wavelet = get_wavelet(wavelet)
+    wavelet = _get_wavelet(wavelet)
     return _analysis(wavelet.name, mode, length,
                      _resolve_level(level, length, wavelet))[1]
 
@@ -218,7 +215,7 @@ def analysis_matrix(length: int, wavelet, level: Optional[int] = None,
 
     Rows are ordered ``cA_n, cD_n, ..., cD_1``. Read-only and cached.
     """
-    wavelet = get_wavelet(wavelet)
+    wavelet = _get_wavelet(wavelet)
     return _analysis(wavelet.name, mode, length,
                      _resolve_level(level, length, wavelet))[0]
 
@@ -233,7 +230,7 @@ def synthesis_matrix(lengths: Sequence[int], wavelet,
     ``pywt.waverec`` returns, or ``length`` when given (the first ``length``
     samples of it).
     """
-    wavelet = get_wavelet(wavelet)
+    wavelet = _get_wavelet(wavelet)
     matrix = _synthesis(wavelet.name, mode, tuple(int(n) for n in lengths))
     if length is not None:
         if not 1 <= length <= matrix.shape[0]:

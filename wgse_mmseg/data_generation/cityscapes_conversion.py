@@ -71,9 +71,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from ..core import arguments
 from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
-                              Number, Path, declare, declare_fields)
+                              Number, Path, SequenceOf, declare,
+                              declare_fields)
 from ..core.folder_walk import files_under
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
 from ..core.io import save_spikes, temporaries_of, write_png
@@ -84,12 +84,7 @@ from ..core.seeding import derive_seed
 from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 from .shards import SHARD, WHOLE, Shard
 
-__all__ = [
-    'CITYSCAPES_LABELS', 'LABEL_ID_TO_TRAIN_ID', 'CityscapesSample',
-    'ConversionSettings', 'find_samples', 'labelids_to_trainids',
-    'resize_nearest', 'sample_effects', 'output_paths',
-    'convert_sample', 'convert_cityscapes', 'load_scene'
-]
+__all__ = ['ConversionSettings', 'convert_cityscapes']
 
 CITYSCAPES_FPS = 17.0  # leftImg8bit_sequence frame rate
 ANNOTATED_INDEX = 19  # the annotated frame is the 20th of a 30-frame snippet
@@ -453,7 +448,7 @@ def _init_worker() -> None:
 
 
 @declare(root=Path(), out_dir=Path(),
-         splits=arguments.Sequence(Choice(CITYSCAPES_SPLITS)),
+         splits=SequenceOf(Choice(CITYSCAPES_SPLITS)),
          nproc=Integer(1, MAX_WORKERS),
          limit=Integer(1, MAX_SAMPLES, optional=True), progress=Flag(),
          shard=SHARD, wait=Flag())

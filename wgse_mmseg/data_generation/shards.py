@@ -11,9 +11,9 @@ from typing import List, NamedTuple, Sequence, TypeVar
 from ..core.arguments import Argument
 from ..core.limits import MAX_SAMPLES
 
-__all__ = ['Shard', 'SHARD', 'WHOLE']
+__all__ = []
 
-Item = TypeVar('Item')
+_Item = TypeVar('_Item')
 
 
 class Shard(NamedTuple):
@@ -21,7 +21,7 @@ class Shard(NamedTuple):
     index: int
     count: int
 
-    def select(self, items: Sequence[Item]) -> List[Item]:
+    def select(self, items: Sequence[_Item]) -> List[_Item]:
         """This shard's ``items``: positions ``index - 1``,
         ``index - 1 + count``, ... of ``items``, in order."""
         return list(items)[self.index - 1::self.count]

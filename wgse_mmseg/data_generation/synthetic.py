@@ -27,7 +27,7 @@ from ..core.output_folder import own_folder
 from ..core.seeding import derive_generator, derive_seed
 from ..core.simulation import simulate_spikes
 
-__all__ = ['render_street_scene', 'make_synthetic_dataset']
+__all__ = ['make_synthetic_dataset']
 
 # Cityscapes train ids of the classes the scenes draw.
 ROAD, SIDEWALK, BUILDING, POLE, SIGN, VEGETATION, SKY, PERSON, CAR = (

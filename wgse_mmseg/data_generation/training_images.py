@@ -33,16 +33,14 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from ..core.arguments import (Choice, Flag, Integer, Path,
-                              Sequence as SequenceOf)
-from ..core.arguments import declare
+from ..core.arguments import (Choice, Flag, Integer, Path, SequenceOf,
+                              declare)
 from ..core.folder_walk import files_under
 from ..core.io import write_png
 from ..core.output_folder import (OutputFolderError, add_wait_option,
                                   own_folder)
 
-__all__ = ['SOURCES', 'SCIKIT_IMAGE_PHOTOGRAPHS', 'export_training_images',
-           'build_parser', 'main']
+__all__ = ['export_training_images']
 
 #: the photographs of ``skimage/data`` (scikit-image 0.26); its charts,
 #: binary masks, text pages and synthetic phantoms are not used

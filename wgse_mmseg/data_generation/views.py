@@ -15,8 +15,7 @@ import torch
 from ..core.folder_walk import files_under
 from ..core.simulation import trajectory_source_maps
 
-__all__ = ['IMAGE_EXTENSIONS', 'read_grey_image', 'load_images',
-           'render_trajectory']
+__all__ = []
 
 #: the image files :func:`load_images` reads
 IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff',

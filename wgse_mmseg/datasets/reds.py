@@ -31,7 +31,7 @@ from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
 from ..core.arguments import (FRAME_SIZE, LAYOUT, NUM_STEPS, SEED, SIDE,
-                              Integer, Number, Path, Sequence as Values,
+                              Integer, Number, Path, SequenceOf,
                               Text, declare)
 from ..core.folder_walk import files_under
 from ..core.limits import MAX_SAMPLES
@@ -44,7 +44,7 @@ from .transforms import LoadSpikeFromFile
 
 __all__ = [
     'REDSSpikeDataset', 'SimulatedSpikeImageDataset', 'LoadSpikeImagePair',
-    'PackReconstructionInputs', 'default_image_dir'
+    'PackReconstructionInputs'
 ]
 
 @TRANSFORMS.register_module()
@@ -181,7 +181,7 @@ class REDSSpikeDataset(BaseDataset):
         return data_list
 
 
-def default_image_dir() -> str:
+def _default_image_dir() -> str:
     """The sample images matplotlib (a dependency of MMSeg) ships.
 
     ``matplotlib/mpl-data/sample_data``: a photograph (``grace_hopper.jpg``,
@@ -192,8 +192,8 @@ def default_image_dir() -> str:
 
 
 #: a ``(low, high)`` range of positive numbers
-_POSITIVE_RANGE = Values(Number(0, strict_minimum=True), names=('low', 'high'),
-                         ordered=True)
+_POSITIVE_RANGE = SequenceOf(Number(0, strict_minimum=True),
+                             names=('low', 'high'), ordered=True)
 
 
 @DATASETS.register_module()
@@ -213,7 +213,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
 
     Args:
         image_dir: folder of images (searched recursively, colour -> grey);
-            ``None`` for :func:`default_image_dir`. Images are read once into
+            ``None`` for :func:`_default_image_dir`. Images are read once into
             memory, downscaled to at most ``max_side`` pixels per side.
         num_samples: length of the dataset.
         crop_size: ``(h, w)`` of each sample.
@@ -246,7 +246,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
                  gain_range: Tuple[float, float] = (0.5, 1.0),
                  gamma_range: Tuple[float, float] = (0.7, 1.4),
                  max_side: int = 1024, **kwargs):
-        self.image_dir = image_dir or default_image_dir()
+        self.image_dir = image_dir or _default_image_dir()
         self.image_paths, self.images = load_images(self.image_dir,
                                                      max_side)
         areas = np.array([im.size for im in self.images], np.float64)

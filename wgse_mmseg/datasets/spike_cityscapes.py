@@ -14,7 +14,7 @@ from ..core.markers import sample_problem
 
 __all__ = ['SpikeCityscapesDataset']
 
-VERIFY_MODES = ('size', 'full', 'none')
+_VERIFY_MODES = ('size', 'full', 'none')
 
 
 @DATASETS.register_module()
@@ -48,7 +48,7 @@ class SpikeCityscapesDataset(CityscapesDataset):
     """
 
     @declare(img_suffix=Text(empty=False), seg_map_suffix=Text(empty=False),
-             verify=Choice(VERIFY_MODES))
+             verify=Choice(_VERIFY_MODES))
     def __init__(self,
                  img_suffix: str = '_spike.spk',
                  seg_map_suffix: str = '_gtFine_labelTrainIds.png',

@@ -11,5 +11,6 @@ from .runner import SpikeRunner  # noqa: E402
 from .visualization_hook import (SpikeVisualizationHook,  # noqa: E402
                                  spike_clip_image)
 
-__all__ = ['CPUDistributedDataParallel', 'SpikeRunner',
-           'SpikeVisualizationHook', 'spike_clip_image']
+__all__ = [
+    'CPUDistributedDataParallel', 'SpikeRunner', 'SpikeVisualizationHook'
+]

@@ -16,7 +16,7 @@ from ..core.io import to_uint8
 from ..core.reconstruction_baselines import tfp
 from ..datasets.transforms import LoadSpikeFromFile
 
-__all__ = ['SpikeVisualizationHook', 'spike_clip_image']
+__all__ = ['SpikeVisualizationHook']
 
 
 def spike_clip_image(path: str, num_steps: Optional[int] = None,

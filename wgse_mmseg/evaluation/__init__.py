@@ -6,5 +6,4 @@ check_mmseg_layer('wgse_mmseg.evaluation')
 from .metrics import (ReconstructionMetric, entropy_2d,  # noqa: E402
                       gaussian_window, psnr, ssim)
 
-__all__ = ['ReconstructionMetric', 'psnr', 'ssim', 'entropy_2d',
-           'gaussian_window']
+__all__ = ['ReconstructionMetric', 'psnr', 'ssim', 'entropy_2d']

@@ -12,5 +12,6 @@ from .reconstruction import (ResidualBlock,  # noqa: E402
                              SpikeReconstructor, load_reconstructor)
 from .segmentors import LEGACY_SEGMENTORS  # noqa: E402
 
-__all__ = ['SpikeSegDataPreProcessor', 'ENHANCERS', 'SpikeReconstructor',
-           'ResidualBlock', 'load_reconstructor', 'LEGACY_SEGMENTORS']
+__all__ = [
+    'SpikeSegDataPreProcessor', 'SpikeReconstructor', 'load_reconstructor'
+]

@@ -51,12 +51,12 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
             ``0 .. num_classes - 1`` and ``seg_pad_val`` (the ignore index);
             another value fails at once, naming the label file and the
             values, instead of deep inside the loss.
-
-    Every input must hold only 0 and 1 (any dtype); another value (NaN, a
-    grey level, a negative) fails naming the file.
         size, size_divisor, pad_val, seg_pad_val, batch_augments, test_cfg:
             as in ``SegDataPreProcessor``. No mean/std normalisation and no
             colour conversion: spikes have neither.
+
+    Every input must hold only 0 and 1 (any dtype); another value (NaN, a
+    grey level, a negative) fails naming the file.
     """
 
     @declare(num_steps=NUM_STEPS.or_none(),

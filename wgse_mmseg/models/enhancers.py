@@ -13,4 +13,4 @@ from ..core.enhancers import ENHANCERS
 for _enhancer in ENHANCERS:
     MODELS.register_module(module=_enhancer)
 
-__all__ = ['ENHANCERS']
+__all__ = []

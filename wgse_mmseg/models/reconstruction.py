@@ -35,9 +35,7 @@ from ..utils.config_data import ConfigDataError, read_config_data
 from ..utils.safe_build import build_from_file_config, check_file_config
 from .enhancers import ENHANCERS
 
-__all__ = ['SpikeReconstructor', 'ResidualBlock', 'DEFAULT_WEIGHTS',
-           'load_reconstructor', 'export_weights', 'reconstruction_method',
-           'METHODS', 'CLASSICAL_METHODS', 'RECONSTRUCTION_BUILDS']
+__all__ = ['SpikeReconstructor', 'load_reconstructor', 'export_weights']
 
 #: Weights shipped with the package (see docs/reconstruction.md).
 DEFAULT_WEIGHTS = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),

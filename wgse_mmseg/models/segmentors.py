@@ -9,7 +9,7 @@ itself, and the shipped configs use MMSeg's segmentor types directly.
 from mmseg.models.segmentors import EncoderDecoder
 from mmseg.registry import MODELS
 
-__all__ = ['LEGACY_SEGMENTORS']
+__all__ = []
 
 #: earlier registered name -> the MMSeg segmentor it builds now
 LEGACY_SEGMENTORS = {'SpikeEncoderDecoder': EncoderDecoder}

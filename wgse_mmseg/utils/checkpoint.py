@@ -4,7 +4,7 @@ import os.path as osp
 
 import torch
 
-__all__ = ['CheckpointError', 'read_checkpoint']
+__all__ = []
 
 
 class CheckpointError(ValueError):

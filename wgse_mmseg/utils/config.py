@@ -22,11 +22,7 @@ from .distributed import prepare_launcher
 from .spike_settings import (SPIKE_SETTINGS, SpikeSettingsError,
                              apply_spike_settings, check_setting)
 
-__all__ = [
-    'SPIKE_SETTING_KINDS', 'ConfigOptions', 'load_config',
-    'add_config_options', 'add_runner_arguments', 'config_from_args',
-    'build_runner'
-]
+__all__ = []
 
 #: ``--cfg-options`` key -> the declaration of its value (from
 #: :data:`~wgse_mmseg.utils.spike_settings.SPIKE_SETTINGS`)

@@ -16,7 +16,7 @@ Python by design in MMSeg (``Config.fromfile``), and is executed.
 import ast
 from typing import Any, Dict
 
-__all__ = ['ConfigDataError', 'read_config_data']
+__all__ = []
 
 
 class ConfigDataError(ValueError):

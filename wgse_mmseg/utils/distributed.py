@@ -16,7 +16,7 @@ import torch
 import torch.distributed as dist
 from mmengine.config import Config
 
-__all__ = ['prepare_launcher']
+__all__ = []
 
 
 def prepare_launcher(cfg: Config) -> None:

@@ -9,7 +9,7 @@ registry as it is, such a config chooses code: mmengine 0.10.7's
 builds its own sub-configs.
 
 :func:`check_file_config` walks such a config at every depth against an
-:data:`AllowList`: a tree naming the classes the config may build and, per
+:data:`_AllowList`: a tree naming the classes the config may build and, per
 class, which of its arguments hold a config of their own and which classes
 those may build. It refuses, with a :class:`ConfigDataError` naming the
 file and the key path (``ckpt.pth: meta['model'].data_preprocessor.type:
@@ -41,12 +41,11 @@ from typing import Any, Dict, FrozenSet, Mapping, Optional
 from ..core.arguments import ArgumentError
 from .config_data import ConfigDataError
 
-__all__ = ['AllowList', 'MAX_DEPTH', 'check_file_config',
-           'build_from_file_config']
+__all__ = []
 
-#: class -> {argument holding a config of its own -> the AllowList of that
+#: class -> {argument holding a config of its own -> the _AllowList of that
 #: config}; arguments not named take plain data only
-AllowList = Mapping[type, Mapping[str, 'AllowList']]
+_AllowList = Mapping[type, Mapping[str, '_AllowList']]
 
 #: deepest nesting of lists and dicts accepted in a file's config
 MAX_DEPTH = 32
@@ -100,7 +99,7 @@ def _plain(value: Any, source: str, path: str, depth: int) -> Any:
                   f'(numbers, strings, booleans, None, lists, dicts)')
 
 
-def _config(cfg: Any, allowed: AllowList, source: str, path: str,
+def _config(cfg: Any, allowed: _AllowList, source: str, path: str,
             depth: int, resolve: bool) -> Dict[str, Any]:
     """A checked copy of ``cfg``; ``type`` the class itself if ``resolve``."""
     _check_depth(source, path, depth)
@@ -138,7 +137,7 @@ def _config(cfg: Any, allowed: AllowList, source: str, path: str,
     return checked
 
 
-def check_file_config(cfg: Any, allowed: AllowList, source: str,
+def check_file_config(cfg: Any, allowed: _AllowList, source: str,
                       key: str) -> Dict[str, Any]:
     """A plain-data copy of ``cfg`` (``type`` names kept as strings), checked
     against ``allowed`` at every depth (see the module docstring).
@@ -178,7 +177,7 @@ def _declared_at(cfg: Any, path: str, err: ArgumentError) -> Optional[str]:
     return None
 
 
-def build_from_file_config(registry, cfg: Any, allowed: AllowList,
+def build_from_file_config(registry, cfg: Any, allowed: _AllowList,
                            source: str, key: str):
     """``registry.build`` of ``cfg`` once :func:`check_file_config` accepts
     it, with each ``type`` given as the allowed class, so no name from the

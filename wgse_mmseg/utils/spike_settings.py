@@ -35,8 +35,7 @@ from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf,
                               Path)
 from ..core.limits import excerpt
 
-__all__ = ['SpikeSettingsError', 'SpikeSetting', 'SPIKE_SETTINGS',
-           'apply_spike_settings', 'check_setting']
+__all__ = []
 
 
 class SpikeSettingsError(ValueError):
@@ -45,7 +44,7 @@ class SpikeSettingsError(ValueError):
 
 
 @dataclass(frozen=True)
-class SpikeSetting:
+class _SpikeSetting:
     """A top-level config value and the fields that carry it.
 
     Attributes:
@@ -81,7 +80,7 @@ _T_STEPS = 'pipeline[LoadSpikeFromFile|LoadSpikeImagePair|SimulateSpikes]'
 #: ``train_pipeline`` and ``test_pipeline`` are MMSeg's top-level copies
 #: (``mmseg.apis.inference_model`` reads ``test_pipeline``).
 SPIKE_SETTINGS = (
-    SpikeSetting(
+    _SpikeSetting(
         'num_steps', NUM_STEPS, agree=True, hint='T',
         fields=('model.data_preprocessor.num_steps',
                 # the enhancers keep T channels: a spike model's stem
@@ -92,9 +91,9 @@ SPIKE_SETTINGS = (
                 f'train_{_T_STEPS}.num_steps', f'test_{_T_STEPS}.num_steps'),
         conditional={'model.backbone.in_channels':
                      'model.data_preprocessor.num_steps'}),
-    SpikeSetting('data_root', Path(), hint='DIR',
-                 fields=_loaders('data_root')),
-    SpikeSetting(
+    _SpikeSetting('data_root', Path(), hint='DIR',
+                  fields=_loaders('data_root')),
+    _SpikeSetting(
         'crop_size', OneOf(SIDE, FRAME_SIZE), hint='H,W',
         fields=('model.data_preprocessor.size',  # pads training batches
                 'train_dataloader.dataset.crop_size',  # simulated images
@@ -167,7 +166,7 @@ def _find(cfg, spec: str) -> List[Tuple[str, Any, str]]:
     return found
 
 
-def _fields(cfg, setting: SpikeSetting) -> List[Tuple[str, Any, str]]:
+def _fields(cfg, setting: _SpikeSetting) -> List[Tuple[str, Any, str]]:
     """``(path, container, key)`` of the fields of ``setting`` in ``cfg``."""
     found: List[Tuple[str, Any, str]] = []
     for spec in setting.fields:
@@ -177,7 +176,7 @@ def _fields(cfg, setting: SpikeSetting) -> List[Tuple[str, Any, str]]:
     return found
 
 
-def _reconcile(cfg, setting: SpikeSetting) -> Dict[str, Any]:
+def _reconcile(cfg, setting: _SpikeSetting) -> Dict[str, Any]:
     """Give ``cfg[setting.name]`` to its fields (module docstring)."""
     target = check_setting(setting.name, cfg[setting.name])
     fields = _fields(cfg, setting)

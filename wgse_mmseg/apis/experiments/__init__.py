@@ -27,11 +27,7 @@ from .runner import (METRICS, Run, RunFailed, StaleRunError, benchmark_entry,
 from .settings import ExperimentSettings, check_schedule
 
 __all__ = [
-    'ExperimentSettings', 'check_schedule', 'Entry', 'PROJECT_ROOT',
-    'ENHANCER_KEY', 'load_grid', 'select', 'enhancer_options',
-    'schedule_options', 'as_cli', 'describe', 'METRICS', 'Run', 'RunFailed',
-    'StaleRunError', 'plan', 'finished', 'run_one', 'run_directory',
-    'loss_curve', 'benchmark_entry', 'read_benchmark', 'aggregate',
-    'loss_change', 'CSV_COLUMNS', 'LOSS_PLOT', 'write_csv', 'write_markdown',
-    'plot', 'plot_loss_curves', 'read_deployment', 'report'
+    'ExperimentSettings', 'load_grid', 'select', 'StaleRunError', 'plan',
+    'finished', 'run_one', 'benchmark_entry', 'aggregate', 'loss_change',
+    'report'
 ]

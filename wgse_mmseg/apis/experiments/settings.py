@@ -10,7 +10,7 @@ import os
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
-from ...core.arguments import (SEED, Flag, Integer, Path, Sequence, Text,
+from ...core.arguments import (SEED, Flag, Integer, Path, SequenceOf, Text,
                                declare_fields)
 from ...core.limits import MAX_EPOCHS, MAX_ITERS
 
@@ -30,9 +30,9 @@ def check_schedule(epochs: Optional[int], max_iters: Optional[int]) -> int:
 
 
 @declare_fields(grid=Path(exists='file'), data_root=Path(),
-                work_dir=Path(), seeds=Sequence(SEED),
+                work_dir=Path(), seeds=SequenceOf(SEED),
                 epochs=EPOCHS.or_none(), max_iters=ITERATIONS.or_none(),
-                only=Sequence(Text(empty=False), optional=True),
+                only=SequenceOf(Text(empty=False), optional=True),
                 report_dir=Path(optional=True), keep_checkpoints=Flag(),
                 benchmark=Flag(), report_only=Flag(),
                 deployment=Path(exists='file', optional=True))

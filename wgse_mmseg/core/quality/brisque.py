@@ -21,7 +21,7 @@ from .grey import as_grey_levels
 from .model_data import brisque_model
 from .natural_scene import fit_aggd_root, mscn
 
-__all__ = ['MIN_SIDE', 'brisque']
+__all__ = []
 
 #: the smallest side BRISQUE takes: the 7x7 window fits the half size
 MIN_SIDE = 14

@@ -6,7 +6,7 @@ is shown, i.e. as 8 bits (:func:`as_grey_levels`).
 """
 import numpy as np
 
-__all__ = ['as_unit_grey', 'as_grey_levels']
+__all__ = []
 
 
 def as_unit_grey(image, name: str = 'image') -> np.ndarray:

@@ -13,8 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ['DATA_DIR', 'SOURCES', 'NiqeModel', 'BrisqueModel',
-           'niqe_model', 'brisque_model']
+__all__ = []
 
 DATA_DIR = osp.join(osp.dirname(osp.abspath(__file__)), 'data')
 #: the record of the shipped files: name -> SHA-256, size and source

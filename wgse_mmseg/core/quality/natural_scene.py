@@ -15,7 +15,7 @@ from typing import NamedTuple, Optional
 import cv2
 import numpy as np
 
-__all__ = ['mscn', 'ggd_ratio', 'Aggd', 'fit_aggd_grid', 'fit_aggd_root']
+__all__ = []
 
 #: ``|I - mu|`` below this (on the 0-255 scale) is rounding error: a
 #: genuine difference of 8-bit levels under a 7x7 window is above 1e-5

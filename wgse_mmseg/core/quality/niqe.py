@@ -18,7 +18,7 @@ from .grey import as_grey_levels
 from .model_data import niqe_model
 from .natural_scene import fit_aggd_grid, mscn
 
-__all__ = ['BLOCK', 'niqe', 'matlab_half_size']
+__all__ = []
 
 #: the side of NIQE's square blocks, in pixels of the full-size image
 BLOCK = 96

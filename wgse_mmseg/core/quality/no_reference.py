@@ -7,7 +7,7 @@ from .entropy import entropy_2d
 from .grey import as_unit_grey
 from .niqe import niqe
 
-__all__ = ['NO_REFERENCE_METRICS', 'no_reference_scores']
+__all__ = []
 
 #: name -> measure; NIQE and BRISQUE: lower is better, Entropy2D: higher
 NO_REFERENCE_METRICS = {'NIQE': niqe, 'BRISQUE': brisque,

@@ -32,8 +32,4 @@ from .intensity import frames_to_intensity
 from .scene import parse_effects, read_scene_file
 from .simulator import simulate_spikes
 
-__all__ = [
-    'simulate_spikes', 'frames_to_intensity', 'initial_charge',
-    'parse_effects', 'read_scene_file', 'EFFECTS', 'register_effect',
-    'trajectory_source_maps'
-]
+__all__ = ['simulate_spikes']

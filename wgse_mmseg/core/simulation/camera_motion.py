@@ -30,7 +30,7 @@ from .effect import (LightEffect, check_choice, check_number, check_pair,
 from .light import Light
 from .warp import affine_grid, pixel_scale, sample, warp_block_steps
 
-__all__ = ['CameraMotion', 'CameraMotionLight', 'trajectory_source_maps']
+__all__ = []
 
 
 def trajectory_source_maps(times: torch.Tensor, view_size: Tuple[int, int],

@@ -28,15 +28,11 @@ from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Type
 import numpy as np
 import torch
 
-from ..arguments import Choice, Number, Sequence as Values
+from ..arguments import Choice, Number, SequenceOf
 from ..limits import excerpt
 from ..seeding import derive_seed
 
-__all__ = [
-    'SimulationContext', 'Effect', 'LightEffect', 'SensorEffect',
-    'ChargeEffect', 'EFFECTS', 'register_effect', 'check_number',
-    'check_choice', 'check_pair'
-]
+__all__ = []
 
 
 #: the entry point errors about effect parameters name
@@ -96,8 +92,8 @@ def check_choice(effect: str, name: str, value: Any,
 
 def check_pair(effect: str, name: str, value: Any) -> list:
     """Two finite numbers, as a list (JSON's form of a pair)."""
-    Values(Number(), names=('a', 'b')).check(value, _EFFECTS,
-                                             f'{effect}.{name}')
+    SequenceOf(Number(), names=('a', 'b')).check(value, _EFFECTS,
+                                                 f'{effect}.{name}')
     return [float(v) for v in value]
 
 

@@ -19,7 +19,7 @@ associative, and CPU and GPU give the same spikes bit for bit. The
 fractional charge ``frac(x)`` carries from block to block; the count
 ``floor(x)`` within a block is bits 24-31 of ``x``. A step's charge is
 resolved to ``2**-24`` thresholds (``6e-8``: a rate of 0.0024 Hz at 40 kHz);
-charge beyond :data:`MAX_STEP_CHARGE` thresholds per step is clipped (such a
+charge beyond :data:`_MAX_STEP_CHARGE` thresholds per step is clipped (such a
 pixel fires every step anyway).
 
 Steps are integrated in blocks short enough that ``x`` stays below
@@ -53,19 +53,16 @@ try:
 except ImportError:  # installed without a C compiler: the torch path runs
     _integrate_and_fire = None
 
-__all__ = ['FRACTION_BITS', 'ONE', 'MAX_STEP_CHARGE', 'MAX_BLOCK_STEPS',
-           'MAX_LINEAR_BLOCK_STEPS', 'BACKENDS', 'CHOICES',
-           'compiled_unavailable', 'resolve_backend', 'initial_charge',
-           'quantise', 'LinearCharge', 'Integrator']
+__all__ = []
 
 #: the backends that integrate (see the module docstring)
 BACKENDS = ('torch', 'compiled')
 #: what ``backend`` accepts
 CHOICES = ('auto', ) + BACKENDS
 
-FRACTION_BITS = 24
-ONE = 1 << FRACTION_BITS
-MAX_STEP_CHARGE = 64
+_FRACTION_BITS = 24
+ONE = 1 << _FRACTION_BITS
+_MAX_STEP_CHARGE = 64
 MAX_BLOCK_STEPS = 32  # steps of up to 2 thresholds each: x < 2**31
 MAX_LINEAR_BLOCK_STEPS = 120  # steps below 1 threshold each: x < 2**31
 _CPU_TILE = 1 << 14  # pixels per tile: larger ops beat cache-sized ones
@@ -133,7 +130,7 @@ def quantise(charge: torch.Tensor) -> Tuple[torch.Tensor, bool]:
         ``1 + frac(a)``, which leaves the spikes and the carried charge as
         they are and keeps every step below two thresholds.
     """
-    charge = charge.clamp(0, MAX_STEP_CHARGE)
+    charge = charge.clamp(0, _MAX_STEP_CHARGE)
     saturated = bool(charge.max() >= 1)
     if saturated:
         charge = torch.where(charge >= 1, charge.frac() + 1, charge)
@@ -146,7 +143,7 @@ def _chunks(steps: int, size: int) -> Iterator[Tuple[int, int]]:
         yield start, min(start + size, steps)
 
 
-class LinearCharge(NamedTuple):
+class _LinearCharge(NamedTuple):
     """Charge per step linear in a weight ``w``: ``base + w * slope``.
 
     ``base``: ``(P,)`` int32 fixed point; ``slope``: ``(P,)`` int32 per
@@ -226,7 +223,7 @@ class Integrator:
 
     @staticmethod
     def linear_charge(first: torch.Tensor, last: Optional[torch.Tensor],
-                      denominator: int) -> Optional[LinearCharge]:
+                      denominator: int) -> Optional[_LinearCharge]:
         """Fixed-point charge going linearly from ``first`` (weight 0) to
         ``last`` (weight ``denominator``; ``None``: constant), or ``None``
         unless it stays below one threshold (then use :func:`quantise` and
@@ -246,12 +243,12 @@ class Integrator:
             return None
         base = (first * ONE).to(torch.int32)
         if last is None:
-            return LinearCharge(base, None)
+            return _LinearCharge(base, None)
         difference = (last * ONE).to(torch.int32) - base
-        return LinearCharge(
+        return _LinearCharge(
             base, torch.div(difference, denominator, rounding_mode='trunc'))
 
-    def linear(self, charge: LinearCharge, weights: np.ndarray,
+    def linear(self, charge: _LinearCharge, weights: np.ndarray,
                out: torch.Tensor) -> None:
         """Steps whose charge is ``base + weights[k] * slope``.
 
@@ -268,7 +265,7 @@ class Integrator:
         for start, stop in _chunks(len(weights), size):
             self._linear(charge, weights[start:stop], out[start:stop])
 
-    def _linear(self, charge: LinearCharge, weights: np.ndarray,
+    def _linear(self, charge: _LinearCharge, weights: np.ndarray,
                 out: torch.Tensor) -> None:
         if self.backend == 'compiled':
             self._linear_compiled(charge, weights, out)
@@ -291,7 +288,7 @@ class Integrator:
 
         self._for_each_tile(tile)
 
-    def _linear_compiled(self, charge: LinearCharge, weights: np.ndarray,
+    def _linear_compiled(self, charge: _LinearCharge, weights: np.ndarray,
                          out: torch.Tensor) -> None:
         """:meth:`_linear` with the compiled kernel: each step adds
         ``base + weights[k] * slope`` (at most ``|last - first|``)."""
@@ -354,7 +351,7 @@ class Integrator:
         running charge; keep the final fraction as the pixels' charge."""
         steps = sums.shape[0] - 1
         torch.bitwise_and(sums[steps], ONE - 1, out=self.charge[begin:end])
-        sums.bitwise_right_shift_(FRACTION_BITS)  # thresholds crossed
+        sums.bitwise_right_shift_(_FRACTION_BITS)  # thresholds crossed
         counts = buffers.counts[:steps + 1, :end - begin]
         counts.copy_(sums)
         spikes = out[:, begin:end]

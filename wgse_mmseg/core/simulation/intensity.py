@@ -2,10 +2,10 @@
 import numpy as np
 import torch
 
-__all__ = ['frames_to_intensity', 'LUMA']
+__all__ = []
 
 # ITU-R BT.601 luma weights of R, G, B.
-LUMA = (0.299, 0.587, 0.114)
+_LUMA = (0.299, 0.587, 0.114)
 
 
 def frames_to_intensity(frames, dtype: torch.dtype = torch.float64,
@@ -47,7 +47,7 @@ def frames_to_intensity(frames, dtype: torch.dtype = torch.float64,
                 f'float frames must lie in [0, 1], got values in '
                 f'[{low:g}, {high:g}]')
     intensity = torch.empty(shape[:3], dtype=dtype, device=device)
-    luma = torch.tensor(LUMA, dtype=dtype, device=device)
+    luma = torch.tensor(_LUMA, dtype=dtype, device=device)
     for index, frame in enumerate(array):
         plane = torch.from_numpy(np.ascontiguousarray(frame)).to(
             device=device, dtype=dtype)

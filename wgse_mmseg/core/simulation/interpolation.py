@@ -24,7 +24,7 @@ from .effect import LightEffect, check_choice, register_effect
 from .light import LinearLight
 from .warp import identity_grid, pixel_scale, sample, warp_block_steps
 
-__all__ = ['Interpolation', 'FlowLight']
+__all__ = []
 
 _PRESETS: Dict[str, int] = {
     'ultrafast': cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,

@@ -14,7 +14,7 @@ from typing import Iterator, Tuple
 import numpy as np
 import torch
 
-__all__ = ['Light', 'LinearLight']
+__all__ = []
 
 
 def _balanced(start: int, stop: int,

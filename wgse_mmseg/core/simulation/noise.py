@@ -9,7 +9,7 @@ import torch
 
 from .effect import ChargeEffect, check_number, register_effect
 
-__all__ = ['ReadoutJitter', 'ShotNoise']
+__all__ = []
 
 
 @register_effect

@@ -20,7 +20,7 @@ import yaml
 from ..limits import EXCERPT_CHARS, cut, excerpt, load_json_file, read_text_file
 from .effect import EFFECTS, Effect
 
-__all__ = ['read_scene_file', 'parse_effects']
+__all__ = []
 
 _KIND_RANK = dict(light=0, sensor=1, charge=2)
 

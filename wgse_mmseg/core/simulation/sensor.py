@@ -21,7 +21,7 @@ from ..seeding import check_seed
 from .effect import (SensorEffect, SimulationContext, check_number,
                      register_effect)
 
-__all__ = ['SensorMaps', 'FixedPattern', 'DarkCurrent', 'HotPixels']
+__all__ = []
 
 
 class SensorMaps:

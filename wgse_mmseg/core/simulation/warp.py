@@ -8,8 +8,7 @@ outside the image.
 import torch
 import torch.nn.functional as F
 
-__all__ = ['warp_block_steps', 'pixel_scale', 'identity_grid', 'affine_grid',
-           'sample']
+__all__ = []
 
 # Pixel-steps warped at once: 16 MiB per (K, H, W, 2) float32 grid, small
 # enough that the allocator reuses its temporaries instead of mapping fresh

@@ -11,7 +11,7 @@ from mmcv.transforms import BaseTransform
 from mmseg.datasets.transforms import RandomCrop
 from mmseg.registry import TRANSFORMS
 from ...core.arguments import (FRAME_SIZE, PROBABILITY, SIDE, Choice,
-                               Number, OneOf, Sequence as Values, declare)
+                               Number, OneOf, SequenceOf, declare)
 
 __all__ = ['SpikeRandomCrop', 'SpikeRandomFlip']
 
@@ -77,8 +77,8 @@ class SpikeRandomFlip(BaseTransform):
     ``'horizontal'``, ``'vertical'`` or ``'diagonal'`` for both, as in mmcv).
     """
 
-    @declare(prob=OneOf(PROBABILITY, Values(PROBABILITY, max_length=2)),
-             direction=OneOf(_DIRECTION, Values(_DIRECTION, max_length=2)))
+    @declare(prob=OneOf(PROBABILITY, SequenceOf(PROBABILITY, max_length=2)),
+             direction=OneOf(_DIRECTION, SequenceOf(_DIRECTION, max_length=2)))
     def __init__(self, prob: Union[float, Sequence[float]] = 0.5,
                  direction: Union[str, Sequence[str]] = ('horizontal',
                                                          'vertical')):

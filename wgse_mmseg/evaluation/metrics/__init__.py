@@ -3,5 +3,4 @@ and the registered ``ReconstructionMetric``."""
 from .image_quality import entropy_2d, gaussian_window, psnr, ssim
 from .reconstruction_metric import ReconstructionMetric
 
-__all__ = ['ReconstructionMetric', 'psnr', 'ssim', 'entropy_2d',
-           'gaussian_window']
+__all__ = ['ReconstructionMetric', 'psnr', 'ssim', 'entropy_2d']

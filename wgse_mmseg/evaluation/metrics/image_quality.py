@@ -13,7 +13,7 @@ import numpy as np
 
 from ...core.quality import as_unit_grey, entropy_2d
 
-__all__ = ['psnr', 'ssim', 'entropy_2d', 'gaussian_window']
+__all__ = ['psnr', 'ssim', 'entropy_2d']
 
 #: SSIM constants of Wang et al. (2004) for data range 1.
 _K1, _K2 = 0.01, 0.03
