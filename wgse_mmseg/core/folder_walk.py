@@ -16,7 +16,7 @@ import os.path as osp
 import stat
 from typing import List, Optional, Sequence, Set, Tuple
 
-__all__ = ['files_under']
+__all__ = []
 
 
 def files_under(folder: str, suffixes: Optional[Sequence[str]] = None,

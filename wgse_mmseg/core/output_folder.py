@@ -49,8 +49,7 @@ import stat
 import sys
 from typing import BinaryIO, Iterator, Optional
 
-__all__ = ['OutputFolderError', 'OwnedFolder', 'own_folder', 'discard',
-           'open_append', 'add_wait_option']
+__all__ = ['OutputFolderError']
 
 #: the lock file of a folder's (only) job; ``.lock-<job>`` for a named one
 LOCK_NAME = '.lock'
