@@ -198,7 +198,16 @@ def onnx_segmentor(path: str, device: str):
     model = OnnxSpikeSegmentor(path, device=device)
     meta = getattr(model, 'dataset_meta', None) or {}
     palette = meta.get('palette', SpikeCityscapesDataset.METAINFO['palette'])
-    return (lambda spikes: model(spikes).argmax(1)), palette
+
+    def segment(spikes):
+        logits = model(spikes)
+        if logits.shape[1] != len(palette):
+            raise ValueError(
+                f'{path}: gives {logits.shape[1]} classes and records no '
+                f'palette; the default (Spike-Cityscapes) has '
+                f'{len(palette)} colours')
+        return logits.argmax(1)
+    return segment, palette
 
 
 def walk(args, cfg) -> None:

@@ -9,12 +9,13 @@ W)``: the config's enhancer (WGSE, TFP, the mean filters), the segmentor
 and the final resize (``wgse_mmseg.apis.onnx_export``). ``T``, ``H`` and
 ``W`` are fixed; the batch is dynamic. The checkpoint is read weights-only
 and must fit the config exactly (``--cfg-options num_steps=T`` for another
-``T``). The file (default ``<config name>.onnx``) is written whole or not
-at all. Then, unless ``--no-verify``, ONNX Runtime (CPU) runs it on two
-random Bernoulli streams beside the torch model; the largest logit
-difference and the share of pixels with the same class are printed, and
-the tool exits with status 1 (the file kept, for inspection) beyond
-``LOGITS_TOLERANCE`` or below ``MIN_ARGMAX_AGREEMENT``.
+``T``); its classes and palette are checked before anything is written.
+The file (default ``<config name>.onnx``) is verified before it is
+published: its interface is checked, and, unless ``--no-verify``, ONNX
+Runtime (CPU) runs it on two random Bernoulli streams beside the torch
+model; the largest logit difference and the share of pixels with the same
+class are printed, and beyond ``LOGITS_TOLERANCE`` or below
+``MIN_ARGMAX_AGREEMENT`` the tool exits with status 1 and writes no file.
 """
 import argparse
 import os.path as osp
@@ -73,25 +74,36 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f'pytorch2onnx.py: error: {err}')
     graph = SpikeSegmentorGraph(model)
-    try:
-        export_onnx(graph, out, num_steps, height, width, opset=args.opset,
-                    dataset_meta=dataset_meta)
-    except ValueError as err:
-        sys.exit(f'pytorch2onnx.py: error: {err}')
-    print(f'{out}\tinput spikes (batch, {num_steps}, {height}, {width})')
-    if args.no_verify:
-        return 0
     spikes = random_spikes((VERIFY_BATCH, num_steps, height, width),
                            args.seed)
-    found = compare_with_onnx(graph, out, spikes)
-    verdict = 'ok' if found['ok'] else 'FAILED'
-    print(f"onnxruntime against torch: max |logits difference| "
-          f"{found['max_abs_diff']:.3g} (tolerance "
-          f"{LOGITS_TOLERANCE * found['scale']:.3g}), argmax agreement "
-          f"{100 * found['argmax_agreement']:.3f}% (at least "
-          f'{100 * MIN_ARGMAX_AGREEMENT:.1f}%): {verdict}')
-    return 0 if found['ok'] else 1
+    verdicts = []
 
+    def compare(written: str) -> None:
+        """The comparison with the torch model, on the file before it is
+        published: one that fails it is not left behind."""
+        found = compare_with_onnx(graph, written, spikes)
+        verdicts.append(found['ok'])
+        print(f"onnxruntime against torch: max |logits difference| "
+              f"{found['max_abs_diff']:.3g} (tolerance "
+              f"{LOGITS_TOLERANCE * found['scale']:.3g}), argmax agreement "
+              f"{100 * found['argmax_agreement']:.3f}% (at least "
+              f"{100 * MIN_ARGMAX_AGREEMENT:.1f}%): "
+              f"{'ok' if found['ok'] else 'FAILED'}")
+        if not found['ok']:
+            raise ValueError(f'{out}: not written, the exported graph does '
+                             f'not agree with the torch model')
+
+    try:
+        export_onnx(graph, out, num_steps, height, width, opset=args.opset,
+                    dataset_meta=dataset_meta,
+                    check=None if args.no_verify else compare)
+    except ValueError as err:
+        if verdicts and not verdicts[-1]:
+            print(f'pytorch2onnx.py: error: {err}', file=sys.stderr)
+            return 1
+        sys.exit(f'pytorch2onnx.py: error: {err}')
+    print(f'{out}\tinput spikes (batch, {num_steps}, {height}, {width})')
+    return 0
 
 if __name__ == '__main__':
     sys.exit(main())
