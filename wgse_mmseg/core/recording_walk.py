@@ -422,7 +422,10 @@ def walk_recording(path: str, video: str,
         raise WalkError(
             f'{path}: no window of length={length} readouts centred on a '
             f'multiple of stride={stride} fits in the recording\'s {total} '
-            f'readouts')
+            f'readouts; ' + (
+                f'the longest window it holds is {total} readouts'
+                if length > total else f'a stride of at most '
+                f'{total - length + 1} reaches a centre that fits'))
     identity = _identity(path, height, width, layout, plan, settings or {})
     resumed = _open_state(outputs, identity, plan)
     todo = plan.centres[resumed:]
