@@ -61,7 +61,7 @@ from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, SIDE,  # noqa
                                        Path, Text)
 from wgse_mmseg.core.exposure import (EXPOSURE, Exposed,  # noqa: E402
                                       apply_exposure)
-from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
+from wgse_mmseg.core.io import spike_shape, to_uint8, write_png  # noqa
 from wgse_mmseg.core.recording_walk import (WalkError,  # noqa: E402
                                             add_walk_options, walk_outputs,
                                             walk_recording)
@@ -192,8 +192,8 @@ def overlay(grey: np.ndarray, labels: np.ndarray, palette,
 def onnx_segmentor(path: str, device: str):
     """The exported model ``path`` in ONNX Runtime (imported only when
     asked): a function ``(B, T, H, W)`` float spikes -> ``(B, H, W)``
-    labels, and the palette the file records (Spike-Cityscapes' where it
-    records none)."""
+    labels, the palette the file records (Spike-Cityscapes' where it
+    records none) and the ``(T, H, W)`` it was exported for."""
     from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
     model = OnnxSpikeSegmentor(path, device=device)
     meta = getattr(model, 'dataset_meta', None) or {}
@@ -207,7 +207,7 @@ def onnx_segmentor(path: str, device: str):
                 f'palette; the default (Spike-Cityscapes) has '
                 f'{len(palette)} colours')
         return logits.argmax(1)
-    return segment, palette
+    return segment, palette, model.input_shape
 
 
 def walk(args, cfg) -> None:
@@ -225,7 +225,20 @@ def walk(args, cfg) -> None:
         segment = PipelineSegmentor(model, pipeline, args.spikes)
         palette = model.dataset_meta['palette']
     else:
-        segment, palette = onnx_segmentor(args.checkpoint, args.device)
+        segment, palette, (steps, height, width) = onnx_segmentor(
+            args.checkpoint, args.device)
+        frame = spike_shape(args.spikes, args.height, args.width,
+                            pipeline_loader(pipeline).layout)[1:]
+        if steps != length:
+            raise ValueError(
+                f'{args.checkpoint}: exported for windows of T={steps} but '
+                f'the config\'s is num_steps={length}; add --cfg-options '
+                f'num_steps={steps}')
+        if (height, width) != tuple(frame):
+            raise ValueError(
+                f'{args.checkpoint}: exported for {height}x{width} frames '
+                f'but {args.spikes} has {frame[0]}x{frame[1]}; export again '
+                f'with --shape {steps} {frame[0]} {frame[1]}')
 
     def render(window, labels):
         grey, _ = clip_image(torch.from_numpy(window), args.exposure)
@@ -259,7 +272,8 @@ def main(argv=None):
         if args.backend == 'pytorch':
             model = load_model(cfg, args.checkpoint, args.device)
         else:
-            segment, palette = onnx_segmentor(args.checkpoint, args.device)
+            segment, palette, _ = onnx_segmentor(args.checkpoint,
+                                                 args.device)
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
 

@@ -242,3 +242,27 @@ def test_the_export_refuses_a_bad_palette_before_writing(tmp_path,
         tool.main([config, checkpoint, '--shape', '9', '32', '64', '--out',
                    str(tmp_path / 'm.onnx'), '--cfg-options', 'num_steps=9'])
     assert [p.name for p in tmp_path.iterdir()] == ['model.pth']
+
+
+@pytest.mark.parametrize('frames, num_steps, words', [
+    ((12, H, W), 5, 'exported for windows of T=3 but the config\'s is '
+     'num_steps=5; add --cfg-options num_steps=3'),
+    ((12, H + 2, W), T, f'exported for {H}x{W} frames but .*rec.npy has '
+     f'{H + 2}x{W}; export again with --shape {T} {H + 2} {W}'),
+    ((12, H, W), T, 'gives 2 classes and records no palette; the default '
+     '\\(Spike-Cityscapes\\) has 19 colours'),
+])
+def test_the_onnx_walk_checks_the_model_against_config_and_recording(
+        tmp_path, load_tool, frames, num_steps, words):
+    """Before a walk: the file's T against the config's window, its H, W
+    against the recording's frames; its classes against the palette."""
+    from wgse_mmseg.core.io import save_spikes
+    model = _model(tmp_path / 'm.onnx')
+    recording = str(tmp_path / 'rec.npy')
+    save_spikes(recording, np.zeros(frames, np.uint8))
+    demo = load_tool('tools/demo.py')
+    with pytest.raises(SystemExit, match=words):
+        demo.main([recording, 'configs/segformer_b0_raw.py', model,
+                   '--backend', 'onnxruntime', '--stride', '3',
+                   '--out-file', str(tmp_path / 'walk.gif'),
+                   '--cfg-options', f'num_steps={num_steps}'])
