@@ -266,3 +266,18 @@ def test_the_onnx_walk_checks_the_model_against_config_and_recording(
                    '--backend', 'onnxruntime', '--stride', '3',
                    '--out-file', str(tmp_path / 'walk.gif'),
                    '--cfg-options', f'num_steps={num_steps}'])
+
+
+def test_non_finite_logits_are_an_error_not_a_label(tmp_path):
+    """log(mean) of an all-zero window is -inf: no argmax of it is a
+    class."""
+    path = _model(tmp_path / 'log.onnx', nodes=[
+        helper.make_node('ReduceMean', ['spikes'], ['m'], axes=[1],
+                         keepdims=1),
+        helper.make_node('Log', ['m'], ['l']),
+        helper.make_node('Concat', ['l', 'l'], ['logits'], axis=1)])
+    runner = OnnxSpikeSegmentor(path)
+    assert torch.isfinite(runner(torch.ones(1, T, H, W))).all()
+    with pytest.raises(ValueError, match='log.onnx: gave 40 non-finite '
+                       'logits of 40'):
+        runner(torch.zeros(1, T, H, W))

@@ -235,4 +235,9 @@ class OnnxSpikeSegmentor:
             raise ValueError(
                 f'{self.path}: gave {OUTPUT} of shape {logits.shape}; an '
                 f'exported spike segmentor gives (B, K, H, W) = {expected}')
-        return torch.from_numpy(logits.astype(np.float32, copy=False))
+        logits = logits.astype(np.float32, copy=False)
+        finite = np.isfinite(logits)
+        if not finite.all():
+            raise ValueError(f'{self.path}: gave {int((~finite).sum())} '
+                             f'non-finite logits of {logits.size}')
+        return torch.from_numpy(logits)
