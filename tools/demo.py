@@ -63,7 +63,8 @@ from wgse_mmseg.core.exposure import (EXPOSURE, Exposed,  # noqa: E402
                                       apply_exposure)
 from wgse_mmseg.core.io import spike_shape, to_uint8, write_png  # noqa
 from wgse_mmseg.core.recording_walk import (WalkError,  # noqa: E402
-                                            add_walk_options, walk_outputs,
+                                            add_walk_options,
+                                            plan_recording_walk, walk_outputs,
                                             walk_recording)
 from wgse_mmseg.apis.window_segmentor import (  # noqa: E402
     PipelineSegmentor, pipeline_loader)
@@ -220,6 +221,8 @@ def walk(args, cfg) -> None:
         raise ValueError(f'{args.config}: a walk needs the window length: '
                          f'num_steps of LoadSpikeFromFile in the test '
                          f'pipeline (--cfg-options num_steps=T)')
+    plan_recording_walk(args.spikes, length, args.stride, args.height,
+                        args.width, pipeline_loader(pipeline).layout)
     if args.backend == 'pytorch':
         model = load_model(cfg, args.checkpoint, args.device)
         segment = PipelineSegmentor(model, pipeline, args.spikes)

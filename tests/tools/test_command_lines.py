@@ -147,6 +147,10 @@ CASES = [
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--method',
                              'tfp', '--num-steps', '51'],
      'none fit: the longest window it holds is 50 frames'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/missing.pth', '--stride', '5',
+                 '--out-file', '{t}/walk.gif', '--cfg-options',
+                 'num_steps=60'],  # refused before the model is loaded
+     'recording\'s 50 readouts; the longest window it holds is 50 readouts'),
     ('train.py', [CONFIG, '--work-dir', '{t}/work', '--cfg-options',
                   'crop_size=16,32', 'num_steps=9'],
      'segformer_b0_wgse.py: crop_size=(16, 32) is below the smallest input '

@@ -71,7 +71,7 @@ from .limits import MAX_BATCH_SIZE, load_json_file
 
 __all__ = ['WalkError', 'WalkPlan', 'WalkOutputs', 'WalkReport',
            'VIDEO_EXTENSIONS', 'CSV_COLUMNS', 'STRIDE', 'BATCH_SIZE', 'FPS',
-           'plan_walk', 'walk_outputs', 'read_windows', 'walk_recording',
+           'plan_walk', 'plan_recording_walk', 'walk_outputs', 'read_windows', 'walk_recording',
            'add_walk_options']
 
 #: the video formats, by lower-case extension of ``video``
@@ -146,6 +146,32 @@ def plan_walk(total: int, length: int, stride: int) -> WalkPlan:
                     range(first * stride, (last + 1) * stride, stride),
                     range(0, first * stride, stride),
                     range((last + 1) * stride, grid_end * stride, stride))
+
+
+def plan_recording_walk(path: str, length: int, stride: int,
+                        height: Optional[int] = None,
+                        width: Optional[int] = None,
+                        layout: Optional[str] = None) -> WalkPlan:
+    """:func:`plan_walk` of the recording ``path`` (its header read, no
+    window), refusing a walk that visits no window: a tool calls it before
+    it loads a model.
+
+    Raises:
+        WalkError: naming ``path``, the longest window it holds (a
+            ``length`` longer than the recording) or the largest stride
+            that reaches a centre that fits.
+    """
+    total = spike_shape(path, height, width, layout)[0]
+    plan = plan_walk(total, length, stride)
+    if not plan.centres:
+        raise WalkError(
+            f'{path}: no window of length={length} readouts centred on a '
+            f'multiple of stride={stride} fits in the recording\'s {total} '
+            f'readouts; ' + (
+                f'the longest window it holds is {total} readouts'
+                if length > total else f'a stride of at most '
+                f'{total - length + 1} reaches a centre that fits'))
+    return plan
 
 
 class WalkOutputs(NamedTuple):
@@ -416,16 +442,7 @@ def walk_recording(path: str, video: str,
         SpikeFileError: for a recording that cannot be read.
     """
     outputs = walk_outputs(video)
-    total = spike_shape(path, height, width, layout)[0]
-    plan = plan_walk(total, length, stride)
-    if not plan.centres:
-        raise WalkError(
-            f'{path}: no window of length={length} readouts centred on a '
-            f'multiple of stride={stride} fits in the recording\'s {total} '
-            f'readouts; ' + (
-                f'the longest window it holds is {total} readouts'
-                if length > total else f'a stride of at most '
-                f'{total - length + 1} reaches a centre that fits'))
+    plan = plan_recording_walk(path, length, stride, height, width, layout)
     identity = _identity(path, height, width, layout, plan, settings or {})
     resumed = _open_state(outputs, identity, plan)
     todo = plan.centres[resumed:]
