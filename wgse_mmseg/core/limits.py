@@ -174,5 +174,6 @@ def load_json_file(path: str, what: str,
 
 
 __all__ = [name for name in dir() if name.startswith('MAX_')] + [
-    'READ_LIMIT_BYTES', 'TEXT_FILE_LIMIT_BYTES', 'LOG_FILE_LIMIT_BYTES', 'EXCERPT_CHARS', 'cut', 'excerpt',
-    'read_text_file', 'json_depth', 'parse_json', 'load_json_file']
+    'READ_LIMIT_BYTES', 'TEXT_FILE_LIMIT_BYTES', 'LOG_FILE_LIMIT_BYTES',
+    'EXCERPT_CHARS', 'cut', 'excerpt', 'read_text_file', 'json_depth',
+    'parse_json', 'load_json_file']
