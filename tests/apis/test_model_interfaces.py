@@ -132,7 +132,7 @@ def test_a_result_of_another_shape_is_refused_at_run_time(tmp_path):
     ('{"classes": ["a"], "palette": [[0, 0, 0], [1, 1, 1]]}',
      '1 classes but 2 palette rows'),
     ('[' * (MAX_JSON_DEPTH + 1) + ']' * (MAX_JSON_DEPTH + 1),
-     'nested 33 levels deep'),
+     'nested too deeply \\(33 levels'),
     ('{"classes": ', 'must be JSON'),
     ('[1, 2]', 'must be a mapping'),
 ])
@@ -217,7 +217,8 @@ def test_json_depth_counts_nesting_not_brackets_in_strings(value):
 def test_json_files_over_the_limits_are_refused_naming_the_file(tmp_path):
     deep = tmp_path / 'deep.json'
     deep.write_text('{"a": ' * 10_000 + '1' + '}' * 10_000)
-    with pytest.raises(ValueError, match='deep.json: a marker nested 10000'):
+    with pytest.raises(ValueError, match='deep.json: a marker nested too '
+                       'deeply \\(10000 levels'):
         load_json_file(str(deep), 'marker')
     big = tmp_path / 'big.json'
     big.write_text(json.dumps(['x' * 1000] * 10))

@@ -152,8 +152,8 @@ def parse_json(text: str, source: str, what: str,
     depth = json_depth(text)
     if depth > MAX_JSON_DEPTH:
         raise ValueError(
-            f'{source}: a {what} nested {depth} levels deep; at most '
-            f'{MAX_JSON_DEPTH} are read (wgse_mmseg.core.limits.'
+            f'{source}: a {what} nested too deeply ({depth} levels; at most '
+            f'{MAX_JSON_DEPTH} are read, wgse_mmseg.core.limits.'
             f'MAX_JSON_DEPTH)')
     try:
         return json.loads(text)
