@@ -250,15 +250,19 @@ def test_the_export_refuses_a_bad_palette_before_writing(tmp_path,
      'num_steps=5; add --cfg-options num_steps=3'),
     ((12, H + 2, W), T, f'exported for {H}x{W} frames but .*rec.npy has '
      f'{H + 2}x{W}; export again with --shape {T} {H + 2} {W}'),
-    ((12, H, W), T, 'gives 2 classes and records no palette; the default '
-     '\\(Spike-Cityscapes\\) has 19 colours'),
+    ((60, H, W), 21, 'gives 21 classes and records no palette; the '
+     'default \\(Spike-Cityscapes\\) has 19 colours'),
 ])
 def test_the_onnx_walk_checks_the_model_against_config_and_recording(
         tmp_path, load_tool, frames, num_steps, words):
     """Before a walk: the file's T against the config's window, its H, W
-    against the recording's frames; its classes against the palette."""
+    against the recording's frames; more classes than the default palette
+    has colours, where the file records none."""
     from wgse_mmseg.core.io import save_spikes
-    model = _model(tmp_path / 'm.onnx')
+    model = _model(tmp_path / 'm.onnx') if num_steps != 21 else _model(
+        tmp_path / 'm.onnx', in_shape=('n', 21, H, W),
+        out_shape=('n', 21, H, W),
+        nodes=[helper.make_node('Identity', ['spikes'], ['logits'])])
     recording = str(tmp_path / 'rec.npy')
     save_spikes(recording, np.zeros(frames, np.uint8))
     demo = load_tool('tools/demo.py')
