@@ -77,7 +77,7 @@ def test_tfi_refuses_what_cannot_be_spikes(value, match):
     ((-FRAMES, 9), {}, r'must lie in \[0, 1\]'),
     ((np.zeros((0, 6, 8)), 9), {}, 'non-empty'),
     ((np.zeros(5), 9), {}, 'non-empty'),
-    ((np.full((2, 6, 8), 300, np.uint16), 9), {}, 'uint8 or float'),
+    ((np.full((2, 6, 8), 300, np.int32), 9), {}, 'bool, uint8 .* or float'),
     ((FRAMES, 9), dict(threshold=0), 'threshold must be a finite number'),
     ((FRAMES, 9), dict(threshold=float('nan')), 'threshold must be'),
     ((FRAMES, 9), dict(seed=-1), 'seed must be an integer >= 0 and <= 9223372036854775807'),

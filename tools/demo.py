@@ -63,9 +63,10 @@ from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, SIDE,  # noqa
                                        Path, Text)
 from wgse_mmseg.core.exposure import (EXPOSURE, Exposed,  # noqa: E402
                                       apply_exposure)
-from wgse_mmseg.core.io import to_uint8, write_png  # noqa: E402
+from wgse_mmseg.core.io import spike_shape, to_uint8, write_png  # noqa
 from wgse_mmseg.core.recording_walk import (WalkError,  # noqa: E402
-                                            add_walk_options, walk_outputs,
+                                            add_walk_options,
+                                            plan_recording_walk, walk_outputs,
                                             walk_recording)
 from wgse_mmseg.apis.window_segmentor import (  # noqa: E402
     PipelineSegmentor, pipeline_loader)
@@ -194,13 +195,22 @@ def overlay(grey: np.ndarray, labels: np.ndarray, palette,
 def onnx_segmentor(path: str, device: str):
     """The exported model ``path`` in ONNX Runtime (imported only when
     asked): a function ``(B, T, H, W)`` float spikes -> ``(B, H, W)``
-    labels, and the palette the file records (Spike-Cityscapes' where it
-    records none)."""
+    labels, the palette the file records (Spike-Cityscapes' where it
+    records none) and the ``(T, H, W)`` it was exported for."""
     from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
     model = OnnxSpikeSegmentor(path, device=device)
     meta = getattr(model, 'dataset_meta', None) or {}
     palette = meta.get('palette', SpikeCityscapesDataset.METAINFO['palette'])
-    return (lambda spikes: model(spikes).argmax(1)), palette
+
+    def segment(spikes):
+        logits = model(spikes)
+        if logits.shape[1] > len(palette):
+            raise ValueError(
+                f'{path}: gives {logits.shape[1]} classes and records no '
+                f'palette; the default (Spike-Cityscapes) has '
+                f'{len(palette)} colours')
+        return logits.argmax(1)
+    return segment, palette, model.input_shape
 
 
 def walk(args, cfg) -> None:
@@ -213,12 +223,27 @@ def walk(args, cfg) -> None:
         raise ValueError(f'{args.config}: a walk needs the window length: '
                          f'num_steps of LoadSpikeFromFile in the test '
                          f'pipeline (--cfg-options num_steps=T)')
+    plan_recording_walk(args.spikes, length, args.stride, args.height,
+                        args.width, pipeline_loader(pipeline).layout)
     if args.backend == 'pytorch':
         model = load_model(cfg, args.checkpoint, args.device)
         segment = PipelineSegmentor(model, pipeline, args.spikes)
         palette = model.dataset_meta['palette']
     else:
-        segment, palette = onnx_segmentor(args.checkpoint, args.device)
+        segment, palette, (steps, height, width) = onnx_segmentor(
+            args.checkpoint, args.device)
+        frame = spike_shape(args.spikes, args.height, args.width,
+                            pipeline_loader(pipeline).layout)[1:]
+        if steps != length:
+            raise ValueError(
+                f'{args.checkpoint}: exported for windows of T={steps} but '
+                f'the config\'s is num_steps={length}; add --cfg-options '
+                f'num_steps={steps}')
+        if (height, width) != tuple(frame):
+            raise ValueError(
+                f'{args.checkpoint}: exported for {height}x{width} frames '
+                f'but {args.spikes} has {frame[0]}x{frame[1]}; export again '
+                f'with --shape {steps} {frame[0]} {frame[1]}')
 
     def render(window, labels):
         grey, _ = clip_image(torch.from_numpy(window), args.exposure)
@@ -252,7 +277,8 @@ def main(argv=None):
         if args.backend == 'pytorch':
             model = load_model(cfg, args.checkpoint, args.device)
         else:
-            segment, palette = onnx_segmentor(args.checkpoint, args.device)
+            segment, palette, _ = onnx_segmentor(args.checkpoint,
+                                                 args.device)
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
 

@@ -14,6 +14,7 @@ from wgse_mmseg.core.io import SpikeFileError
 from wgse_mmseg.utils.checkpoint import CheckpointError
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
+from wgse_mmseg.utils.cross_checks import ModelFitError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,6 +42,8 @@ def main():
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     try:
         runner.train()
+    except ModelFitError as err:  # names the setting and what works
+        sys.exit(f'{osp.basename(__file__)}: error: {err}')
     except (FileNotFoundError, SpikeFileError, CheckpointError) as err:
         # data and checkpoint files: the message names the file
         sys.exit(f'{osp.basename(__file__)}: error: {type(err).__name__}: '

@@ -114,7 +114,8 @@ def test_wgse_is_exported_through_its_reference_backend():
 def exported(tmp_path_factory):
     """segformer_b0_raw exported with a dataset meta."""
     path = str(tmp_path_factory.mktemp('onnx') / 'segformer.onnx')
-    meta = dict(classes=['a', 'b'], palette=[[1, 2, 3], [4, 5, 6]])
+    meta = dict(classes=[f'c{i}' for i in range(19)],  # the model's 19
+                palette=[[i, 2 * i, 255 - i] for i in range(19)])
     model = _model('segformer_b0_raw.py')
     export_onnx(SpikeSegmentorGraph(model), path, T, H, W,
                 dataset_meta=meta)

@@ -717,8 +717,8 @@ def test_bad_settings(kwargs, message):
     (np.zeros((3, 3), np.uint8), 'leading axis'),
     (np.zeros((1, 3, 3, 4), np.uint8), r'\(N, H, W, 3\)'),
     (np.zeros((0, 3, 3), np.uint8), 'non-empty'),
-    (np.zeros((1, 3, 3), np.int16), 'uint8 or float'),
-    (np.zeros((1, 3, 3), bool), 'uint8 or float'),
+    (np.zeros((1, 3, 3), np.int16), 'white is not known'),
+    (np.zeros((1, 3, 3), np.uint32), 'white is not known'),
 ])
 def test_bad_frames(frames, message):
     with pytest.raises(ValueError, match=message):

@@ -138,7 +138,23 @@ CASES = [
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
                              '--method', 'tfp', '--stride', '100'],
      '{t}/ok.npy: no window of length=41 readouts centred on a multiple of '
-     'stride=100 fits in the recording\'s 50 readouts'),
+     'stride=100 fits in the recording\'s 50 readouts; a stride of at most '
+     '10 reaches a centre that fits'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
+                             '--method', 'tfp', '--num-steps', '60',
+                             '--stride', '5'],
+     'recording\'s 50 readouts; the longest window it holds is 50 readouts'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--method',
+                             'tfp', '--num-steps', '51'],
+     'none fit: the longest window it holds is 50 frames'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/missing.pth', '--stride', '5',
+                 '--out-file', '{t}/walk.gif', '--cfg-options',
+                 'num_steps=60'],  # refused before the model is loaded
+     'recording\'s 50 readouts; the longest window it holds is 50 readouts'),
+    ('train.py', [CONFIG, '--work-dir', '{t}/work', '--cfg-options',
+                  'crop_size=16,32', 'num_steps=9'],
+     'segformer_b0_wgse.py: crop_size=(16, 32) is below the smallest input '
+     'the model takes, 29x29'),
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
                              '--stride', '10', '--frames', '25'],
      '--frames and --stride'),

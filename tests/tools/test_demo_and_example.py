@@ -222,8 +222,10 @@ def test_demo_walk_segments_each_window_as_the_one_window_demo(
 
 class FakeOnnxSegmentor:
     """``OnnxSpikeSegmentor``'s contract: ``(B, T, H, W)`` float spikes ->
-    ``(B, K, H, W)`` logits; class 1 where the spike rate exceeds 0.2."""
+    ``(B, K, H, W)`` logits; class 1 where the spike rate exceeds 0.2;
+    exported for ``input_shape`` ``(T, H, W)``."""
     made = []
+    input_shape = (NUM_STEPS, 16, 24)
 
     def __init__(self, onnx_path, device='cpu'):
         self.made.append((onnx_path, device))

@@ -9,16 +9,17 @@ W)``: the config's enhancer (WGSE, TFP, the mean filters), the segmentor
 and the final resize (``wgse_mmseg.apis.onnx_export``). ``T``, ``H`` and
 ``W`` are fixed; the batch is dynamic. The checkpoint is read weights-only
 and must fit the config exactly (``--cfg-options num_steps=T`` for another
-``T``). The file (default ``<config name>.onnx``) is written whole or not
-at all, by one export at a time (a second export to the same file stops
-naming the first, or waits with ``--wait``:
-:func:`~wgse_mmseg.core.output_folder.own_folder`). Unless
-``--no-verify``, ONNX Runtime (CPU) first runs it, still a temporary file,
-on two random Bernoulli streams beside the torch model; the largest logit
-difference and the share of pixels with the same class are printed, and
-beyond ``LOGITS_TOLERANCE`` or below ``MIN_ARGMAX_AGREEMENT`` the tool exits
-with status 1 and the file is not written (one already at ``--out`` is left
-as it was).
+``T``); its classes and palette are checked before anything is written.
+The file (default ``<config name>.onnx``) is written whole or not at all,
+by one export at a time (a second export to the same file stops naming
+the first, or waits with ``--wait``:
+:func:`~wgse_mmseg.core.output_folder.own_folder`), and verified before it
+is published: its interface is checked, and, unless ``--no-verify``, ONNX
+Runtime (CPU) runs it on two random Bernoulli streams beside the torch
+model; the largest logit difference and the share of pixels with the same
+class are printed, and beyond ``LOGITS_TOLERANCE`` or below
+``MIN_ARGMAX_AGREEMENT`` the tool exits with status 1 and writes no file
+(one already at ``--out`` is left as it was).
 """
 import argparse
 import os.path as osp
@@ -32,7 +33,6 @@ from wgse_mmseg.apis.onnx_export import (  # noqa: E402
     SpikeSegmentorGraph, compare_with_onnx, export_onnx, random_spikes)
 from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor  # noqa
 from wgse_mmseg.core.arguments import SEED, Path  # noqa: E402
-from wgse_mmseg.core.io import atomic_path  # noqa: E402
 from wgse_mmseg.core.output_folder import (  # noqa: E402
     add_wait_option, own_folder)
 from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
@@ -81,41 +81,38 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f'pytorch2onnx.py: error: {err}')
     graph = SpikeSegmentorGraph(model)
+    spikes = random_spikes((VERIFY_BATCH, num_steps, height, width),
+                           args.seed)
+    verdicts = []
+
+    def compare(written: str) -> None:
+        """The comparison with the torch model, on the file before it is
+        published: one that fails it is not left behind."""
+        found = compare_with_onnx(graph, written, spikes)
+        verdicts.append(found['ok'])
+        print(f"onnxruntime against torch: max |logits difference| "
+              f"{found['max_abs_diff']:.3g} (tolerance "
+              f"{LOGITS_TOLERANCE * found['scale']:.3g}), argmax agreement "
+              f"{100 * found['argmax_agreement']:.3f}% (at least "
+              f"{100 * MIN_ARGMAX_AGREEMENT:.1f}%): "
+              f"{'ok' if found['ok'] else 'FAILED'}")
+        if not found['ok']:
+            raise ValueError(f'{out}: not written, the exported graph does '
+                             f'not agree with the torch model')
+
     try:
         with own_folder(osp.dirname(osp.abspath(out)), osp.basename(out),
-                        args.wait), atomic_path(out) as written:
-            export_onnx(graph, written, num_steps, height, width,
-                        opset=args.opset, dataset_meta=dataset_meta)
-            if not (args.no_verify or _verified(graph, written, args.seed,
-                                                num_steps, height, width)):
-                raise _Refused
-    except _Refused:
-        print(f'{out}: not written, the exported graph fails the check')
-        return 1
+                        args.wait):
+            export_onnx(graph, out, num_steps, height, width,
+                        opset=args.opset, dataset_meta=dataset_meta,
+                        check=None if args.no_verify else compare)
     except ValueError as err:
+        if verdicts and not verdicts[-1]:
+            print(f'pytorch2onnx.py: error: {err}', file=sys.stderr)
+            return 1
         sys.exit(f'pytorch2onnx.py: error: {err}')
     print(f'{out}\tinput spikes (batch, {num_steps}, {height}, {width})')
     return 0
-
-
-class _Refused(Exception):
-    """The exported file failed the check: it is not kept."""
-
-
-def _verified(graph, path: str, seed: int, num_steps: int, height: int,
-              width: int) -> bool:
-    """Run the ONNX file ``path`` beside ``graph`` on random streams,
-    print the agreement, and say whether it passes."""
-    spikes = random_spikes((VERIFY_BATCH, num_steps, height, width), seed)
-    found = compare_with_onnx(graph, path, spikes)
-    verdict = 'ok' if found['ok'] else 'FAILED'
-    print(f"onnxruntime against torch: max |logits difference| "
-          f"{found['max_abs_diff']:.3g} (tolerance "
-          f"{LOGITS_TOLERANCE * found['scale']:.3g}), argmax agreement "
-          f"{100 * found['argmax_agreement']:.3f}% (at least "
-          f'{100 * MIN_ARGMAX_AGREEMENT:.1f}%): {verdict}')
-    return found['ok']
-
 
 if __name__ == '__main__':
     sys.exit(main())

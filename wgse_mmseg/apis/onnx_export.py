@@ -27,7 +27,7 @@ check_mmseg_layer('wgse_mmseg.apis.onnx_export')  # before MMSeg is imported
 
 import json
 import warnings
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Optional, Sequence
 
 import onnx
 import torch
@@ -35,10 +35,11 @@ from mmengine.model import revert_sync_batchnorm
 from torch import nn
 
 from ..core.arguments import NUM_STEPS, SIDE, Integer, declare
-from ..core.io import atomic_output
+from ..core.io import atomic_path
 from ..core.limits import MAX_NUM_STEPS
 from ..core.wgse import WGSE
-from .segmentor_checkpoint import load_segmentor
+from .onnx_segmentor import INPUT, OUTPUT, OnnxSpikeSegmentor, \
+    check_dataset_meta
 
 __all__ = ['export_onnx']
 
@@ -59,8 +60,6 @@ OPSET = 18
 SHAPE_ENTRY = Integer(1, MAX_NUM_STEPS)
 #: spike probability of the random streams of :func:`compare_with_onnx`
 SPIKE_PROBABILITY = 0.3
-#: the names of the graph's input and output
-INPUT, OUTPUT = 'spikes', 'logits'
 
 
 class SpikeSegmentorGraph(nn.Module):
@@ -103,16 +102,36 @@ def random_spikes(shape: Sequence[int], seed: int) -> torch.Tensor:
 @declare(num_steps=NUM_STEPS, height=SIDE, width=SIDE, opset=OPSETS)
 def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
                 height: int, width: int, opset: int = OPSET,
-                dataset_meta: Optional[dict] = None) -> str:
-    """Write ``graph`` as ONNX to ``path``, whole or not at all; a model
-    the exporter cannot trace (TFI's data-dependent scans) is a
-    ``ValueError`` naming ``path``, and nothing is written.
+                dataset_meta: Optional[dict] = None,
+                check: Optional[Callable[[str], None]] = None) -> str:
+    """Write ``graph`` as ONNX to ``path``, verified before it is
+    published: whole and passing every check, or not at all.
 
     The input ``spikes`` is ``(batch, num_steps, height, width)`` float32
     with a dynamic batch; the output ``logits`` ``(batch, K, height,
-    width)``. ``dataset_meta`` (``classes``, ``palette``) is stored as JSON
-    in the model's metadata (``dataset_meta``). Returns ``path``.
+    width)``. ``dataset_meta`` (``classes``, ``palette``; checked by
+    :func:`~.onnx_segmentor.check_dataset_meta` before anything is done) is
+    stored as JSON in the model's metadata (``dataset_meta``). The file is
+    written to a temporary beside ``path``, opened as
+    :class:`~.onnx_segmentor.OnnxSpikeSegmentor` opens it (its interface
+    and metadata checked), then given to ``check`` (which raises to refuse
+    it; the tool's comparison with the torch model), and only then renamed
+    to ``path``. Returns ``path``.
+
+    Raises:
+        ValueError: naming ``path``, for a model the exporter cannot trace
+            (TFI's data-dependent scans), metadata that is not classes and
+            a palette, or a file its own checks refuse; nothing is left.
     """
+    if dataset_meta is not None:
+        dataset_meta = check_dataset_meta(f'{path} (dataset_meta)',
+                                          dataset_meta)
+        classes = getattr(getattr(graph.segmentor, 'decode_head', None),
+                          'num_classes', None)
+        if classes not in (None, len(dataset_meta['classes'])):
+            raise ValueError(
+                f'{path}: the model has {classes} classes but its '
+                f'dataset_meta names {len(dataset_meta["classes"])}')
     example = random_spikes((2, num_steps, height, width), seed=0)
     batch = torch.export.Dim('batch', min=1, max=4096)
     try:
@@ -134,8 +153,16 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
         entry = model.metadata_props.add()
         entry.key, entry.value = 'dataset_meta', json.dumps(dataset_meta)
     onnx.checker.check_model(model)
-    with atomic_output(path) as f:
-        f.write(model.SerializeToString())
+    with atomic_path(path) as written:
+        with open(written, 'wb') as f:
+            f.write(model.SerializeToString())
+        try:
+            OnnxSpikeSegmentor(written)
+        except ValueError as err:
+            raise ValueError(f'{path}: the exported file fails its own '
+                             f'interface check, not written: {err}') from err
+        if check is not None:
+            check(written)
     return path
 
 
@@ -152,7 +179,6 @@ def compare_with_onnx(graph: SpikeSegmentorGraph, onnx_path: str,
         ``max_abs_diff <= LOGITS_TOLERANCE * scale`` and
         ``argmax_agreement >= MIN_ARGMAX_AGREEMENT``.
     """
-    from .onnx_segmentor import OnnxSpikeSegmentor
     got = OnnxSpikeSegmentor(onnx_path)(spikes)
     with torch.no_grad():
         expected = graph.eval()(spikes)

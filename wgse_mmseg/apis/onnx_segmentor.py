@@ -4,27 +4,105 @@ in ONNX Runtime.
 :class:`OnnxSpikeSegmentor` maps float spikes ``(B, T, H, W)`` to logits
 ``(B, K, H, W)`` as the torch model does (preprocessing, enhancer and
 resize are inside the graph, :mod:`.onnx_export`), checking its input
-first: the graph holds no checks of its own. It needs ``onnxruntime`` and
-torch, not OpenMMLab.
+first: the graph holds no checks of its own. A file is checked against that
+interface when it is opened (:func:`check_interface`): one input
+``spikes`` ``(batch, T, H, W)`` with ``T``, ``H``, ``W`` fixed and a
+numeric element type (the spikes are fed in it: 0 and 1 are exact in every
+one), one output ``logits`` ``(batch, K, H, W)`` of floats, ``K`` the
+number of classes the file records; a fixed batch is run in chunks of it.
+Every result is checked against the same interface. It needs
+``onnxruntime`` and torch, not OpenMMLab.
 """
-import json
 import os.path as osp
-from typing import Optional, Tuple
+from typing import NamedTuple, Optional, Tuple
 
 import numpy as np
 import torch
 
-__all__ = ['OnnxSpikeSegmentor']
+from ..core.limits import parse_json
+from ..utils.checkpoint import check_dataset_meta
+
+__all__ = ['INPUT', 'OUTPUT', 'OnnxInterface', 'check_interface',
+           'OnnxSpikeSegmentor']
+
+#: the names of an exported graph's input and output
+INPUT, OUTPUT = 'spikes', 'logits'
+#: ONNX Runtime's input element types -> the NumPy dtype the spikes are fed
+#: in (0 and 1 are exact in each)
+_INPUT_TYPES = {'tensor(float)': np.float32, 'tensor(float16)': np.float16,
+                'tensor(double)': np.float64, 'tensor(uint8)': np.uint8,
+                'tensor(int8)': np.int8, 'tensor(int32)': np.int32,
+                'tensor(int64)': np.int64, 'tensor(bool)': np.bool_}
+#: the output element types that can hold logits
+_OUTPUT_TYPES = ('tensor(float)', 'tensor(float16)', 'tensor(double)')
 
 
-def _static_shape(path: str, dims) -> Tuple[int, int, int]:
-    """``(T, H, W)`` of the graph's input ``(batch, T, H, W)``."""
-    if len(dims) != 4 or not all(isinstance(d, int) and d > 0
-                                 for d in dims[1:]):
+class OnnxInterface(NamedTuple):
+    """What an exported spike segmentor's file declares."""
+    #: ``(T, H, W)`` of its input
+    input_shape: Tuple[int, int, int]
+    #: the NumPy dtype its input is fed in
+    input_dtype: type
+    #: its fixed batch size, or ``None`` for a dynamic batch
+    batch: Optional[int]
+    #: ``K``, the classes of its output, or ``None`` where not fixed
+    num_classes: Optional[int]
+
+
+def _fixed(dim) -> bool:
+    return isinstance(dim, int) and dim > 0
+
+
+def check_interface(path: str, inputs, outputs) -> OnnxInterface:
+    """The :class:`OnnxInterface` of a graph's ``inputs`` and ``outputs``
+    (ONNX Runtime's ``NodeArg`` lists: ``name``, ``type``, ``shape``).
+
+    Raises:
+        ValueError: naming ``path`` and what an exported spike segmentor
+            has, for any other count, name, rank, element type or fixed
+            dimension.
+    """
+    if len(inputs) != 1 or len(outputs) != 1:
         raise ValueError(
-            f'{path}: the graph input is {list(dims)}; an exported spike '
+            f'{path}: an exported spike segmentor has one input and one '
+            f'output, found {len(inputs)} and {len(outputs)}')
+    spikes, logits = inputs[0], outputs[0]
+    dims = list(spikes.shape or ())
+    if len(dims) != 4 or not all(_fixed(d) for d in dims[1:]):
+        raise ValueError(
+            f'{path}: the graph input is {dims}; an exported spike '
             f'segmentor takes (batch, T, H, W) with T, H, W fixed')
-    return tuple(dims[1:])
+    if (spikes.name, logits.name) != (INPUT, OUTPUT):
+        raise ValueError(
+            f'{path}: an exported spike segmentor\'s input is named '
+            f'{INPUT!r} and its output {OUTPUT!r}, found {spikes.name!r} and '
+            f'{logits.name!r}')
+    if spikes.type not in _INPUT_TYPES:
+        raise ValueError(
+            f'{path}: the input {INPUT!r} holds {spikes.type}; an exported '
+            f'spike segmentor takes one of {sorted(_INPUT_TYPES)}')
+    out = list(logits.shape or ())  # [] where the rank is not known:
+    if out and len(out) != 4:  # then each result is checked
+        raise ValueError(
+            f'{path}: the output {OUTPUT!r} is {out}; an exported spike '
+            f'segmentor gives logits (batch, K, H, W)')
+    if logits.type not in _OUTPUT_TYPES:
+        raise ValueError(
+            f'{path}: the output {OUTPUT!r} holds {logits.type}; logits are '
+            f'one of {list(_OUTPUT_TYPES)}')
+    out = out or [None] * 4
+    for axis, (got, size) in enumerate(zip(out[2:], dims[2:]), 2):
+        if _fixed(got) and got != size:
+            raise ValueError(
+                f'{path}: the output\'s dimension {axis} is {got}, not the '
+                f'input\'s {size}; logits (batch, K, H, W) are at the '
+                f'input\'s size')
+    batch = dims[0] if _fixed(dims[0]) else None
+    if batch is not None and _fixed(out[0]) and out[0] != batch:
+        raise ValueError(f'{path}: a batch of {batch} windows in gives '
+                         f'{out[0]} results out')
+    return OnnxInterface(tuple(dims[1:]), _INPUT_TYPES[spikes.type], batch,
+                         out[1] if _fixed(out[1]) else None)
 
 
 class OnnxSpikeSegmentor:
@@ -76,38 +154,33 @@ class OnnxSpikeSegmentor:
             raise ValueError(
                 f'{onnx_path}: not a model ONNX Runtime can load '
                 f'({type(err).__name__}: {str(err)[:300]})') from err
-        inputs, outputs = self.session.get_inputs(), \
-            self.session.get_outputs()
-        if len(inputs) != 1 or len(outputs) != 1:
-            raise ValueError(
-                f'{onnx_path}: an exported spike segmentor has one input '
-                f'and one output, found {len(inputs)} and {len(outputs)}')
         self.path = onnx_path
         self.device = device
-        self.input_name = inputs[0].name
-        self.input_shape = _static_shape(onnx_path, inputs[0].shape)
+        self.interface = check_interface(onnx_path, self.session.get_inputs(),
+                                         self.session.get_outputs())
+        self.input_shape = self.interface.input_shape
         self.dataset_meta = self._read_dataset_meta()
+        recorded = self.dataset_meta and len(self.dataset_meta['classes'])
+        if recorded and self.interface.num_classes not in (None, recorded):
+            raise ValueError(
+                f'{onnx_path}: its logits have {self.interface.num_classes} '
+                f'classes but its dataset_meta names {recorded}')
+
+    @property
+    def num_classes(self) -> Optional[int]:
+        """``K`` of the logits where the file fixes it or records its
+        classes, else ``None``."""
+        return self.interface.num_classes or (
+            self.dataset_meta and len(self.dataset_meta['classes']))
 
     def _read_dataset_meta(self) -> Optional[dict]:
         text = self.session.get_modelmeta().custom_metadata_map.get(
             'dataset_meta')
         if text is None:
             return None
-        try:
-            meta = json.loads(text)
-            classes, palette = meta['classes'], meta['palette']
-        except (ValueError, TypeError, KeyError):
-            raise ValueError(f'{self.path}: its dataset_meta is not the '
-                             f'JSON of classes and palette') from None
-        if not (isinstance(classes, list) and
-                all(isinstance(c, str) for c in classes) and
-                isinstance(palette, list) and all(
-                    isinstance(c, list) and len(c) == 3 and
-                    all(isinstance(v, int) and 0 <= v <= 255 for v in c)
-                    for c in palette)):
-            raise ValueError(f'{self.path}: its dataset_meta holds classes '
-                             f'(names) and palette (RGB triples in 0..255)')
-        return dict(classes=classes, palette=palette)
+        meta = parse_json(text, f'{self.path} (metadata dataset_meta)',
+                          'dataset meta')
+        return check_dataset_meta(f'{self.path} (metadata)', meta)
 
     def _check(self, spikes: torch.Tensor) -> None:
         if not isinstance(spikes, torch.Tensor):
@@ -132,11 +205,39 @@ class OnnxSpikeSegmentor:
             raise ValueError(f'spikes hold only 0 and 1, found {shown} '
                              f'({spikes.dtype})')
 
+    def _run(self, array: np.ndarray) -> np.ndarray:
+        """The graph on ``array`` ``(B, T, H, W)`` in its input dtype, in
+        chunks of a fixed batch (the last padded with zeros)."""
+        batch = self.interface.batch
+        if batch is None:
+            return self.session.run(None, {INPUT: array})[0]
+        chunks = []
+        for first in range(0, len(array), batch):
+            chunk = array[first:first + batch]
+            padded = np.zeros((batch, ) + array.shape[1:], array.dtype)
+            padded[:len(chunk)] = chunk
+            chunks.append(self.session.run(None, {INPUT: padded})[0]
+                          [:len(chunk)])
+        return np.concatenate(chunks)
+
     def __call__(self, spikes: torch.Tensor) -> torch.Tensor:
         """``(B, T, H, W)`` spikes (0 and 1, any dtype) -> ``(B, K, H, W)``
         float32 logits on the CPU."""
         self._check(spikes)
-        array = spikes.detach().to('cpu', torch.float32).numpy()
-        logits, = self.session.run(None, {self.input_name:
-                                          np.ascontiguousarray(array)})
+        array = np.ascontiguousarray(spikes.detach().to('cpu').numpy()
+                                     .astype(self.interface.input_dtype))
+        logits = self._run(array)
+        expected = (len(array), self.num_classes or 'K') + \
+            self.input_shape[1:]
+        if logits.ndim != 4 or any(
+                isinstance(e, int) and g != e
+                for g, e in zip(logits.shape, expected)):
+            raise ValueError(
+                f'{self.path}: gave {OUTPUT} of shape {logits.shape}; an '
+                f'exported spike segmentor gives (B, K, H, W) = {expected}')
+        logits = logits.astype(np.float32, copy=False)
+        finite = np.isfinite(logits)
+        if not finite.all():
+            raise ValueError(f'{self.path}: gave {int((~finite).sum())} '
+                             f'non-finite logits of {logits.size}')
         return torch.from_numpy(logits)

@@ -17,21 +17,30 @@ from torch import nn  # noqa: E402
 
 from mmseg.registry import MODELS  # noqa: E402
 from ..datasets import SpikeCityscapesDataset  # noqa: E402
-from ..utils.checkpoint import read_checkpoint  # noqa: E402
+from ..utils.checkpoint import (CheckpointError, check_dataset_meta,  # noqa
+                                checkpoint_state_dict, read_checkpoint)
 
 __all__ = ['load_segmentor']
 
 
-def _dataset_meta(state: dict) -> Dict[str, list]:
-    """Classes and palette from a checkpoint's ``meta['dataset_meta']``,
-    Spike-Cityscapes' where it names none."""
+def _dataset_meta(path: str, state: dict) -> Dict[str, list]:
+    """Classes and palette from a checkpoint's ``meta['dataset_meta']``
+    (checked: :func:`~wgse_mmseg.utils.checkpoint.check_dataset_meta`),
+    Spike-Cityscapes' for what it names none of."""
     meta = state.get('meta')
-    meta = meta.get('dataset_meta') if isinstance(meta, dict) else None
-    meta = meta if isinstance(meta, dict) else {}
+    if meta is not None and not isinstance(meta, dict):
+        raise CheckpointError(f'{path}: meta must be a mapping, found '
+                              f'{type(meta).__name__}')
+    meta = (meta or {}).get('dataset_meta')
+    meta = {} if meta is None else meta
+    if not isinstance(meta, dict):
+        raise CheckpointError(f'{path}: meta.dataset_meta must be a mapping '
+                              f'with classes and palette, found '
+                              f'{type(meta).__name__}')
     default = SpikeCityscapesDataset.METAINFO
-    return dict(classes=list(meta.get('classes', default['classes'])),
-                palette=[list(c) for c in meta.get('palette',
-                                                   default['palette'])])
+    return check_dataset_meta(f'{path} (meta.dataset_meta)', dict(
+        classes=meta.get('classes', list(default['classes'])),
+        palette=meta.get('palette', [list(c) for c in default['palette']])))
 
 
 def load_segmentor(cfg, checkpoint: str) -> Tuple[nn.Module, dict]:
@@ -40,17 +49,20 @@ def load_segmentor(cfg, checkpoint: str) -> Tuple[nn.Module, dict]:
     ``palette``).
 
     The checkpoint is read weights-only
-    (:func:`~wgse_mmseg.utils.checkpoint.read_checkpoint`) and must fit the
-    model exactly: a ``ValueError`` names the file otherwise (one trained
-    with another ``T`` needs ``--cfg-options num_steps=T``).
+    (:func:`~wgse_mmseg.utils.checkpoint.read_checkpoint`), its state dict
+    and dataset meta checked before the model is built, and must fit the
+    model exactly: a ``ValueError`` names the file and the field otherwise
+    (one trained with another ``T`` needs ``--cfg-options num_steps=T``).
     """
-    model = MODELS.build(cfg.model)
     state = read_checkpoint(checkpoint)
+    weights = checkpoint_state_dict(checkpoint, state)
+    dataset_meta = _dataset_meta(checkpoint, state)
+    model = MODELS.build(cfg.model)
     try:
-        load_state_dict(model, state.get('state_dict', state), strict=True)
+        load_state_dict(model, weights, strict=True)
     except RuntimeError as err:
         raise ValueError(
             f'{checkpoint}: does not fit the model built from the config '
             f'(num_steps={cfg.get("num_steps")}; a checkpoint trained with '
             f'another T needs --cfg-options num_steps=T): {err}') from err
-    return model.eval(), _dataset_meta(state)
+    return model.eval(), dataset_meta

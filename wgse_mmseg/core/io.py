@@ -276,7 +276,8 @@ def centered_window(path: str, total: int, center: int, length: int) -> int:
         raise SpikeFileError(
             f'{path}: a {length}-frame window centred on frame {center} does '
             f'not fit in the stream\'s {total} frames; centre frames '
-            + (f'{first}..{last} fit' if last >= first else 'none fit'))
+            + (f'{first}..{last} fit' if last >= first else
+               f'none fit: the longest window it holds is {total} frames'))
     return start
 
 

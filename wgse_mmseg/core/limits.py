@@ -21,8 +21,13 @@ quotes at most :data:`EXCERPT_CHARS` characters of an offending value:
 ``TEXT_FILE_LIMIT_BYTES``
     the largest side file, marker or scene file (JSON/YAML) read (1 MiB;
     a converter's marker is a few kB).
+``MAX_JSON_DEPTH``
+    the deepest nesting of arrays and objects any JSON the package reads
+    may have (:func:`parse_json`; the package writes at most 4 levels), so
+    that no crafted file or metadata can exhaust the parser's recursion.
 """
 import json
+import re
 from typing import Any
 
 #: ``T``: spike frames per window (``num_steps``) a model, transform,
@@ -71,8 +76,17 @@ MAX_TILE_SCALE = 64
 READ_LIMIT_BYTES = 2**31
 #: bytes of a side file, marker or scene file
 TEXT_FILE_LIMIT_BYTES = 2**20
+#: bytes of a log or result file of a training run the package reads back
+#: (mmengine's logs, an experiment's results)
+LOG_FILE_LIMIT_BYTES = 2**28
 #: characters of a value quoted in an error message
 EXCERPT_CHARS = 200
+#: nesting of arrays and objects in JSON read from a file or a model
+MAX_JSON_DEPTH = 32
+
+#: a JSON string literal (escapes included), whose brackets do not nest
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
+_JSON_BRACKET = re.compile(r'[\[\]{}]')
 
 
 def cut(text: str, limit: int = EXCERPT_CHARS) -> str:
@@ -111,20 +125,52 @@ def read_text_file(path: str, what: str,
             from err
 
 
-def load_json_file(path: str, what: str) -> Any:
-    """The JSON value in ``path`` (:func:`read_text_file`'s limit).
+def json_depth(text: str) -> int:
+    """The deepest nesting of arrays and objects in JSON ``text``, counted
+    without parsing it (brackets inside strings do not count)."""
+    depth = deepest = 0
+    for bracket in _JSON_BRACKET.findall(_JSON_STRING.sub('""', text)):
+        depth += 1 if bracket in '[{' else -1
+        deepest = max(deepest, depth)
+    return deepest
+
+
+def parse_json(text: str, source: str, what: str,
+               limit: int = TEXT_FILE_LIMIT_BYTES) -> Any:
+    """The JSON value of ``text`` read from ``source`` (a file, or a model's
+    metadata entry), the one bounded JSON parser of the package: at most
+    ``limit`` characters and :data:`MAX_JSON_DEPTH` levels of nesting.
 
     Raises:
-        ValueError: naming ``path``, for a file over the limit, invalid
-            JSON, or nesting deeper than Python's recursion limit.
-            ``OSError`` passes through.
+        ValueError: naming ``source`` and ``what`` it should be, for text
+            over a limit or invalid JSON.
     """
-    text = read_text_file(path, what)
+    if len(text) > limit:
+        raise ValueError(
+            f'{source}: a {what} longer than {limit} characters is refused '
+            f'(wgse_mmseg.core.limits.TEXT_FILE_LIMIT_BYTES)')
+    depth = json_depth(text)
+    if depth > MAX_JSON_DEPTH:
+        raise ValueError(
+            f'{source}: a {what} nested too deeply ({depth} levels; at most '
+            f'{MAX_JSON_DEPTH} are read, wgse_mmseg.core.limits.'
+            f'MAX_JSON_DEPTH)')
     try:
         return json.loads(text)
-    except RecursionError as err:
-        raise ValueError(f'{path}: a {what} nested too deeply') from err
     except ValueError as err:
-        raise ValueError(f'{path}: a {what} must be JSON ({err})') from err
+        raise ValueError(f'{source}: a {what} must be JSON ({err})') from err
+
+
+def load_json_file(path: str, what: str,
+                   limit: int = TEXT_FILE_LIMIT_BYTES) -> Any:
+    """The JSON value in ``path``: :func:`read_text_file` then
+    :func:`parse_json`, both with ``limit`` bytes.
+
+    Raises:
+        ValueError: naming ``path``, for a file over the limits, not UTF-8,
+            or invalid JSON. ``OSError`` passes through.
+    """
+    return parse_json(read_text_file(path, what, limit), path, what, limit)
+
 
 __all__ = []

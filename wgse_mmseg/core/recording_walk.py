@@ -158,6 +158,32 @@ def plan_walk(total: int, length: int, stride: int) -> WalkPlan:
                     range((last + 1) * stride, grid_end * stride, stride))
 
 
+def plan_recording_walk(path: str, length: int, stride: int,
+                        height: Optional[int] = None,
+                        width: Optional[int] = None,
+                        layout: Optional[str] = None) -> WalkPlan:
+    """:func:`plan_walk` of the recording ``path`` (its header read, no
+    window), refusing a walk that visits no window: a tool calls it before
+    it loads a model.
+
+    Raises:
+        WalkError: naming ``path``, the longest window it holds (a
+            ``length`` longer than the recording) or the largest stride
+            that reaches a centre that fits.
+    """
+    total = spike_shape(path, height, width, layout)[0]
+    plan = plan_walk(total, length, stride)
+    if not plan.centres:
+        raise WalkError(
+            f'{path}: no window of length={length} readouts centred on a '
+            f'multiple of stride={stride} fits in the recording\'s {total} '
+            f'readouts; ' + (
+                f'the longest window it holds is {total} readouts'
+                if length > total else f'a stride of at most '
+                f'{total - length + 1} reaches a centre that fits'))
+    return plan
+
+
 class WalkOutputs(NamedTuple):
     """The files of a walk to ``video`` (:func:`walk_outputs`)."""
     video: str
@@ -447,13 +473,7 @@ def walk_recording(path: str, video: str,
         SpikeFileError: for a recording that cannot be read.
     """
     outputs = walk_outputs(video)
-    total = spike_shape(path, height, width, layout)[0]
-    plan = plan_walk(total, length, stride)
-    if not plan.centres:
-        raise WalkError(
-            f'{path}: no window of length={length} readouts centred on a '
-            f'multiple of stride={stride} fits in the recording\'s {total} '
-            f'readouts')
+    plan = plan_recording_walk(path, length, stride, height, width, layout)
     for output in (outputs.video, outputs.csv):
         if osp.isdir(output) and not osp.islink(output):
             raise WalkError(f'{output}: a folder where the walk writes a '

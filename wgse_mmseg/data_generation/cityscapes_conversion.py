@@ -77,7 +77,7 @@ from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
 from ..core.folder_walk import files_under
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
 from ..core.io import save_spikes, temporaries_of, write_png
-from ..core.limits import MAX_SAMPLES, MAX_WORKERS
+from ..core.limits import MAX_SAMPLES, MAX_WORKERS, excerpt, parse_json
 from ..core.markers import invalidate, is_complete, write_marker
 from ..core.output_folder import OwnedFolder, own_folder
 from ..core.seeding import derive_seed
@@ -519,11 +519,10 @@ def load_scene(value: Optional[str]) -> Dict[str, Optional[dict]]:
         scene = read_scene_file(value)
     else:
         try:
-            scene = json.loads(value)
+            scene = parse_json(value, 'the command line', 'scene')
         except ValueError as err:
-            raise ValueError(
-                f'scene {value!r} is neither a file nor inline JSON: '
-                f'{err}') from err
+            raise ValueError(f'scene {excerpt(value)} is neither a file nor '
+                             f'inline JSON: {err}') from err
         if not isinstance(scene, dict):
             raise ValueError(
                 f'scene {value!r} must map effect names to parameters, '

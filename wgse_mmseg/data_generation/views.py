@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from ..core.folder_walk import files_under
+from ..core.images import read_grey_image
 from ..core.simulation import trajectory_source_maps
 
 __all__ = []
@@ -20,14 +21,6 @@ __all__ = []
 #: the image files :func:`load_images` reads
 IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff',
                     '.webp')
-
-
-def read_grey_image(path: str) -> np.ndarray:
-    """An image file as ``(H, W)`` float32 grey in [0, 1] (colour -> luma)."""
-    image = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise FileNotFoundError(f'{path}: missing or not a readable image')
-    return image.astype(np.float32) / 255.0
 
 
 def load_images(image_dir: str, max_side: int) -> Tuple[List[str],

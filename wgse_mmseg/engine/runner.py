@@ -21,6 +21,7 @@ from mmengine.runner import Runner
 
 from .._openmmlab import prepare_mmseg_layer
 from ..utils.checkpoint import CheckpointError
+from ..utils.cross_checks import check_training_fits
 from ..utils.spike_settings import apply_spike_settings
 
 __all__ = ['SpikeRunner']
@@ -31,7 +32,9 @@ class SpikeRunner(Runner):
     """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` sets up the
     MMSeg layer (:func:`~wgse_mmseg._openmmlab.prepare_mmseg_layer`, once
     per process) and applies the config's spike settings first (also those ``--cfg-options`` of MMSeg's
-    own tools merged in), whose :meth:`save_checkpoint` is atomic on
+    own tools merged in), whose :meth:`train` first checks that the crop
+    and the batch fit the model (:mod:`wgse_mmseg.utils.cross_checks`),
+    whose :meth:`save_checkpoint` is atomic on
     local disks and whose :meth:`load_checkpoint` refuses config text that
     mmengine would execute; otherwise the same."""
 
@@ -45,6 +48,14 @@ class SpikeRunner(Runner):
                           f'{path} (was {old!r})' for path, old in
                           sorted(changed.items())), logger='current')
         return super().from_cfg(cfg)
+
+    def train(self):
+        """mmengine's, after the cross-field checks of the config against
+        the built model (:func:`~wgse_mmseg.utils.cross_checks.
+        check_training_fits`: the crop, the batch), before any data is
+        read."""
+        check_training_fits(self.cfg, self.model)
+        return super().train()
 
     def load_checkpoint(self, filename: str, *args, **kwargs) -> dict:
         """mmengine's, but a checkpoint with a ``meta['config']`` entry is

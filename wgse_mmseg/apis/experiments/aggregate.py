@@ -4,11 +4,11 @@ One row per entry (:func:`aggregate`): mean and standard deviation over
 seeds of the test metrics, time per image, training time and the training
 loss at the end (:func:`loss_change`: how flat the curve had become).
 """
-import json
 import os.path as osp
 import statistics
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
+from ...core.limits import LOG_FILE_LIMIT_BYTES, load_json_file
 from .grid import Entry, describe
 from .runner import METRICS, RESULT, read_benchmark, run_directory
 
@@ -51,8 +51,8 @@ def aggregate(entries: List[Entry], seeds: Sequence[int],
         for seed in seeds:
             path = osp.join(run_directory(work_dir, entry, seed), RESULT)
             if osp.exists(path):
-                with open(path) as f:
-                    results.append(json.load(f))
+                results.append(load_json_file(path, 'run result',
+                                              LOG_FILE_LIMIT_BYTES))
         if not results:
             continue
         row = dict(name=entry.name, model=entry.model,

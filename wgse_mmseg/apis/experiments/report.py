@@ -7,7 +7,6 @@ command that made it, the grid's settings and the machine.
 """
 import csv
 import io
-import json
 import os.path as osp
 from typing import Any, Dict, List
 
@@ -15,6 +14,7 @@ from mmengine.config import Config
 
 from ...benchmarks.markdown import markdown_table
 from ...core.io import atomic_output
+from ...core.limits import load_json_file
 from .aggregate import aggregate
 from .grid import Entry
 from .settings import ExperimentSettings
@@ -35,8 +35,7 @@ def read_deployment(path: str) -> Dict[str, Dict[str, Any]]:
     (:func:`~wgse_mmseg.benchmarks.deployment.measure_deployment`); a
     ``ValueError`` names the file if it is not one."""
     try:
-        with open(path) as f:
-            results = json.load(f)['results']
+        results = load_json_file(path, 'deployment benchmark')['results']
         return {r['name']: dict(
             torch=float(r['torch_eager']['windows_per_s']),
             onnxruntime=float(r['onnxruntime']['windows_per_s']),

@@ -24,6 +24,7 @@ from mmengine.config import Config
 from ...benchmarks.machine import run_isolated
 from ...benchmarks.segmentation import benchmark_config, validation_cost
 from ...core.io import atomic_output
+from ...core.limits import LOG_FILE_LIMIT_BYTES, load_json_file, parse_json
 from .grid import (PROJECT_ROOT, Entry, as_cli, enhancer_options,
                    schedule_options)
 from .settings import ExperimentSettings
@@ -66,8 +67,7 @@ def _train(command: List[str], run_dir: str) -> Dict[str, Any]:
     path = osp.join(run_dir, 'train_time.json')
     timing = dict(seconds=0.0, attempts=0)
     if osp.exists(path):
-        with open(path) as f:
-            timing = json.load(f)
+        timing = load_json_file(path, 'training time record')
     start = time.perf_counter()
     try:
         _run_logged(command, osp.join(run_dir, 'train.log'), 'training')
@@ -86,8 +86,7 @@ def _test_metrics(test_dir: str) -> Dict[str, float]:
                   '.json')
     if not logs:
         raise RunFailed(f'no test log under {test_dir}')
-    with open(logs[-1]) as f:
-        logged = json.load(f)
+    logged = load_json_file(logs[-1], 'test log', LOG_FILE_LIMIT_BYTES)
     missing = [m for m in METRICS if m not in logged]
     if missing:
         raise RunFailed(f'{logs[-1]} lacks {missing}')
@@ -104,7 +103,7 @@ def loss_curve(run_dir: str) -> List[List[float]]:
                                           'scalars.json'))):
         with open(path) as f:
             for line in f:
-                record = json.loads(line)
+                record = parse_json(line, path, 'log line')
                 if 'loss' in record and 'iter' in record:
                     losses[int(record['iter'])] = float(record['loss'])
     return [[step, losses[step]] for step in sorted(losses)]
@@ -155,8 +154,8 @@ def finished(run: Run) -> bool:
     path = osp.join(run.run_dir, RESULT)
     if not osp.exists(path):
         return False
-    with open(path) as f:
-        made_with = json.load(f)['train_options']
+    made_with = load_json_file(path, 'run result',
+                               LOG_FILE_LIMIT_BYTES)['train_options']
     if made_with != run.train_options:
         changed = sorted(k for k in set(made_with) | set(run.train_options)
                          if made_with.get(k) != run.train_options.get(k))
@@ -219,8 +218,7 @@ def read_benchmark(work_dir: str, entry: Entry) -> Optional[Dict[str, Any]]:
     path = _benchmark_path(work_dir, entry)
     if not osp.exists(path):
         return None
-    with open(path) as f:
-        return json.load(f)
+    return load_json_file(path, 'benchmark result')
 
 
 def benchmark_entry(entry: Entry, model_options: Dict[str, Any],

@@ -7,11 +7,12 @@ nothing is downloaded at run time and no pickle is read (``.npz`` files are
 loaded with ``allow_pickle=False``, the rest is JSON).
 """
 import functools
-import json
 import os.path as osp
 from typing import NamedTuple
 
 import numpy as np
+
+from ..limits import load_json_file
 
 __all__ = []
 
@@ -86,9 +87,8 @@ def brisque_model() -> BrisqueModel:
     _check(name, arrays, {'support_vectors': (count, NUM_FEATURES),
                           'dual_coef': (count, ), 'rho': (), 'gamma': ()})
     name = 'brisque_feature_range.json'
-    with open(osp.join(DATA_DIR, name)) as f:
-        limits = {key: np.array(value, np.float64)
-                  for key, value in json.load(f).items()}
+    limits = {key: np.array(value, np.float64) for key, value in
+              load_json_file(osp.join(DATA_DIR, name), 'model file').items()}
     _check(name, limits, {'min': (NUM_FEATURES, ), 'max': (NUM_FEATURES, )})
     return BrisqueModel(limits['min'], limits['max'],
                         arrays['support_vectors'], arrays['dual_coef'],

@@ -2,6 +2,8 @@
 import numpy as np
 import torch
 
+from ..images import check_unit_range, full_scale
+
 __all__ = []
 
 # ITU-R BT.601 luma weights of R, G, B.
@@ -13,7 +15,8 @@ def frames_to_intensity(frames, dtype: torch.dtype = torch.float64,
     """``(N, H, W)`` or ``(N, H, W, 3)`` frames to ``(N, H, W)`` intensity.
 
     Args:
-        frames: ``uint8`` (divided by 255) or float in [0, 1]; colour
+        frames: any image kind :mod:`wgse_mmseg.core.images` accepts
+            (``bool``, ``uint8``, ``uint16``, float in [0, 1]); colour
             frames are RGB and become luma (BT.601 weights). A NumPy array,
             a CPU tensor or anything ``np.asarray`` takes.
         dtype: floating dtype of the result.
@@ -34,24 +37,15 @@ def frames_to_intensity(frames, dtype: torch.dtype = torch.float64,
         raise ValueError(
             f'frames must be a non-empty (N, H, W) or (N, H, W, 3) array '
             f'(a single image needs a leading axis of 1), got shape {shape}')
-    if array.dtype != np.uint8 and not np.issubdtype(array.dtype,
-                                                     np.floating):
-        raise ValueError(
-            f'frames must be uint8 or float in [0, 1], got dtype '
-            f'{array.dtype}')
-    full_scale = 255 if array.dtype == np.uint8 else 1
-    if full_scale == 1:
-        low, high = array.min(), array.max()
-        if not (low >= 0 and high <= 1):  # also catches NaN
-            raise ValueError(
-                f'float frames must lie in [0, 1], got values in '
-                f'[{low:g}, {high:g}]')
+    white = full_scale(array.dtype, 'frames')
+    if np.issubdtype(array.dtype, np.floating):
+        check_unit_range(array, 'frames')
     intensity = torch.empty(shape[:3], dtype=dtype, device=device)
     luma = torch.tensor(_LUMA, dtype=dtype, device=device)
     for index, frame in enumerate(array):
         plane = torch.from_numpy(np.ascontiguousarray(frame)).to(
             device=device, dtype=dtype)
         if plane.dim() == 3:  # the weights sum to 1 up to rounding
-            plane = (plane @ luma).clamp_(max=full_scale)
-        torch.div(plane, full_scale, out=intensity[index])
+            plane = (plane @ luma).clamp_(max=white)
+        torch.div(plane, white, out=intensity[index])
     return intensity

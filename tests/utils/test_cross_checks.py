@@ -1,0 +1,107 @@
+"""Cross-field checks at the start of training (issue 32, item 5): a crop
+below the smallest input the built model takes, or a batch its batch norms
+cannot train on, refused before any data is read, naming the smallest
+value that works."""
+import os.path as osp
+
+import pytest
+import torch
+from hypothesis import given, settings, strategies as st
+
+import wgse_mmseg
+from mmengine.registry import init_default_scope
+from mmseg.registry import MODELS
+from wgse_mmseg.utils.config import load_config
+from wgse_mmseg.utils.cross_checks import (ModelFitError,
+                                           check_training_fits,
+                                           smallest_input_side)
+
+wgse_mmseg.register_all_modules()
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+T = 9
+
+
+def _built(config, **options):
+    cfg = load_config(osp.join(ROOT, 'configs', config),
+                      dict(num_steps=T, **options))
+    init_default_scope(cfg.get('default_scope', 'mmseg'))
+    return cfg, MODELS.build(cfg.model)
+
+
+@settings(max_examples=200, deadline=None)
+@given(smallest=st.integers(1, 5000), start=st.integers(1, 5000))
+def test_the_search_finds_the_smallest_side(smallest, start):
+    probes = []
+
+    def runs(side):
+        probes.append(side)
+        return side >= smallest
+    assert smallest_input_side(runs, start) == smallest
+    assert len(probes) <= 2 * 14 + 2  # doubling, then bisection
+
+
+def test_a_model_that_runs_on_nothing_is_named():
+    assert smallest_input_side(lambda side: False, 7) is None
+
+
+def _segformer_smallest_side(cfg):
+    """From SegFormer's definition: stage 1's patch embedding (kernel 7,
+    stride 4, padding 3) must leave at least ``sr_ratio`` pixels for the
+    spatial-reduction convolution of its attention."""
+    backbone = cfg.model.backbone  # MixVisionTransformer's defaults:
+    kernel = backbone.get('patch_sizes', [7, 3, 3, 3])[0]
+    stride = backbone.get('strides', [4, 2, 2, 2])[0]
+    ratio = backbone.get('sr_ratios', [8, 4, 2, 1])[0]
+    side = 1
+    while (side + 2 * (kernel // 2) - kernel) // stride + 1 < ratio:
+        side += 1
+    return side
+
+
+def test_a_crop_below_the_backbones_minimum_is_refused():
+    cfg, model = _built('segformer_b0_wgse.py', crop_size=(16, 32))
+    smallest = _segformer_smallest_side(cfg)
+    assert smallest == 29
+    with pytest.raises(ModelFitError) as error:
+        check_training_fits(cfg, model)
+    message = str(error.value)
+    assert 'segformer_b0_wgse.py: crop_size=(16, 32)' in message
+    assert f'{smallest}x{smallest}' in message
+    assert f'crop_size={smallest},32 or larger' in message
+    for crop in ((smallest, smallest), (smallest, 300)):
+        cfg, model = _built('segformer_b0_wgse.py', crop_size=crop)
+        check_training_fits(cfg, model)
+    cfg, model = _built('segformer_b0_wgse.py',
+                        crop_size=(300, smallest - 1))
+    with pytest.raises(ModelFitError, match=f'{smallest}x{smallest}'):
+        check_training_fits(cfg, model)
+
+
+def test_a_batch_of_one_before_a_pooled_batch_norm_is_refused():
+    """PSPNet's 1x1 pooling branch has a batch norm: one window a batch
+    gives it one value per channel."""
+    cfg, model = _built('pspnet_raw.py', crop_size=(32, 32),
+                        **{'train_dataloader.batch_size': 1})
+    with pytest.raises(ModelFitError, match='train_dataloader.batch_size=1 '
+                       'does not train this model.*the smallest batch_size '
+                       'that works is 2'):
+        check_training_fits(cfg, model)
+    cfg, model = _built('pspnet_raw.py', crop_size=(32, 32),
+                        **{'train_dataloader.batch_size': 2})
+    check_training_fits(cfg, model)
+
+
+def test_the_checks_leave_the_model_and_the_generators_as_they_were():
+    cfg, model = _built('pspnet_wgse.py', crop_size=(40, 48),
+                        **{'train_dataloader.batch_size': 1})
+    model.train()
+    state = {k: v.clone() for k, v in model.state_dict().items()}
+    torch.manual_seed(5)
+    expected = torch.rand(3)
+    torch.manual_seed(5)
+    with pytest.raises(ModelFitError):
+        check_training_fits(cfg, model)
+    assert torch.equal(torch.rand(3), expected)
+    assert all(torch.equal(state[k], v) for k, v in
+               model.state_dict().items())
+    assert all(m.training for m in model.modules())
