@@ -22,8 +22,7 @@ import torch
 from ..core.limits import parse_json
 from ..utils.checkpoint import check_dataset_meta
 
-__all__ = ['INPUT', 'OUTPUT', 'OnnxInterface', 'check_interface',
-           'OnnxSpikeSegmentor']
+__all__ = ['OnnxSpikeSegmentor']
 
 #: the names of an exported graph's input and output
 INPUT, OUTPUT = 'spikes', 'logits'

@@ -22,8 +22,7 @@ from typing import Iterator, Tuple
 import cv2
 import numpy as np
 
-__all__ = ['BLOCK_PIXELS', 'row_blocks', 'full_scale', 'check_unit_range',
-           'as_unit_grey', 'as_grey_levels', 'read_grey_image']
+__all__ = []
 
 #: pixels per block of rows a conversion or a measure works on at once
 BLOCK_PIXELS = 1 << 16

@@ -28,8 +28,7 @@ from torch import nn
 
 from ..core.limits import MAX_IMAGE_SIDE
 
-__all__ = ['ModelFitError', 'PROBE_SIDE', 'smallest_input_side',
-           'check_training_fits']
+__all__ = ['ModelFitError']
 
 #: the side the dry forward is capped at: a crop whose sides reach it is
 #: checked at it (a model that takes an input takes every larger one)
