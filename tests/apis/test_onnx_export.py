@@ -265,7 +265,9 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys, load_tool
 
 
 def test_the_tool_refuses_a_failed_check(tmp_path, capsys, monkeypatch, load_tool):
-    """Beyond the tolerance the tool exits with 1 and says FAILED."""
+    """Beyond the tolerance the tool exits with 1 and says FAILED; the file
+    the check ran on does not land, and an earlier export at --out is kept
+    as it was."""
     model = _model('segformer_b0_raw.py')
     checkpoint = str(tmp_path / 'model.pth')
     torch.save(dict(state_dict=model.state_dict()), checkpoint)
@@ -277,11 +279,15 @@ def test_the_tool_refuses_a_failed_check(tmp_path, capsys, monkeypatch, load_too
         found.update(max_abs_diff=1.0, ok=False)
         return found
     monkeypatch.setattr(tool, 'compare_with_onnx', skewed)
+    out = tmp_path / 'm.onnx'
+    out.write_bytes(b'an earlier export')
     code = tool.main([osp.join(ROOT, 'configs', 'segformer_b0_raw.py'),
                       checkpoint, '--shape', str(T), str(H), str(W), '--out',
-                      str(tmp_path / 'm.onnx'), '--cfg-options',
-                      f'num_steps={T}'])
+                      str(out), '--cfg-options', f'num_steps={T}'])
     assert code == 1 and 'FAILED' in capsys.readouterr().out
+    assert out.read_bytes() == b'an earlier export'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['m.onnx',
+                                                          'model.pth']
 
 
 def test_the_comparison_sees_a_model_that_differs(exported):
