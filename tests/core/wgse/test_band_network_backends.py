@@ -256,3 +256,64 @@ def test_triton_function_rejects_bad_arguments(call, match):
     weights, _ = band_network_backends._weights(model.band_networks)
     with pytest.raises(ValueError, match=match):
         call(weights)
+
+
+# ---------------------------------------- the torch backend off the CPU
+
+def _device_path(budget):
+    """The ``'torch'`` backend's path for CUDA tensors (``nn.Conv1d``
+    chunks of ``budget`` bytes, each recomputed), forced on CPU tensors."""
+    class DevicePath(band_network_backends.TorchBackend):
+        def run(self, networks, coeffs, lengths, spatial):
+            return band_network_backends._module_bands(
+                networks, coeffs, lengths, spatial, recompute=True,
+                chunk_bytes=budget)
+    return DevicePath()
+
+
+@pytest.mark.parametrize('kwargs', [dict(), dict(num_blocks=2,
+                                                 hidden_channels=5)],
+                         ids=['paper', 'long'])
+@pytest.mark.parametrize('budget', [1, 40_000, 1 << 29],
+                         ids=['a-pixel-a-chunk', 'several', 'one-chunk'])
+def test_torch_device_path_matches_float64_modules(monkeypatch, kwargs,
+                                                    budget):
+    """Every chunking (one pixel, several chunks with a partial last one,
+    one chunk) in float64 against the modules run whole."""
+    monkeypatch.setitem(band_network_backends.BACKENDS, 'torch',
+                        _device_path(budget))
+    model = _model(backend='torch', **kwargs).double()
+    spikes = _spikes(1, 21, 5, 7).double()
+    got = _run(model, spikes, True)
+    _assert_close(got, _reference(model, spikes, True), 1e-12,
+                  f'{kwargs} {budget}')
+    with torch.no_grad():  # chunked without recomputation
+        torch.testing.assert_close(model(spikes), got[0], rtol=0, atol=0)
+
+
+def test_torch_device_path_keeps_no_hidden_activation():
+    """What the backward pass keeps is the chunks' inputs (the coefficients,
+    once), not the 32-channel activations of any pixel."""
+    model = _model()
+    coeffs = torch.randn(1, 300, 15, requires_grad=True)
+    lengths = [5, 10]
+    saved = {}
+    for recompute in (True, False):
+        saved[recompute] = []
+        with torch.autograd.graph.saved_tensors_hooks(
+                lambda t, into=saved[recompute]: into.append(t.numel()) or t,
+                lambda t: t):
+            out = band_network_backends._module_bands(
+                model.band_networks[:2], coeffs, lengths, (15, 20),
+                recompute=recompute, chunk_bytes=200_000)
+    assert sum(saved[True]) <= coeffs.numel()
+    assert sum(saved[False]) > 32 * coeffs.numel()  # the whole reference
+    out.sum().backward()
+    assert coeffs.grad is not None
+
+
+def test_device_chunks_come_from_the_memory_budget():
+    network = _model().band_networks[0]  # widths 32, 32, 1: 161 per row
+    assert band_network_backends._pixels_per_chunk(
+        network, 72, 4, 1 << 29) == (1 << 29) // (161 * 72 * 4)
+    assert band_network_backends._pixels_per_chunk(network, 72, 8, 1) == 1
