@@ -317,3 +317,56 @@ def test_device_chunks_come_from_the_memory_budget():
     assert band_network_backends._pixels_per_chunk(
         network, 72, 4, 1 << 29) == (1 << 29) // (161 * 72 * 4)
     assert band_network_backends._pixels_per_chunk(network, 72, 8, 1) == 1
+
+
+def test_device_path_cost_as_docs_state():
+    """docs/wgse_speed.md's count of the device path, per chunk of the
+    paper's network: aten operations (views aside) and FLOPs, against the
+    arithmetic (per coefficient a forward is 2 * 3 * (32 + 32*32 + 32)
+    FLOPs; training runs it twice and the backward's two products per
+    convolution, but no input gradient of the first)."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+    from torch.utils.flop_counter import FlopCounterMode
+
+    class Operations(TorchDispatchMode):
+        def __init__(self):
+            super().__init__()
+            self.names = []
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            if not func.is_view:
+                self.names.append(str(func.overloadpacket))
+            return func(*args, **(kwargs or {}))
+
+    network = _model().band_networks[0]
+    pixels, length = 40, 7
+    coeffs = torch.randn(1, 2 * pixels, length)
+    budget = pixels * 161 * length * 4  # two chunks of 40 pixels
+    forward = 2 * 3 * (32 + 32 * 32 + 32)
+    for train, flops_per_coefficient in ((False, forward),
+                                         (True, 4 * forward - 2 * 3 * 32)):
+        operations, flops = Operations(), FlopCounterMode(display=False)
+        with flops, operations, torch.set_grad_enabled(train):
+            out = band_network_backends._module_bands(
+                [network], coeffs, [length], (1, 2 * pixels), True, budget)
+            if train:
+                out.backward(torch.ones_like(out))
+        counts = {name: operations.names.count(name)
+                  for name in set(operations.names)}
+        per_chunk = {'aten.convolution': 3, 'aten.relu': 3}
+        if train:
+            per_chunk = {name: 2 * count for name, count in per_chunk.items()}
+            per_chunk.update({'aten.convolution_backward': 3,
+                              'aten.threshold_backward': 3})
+        for name, count in per_chunk.items():
+            assert counts.pop(name) == 2 * count, name
+        # the residual add (per chunk, once a pass), and from the second
+        # chunk on the 6 parameter gradients accumulated (in place or not)
+        adds = counts.pop('aten.add', 0) + counts.pop('aten.add_', 0)
+        assert adds == 2 * (2 if train else 1) + (6 if train else 0)
+        # the chunks' and the bands' concatenations
+        assert counts.pop('aten.cat') == 2
+        assert set(counts) <= {'aten.ones_like', 'aten.clone',
+                               'aten.copy_', 'aten.detach', 'aten.empty'}
+        assert flops.get_total_flops() == \
+            flops_per_coefficient * coeffs.numel()

@@ -38,9 +38,9 @@ __all__ = ['CheckResult', 'FirstUseCheckFailed', 'check_on_first_use',
            'relative_errors', 'REPORT_TO']
 
 #: where a failed check asks to be reported
-REPORT_TO = ('https://github.com/wgse-mmseg/wgse_mmseg/issues, with the '
-             'log line above and the output of `bash tools/gpu_report.sh` '
-             '(docs/gpu.md)')
+REPORT_TO = ("the project's bug tracker with this line and the docs/gpu.md "
+             'and gpu.json that `bash tools/gpu_report.sh` writes on this '
+             'machine')
 
 
 class FirstUseCheckFailed(RuntimeError):
