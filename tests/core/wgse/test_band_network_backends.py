@@ -9,9 +9,12 @@ import pytest
 import torch
 
 from mmseg.registry import MODELS
+
+import wgse_mmseg
 from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
     compiled_band_networks, triton_band_networks
 
+wgse_mmseg.register_all_modules()  # MODELS.build(dict(type='WGSE'))
 pytestmark = pytest.mark.usefixtures('single_thread')
 
 needs_triton = pytest.mark.skipif(
@@ -148,10 +151,17 @@ AVAILABLE = [name for name, backend in band_network_backends.BACKENDS.items()
 # that are not a multiple of the Triton tiles (16 pixels in the first
 # launch entries) and span several of them.
 SHAPES = [(1, 41, 5, 7), (2, 3, 3, 5), (1, 9, 9, 11)]
+# The Triton kernel in its interpreter: 1x9x9x11 adds nothing to its paths
+# that 1x41x5x7 (three tiles, the last partial; bands up to 28) and 2x3x3x5
+# (bands shorter than the filter) do not reach; the launch-entry test below
+# spans several of the largest tiles.
+BACKEND_SHAPES = [(backend, shape) for backend in AVAILABLE for shape in
+                  (SHAPES[:2] if backend == 'triton' else SHAPES)]
 
 
-@pytest.mark.parametrize('shape', SHAPES, ids=lambda s: 'x'.join(map(str, s)))
-@pytest.mark.parametrize('backend', AVAILABLE)
+@pytest.mark.parametrize('backend, shape', BACKEND_SHAPES,
+                         ids=lambda v: 'x'.join(map(str, v))
+                         if isinstance(v, tuple) else v)
 def test_every_backend_matches_float64_modules(backend, shape):
     model = _model(backend=backend)
     spikes = _spikes(*shape)
@@ -225,7 +235,9 @@ def test_triton_under_autocast_within_its_stated_tolerance(dtype):
     """Under autocast the hidden products take fp16/bf16 operands; output
     and gradients stay within :data:`TOLERANCES` of float64."""
     model = _model(backend='triton')
-    spikes = _spikes(1, 41, 5, 7)
+    # two tiles, the second partial; bands of 1-16 coefficients: the
+    # precision changes the products' operands, not the tiling
+    spikes = _spikes(1, 16, 3, 7)
     precision = {torch.float16: 'fp16', torch.bfloat16: 'bf16'}[dtype]
     with torch.autocast('cpu', dtype=dtype):
         assert triton_band_networks.dot_precision('cpu') == precision
