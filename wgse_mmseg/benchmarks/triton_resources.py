@@ -77,7 +77,8 @@ class Variant(NamedTuple):
     def default(self) -> bool:
         """What runs untuned at the paper's widths: the first launch entry,
         16 or 32 channels, tensor-core precisions (not full float32)."""
-        from ..core.wgse.triton_band_networks import BACKWARD_CONFIGS, FORWARD_CONFIGS
+        from ..core.wgse.triton_band_networks import (BACKWARD_CONFIGS,
+                                                      FORWARD_CONFIGS)
         first = (FORWARD_CONFIGS if self.kernel == 'band_forward' else
                  BACKWARD_CONFIGS)[0]
         return ((self.block, self.num_warps) == tuple(first) and
@@ -96,8 +97,8 @@ class Resources(NamedTuple):
 
 def variants() -> List[Variant]:
     """Every kernel variant the dispatcher can launch."""
-    from ..core.wgse.triton_band_networks import (BACKWARD_CONFIGS, FORWARD_CONFIGS,
-                                       HIDDEN_CHANNELS, TOLERANCES)
+    from ..core.wgse.triton_band_networks import (
+        BACKWARD_CONFIGS, FORWARD_CONFIGS, HIDDEN_CHANNELS, TOLERANCES)
     found = []
     for hidden in HIDDEN_CHANNELS:
         for precision in TOLERANCES:

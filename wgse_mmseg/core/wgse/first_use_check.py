@@ -28,6 +28,7 @@ would have paid anyway, but for the entries autotuning would not have
 picked.
 """
 import copy
+import logging
 import time
 from typing import Dict, List, NamedTuple, Optional, Sequence
 
@@ -212,7 +213,6 @@ def check_on_first_use(backend, reference, networks: Sequence[nn.Module],
 def _log(result: CheckResult) -> None:
     """Into the training log (mmengine's current logger) where mmengine
     imports, else Python's logging."""
-    import logging
     level = logging.INFO if result.passed else logging.WARNING
     try:
         from mmengine.logging import print_log
