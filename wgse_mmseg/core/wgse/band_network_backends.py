@@ -8,7 +8,9 @@ differ in where they run and how fast:
 
 * ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
   every variant. ``dim=1`` runs the chunked kernel of
-  :mod:`~wgse_mmseg.core.wgse.torch_band_networks`; ``dim`` 2 and 3 run the
+  :mod:`~wgse_mmseg.core.wgse.torch_band_networks` on the CPU and the
+  ``nn.Conv1d`` modules (the device's library convolutions) in chunks of
+  :data:`DEVICE_CHUNK_BYTES` elsewhere; ``dim`` 2 and 3 run the
   ``nn.Conv3d`` modules one band and sample at a time.
 * ``'compiled'``: the C kernel of
   :mod:`~wgse_mmseg.core.wgse.compiled_band_networks`: CPU with AVX2/FMA,
@@ -23,9 +25,12 @@ differ in where they run and how fast:
 
 ``'auto'`` picks ``triton`` for CUDA tensors and ``compiled`` for CPU
 tensors where they can run the call, and ``torch`` otherwise (and while
-``torch.jit`` traces, so that FLOP counters see the convolutions). Naming a
-backend that cannot run a call is an error that says why and lists the
-choices; nothing falls back silently then.
+``torch.jit`` traces, so that FLOP counters see the convolutions). A
+backend compiled for the device (``triton``) is checked against ``torch``
+before its first use there (:mod:`.first_use_check`); where the check
+fails, ``'auto'`` runs ``torch`` and logs why. Naming a backend that cannot
+run a call, or that fails the check, is an error that says why; nothing
+falls back silently then.
 
 Every backend but ``'reference'`` keeps training memory ``O(B*T*H*W)``:
 hidden activations are recomputed in the backward pass, chunk by chunk
