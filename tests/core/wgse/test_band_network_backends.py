@@ -4,6 +4,7 @@ backend against the band networks run as float64 ``nn.Conv1d`` modules
 runs in triton's CPU interpreter (``TRITON_INTERPRET=1``, set in
 ``conftest.py``)."""
 import copy
+import warnings
 
 import pytest
 import torch
@@ -382,3 +383,41 @@ def test_device_path_cost_as_docs_state():
                                'aten.copy_', 'aten.detach', 'aten.empty'}
         assert flops.get_total_flops() == \
             flops_per_coefficient * coeffs.numel()
+
+
+def test_torch_device_path_peak_memory(monkeypatch, tmp_path):
+    """docs/wgse_speed.md's bound, measured by the profiler's memory
+    timeline on CPU tensors: WGSE forward+backward on the device path
+    peaks within its chunk budget plus 7x the float32 spikes (measured
+    6.1x) plus what does not grow with the input, where keeping every
+    activation (``'reference'``) takes many times that."""
+    import json
+
+    from torch.profiler import ProfilerActivity, profile
+
+    from wgse_mmseg.core.wavelets import band_lengths
+
+    budget = 1 << 21
+    monkeypatch.setitem(band_network_backends.BACKENDS, 'torch',
+                        _device_path(budget))
+    spikes = _spikes(1, 129, 16, 32)
+    peaks = {}
+    for backend in ('torch', 'reference'):
+        model = _model(backend=backend)
+        with profile(activities=[ProfilerActivity.CPU], profile_memory=True,
+                     with_stack=True, record_shapes=True) as prof:
+            model(spikes).square().mean().backward()
+        path = str(tmp_path / f'{backend}.json')
+        with warnings.catch_warnings():  # deprecated in favour of CUDA's
+            warnings.simplefilter('ignore', FutureWarning)
+            prof.export_memory_timeline(path, device='cpu')
+        with open(path) as f:
+            _, sizes = json.load(f)
+        peaks[backend] = max(sum(s) for s in sizes)
+    # besides: the analysis and synthesis matrices, the parameters, their
+    # gradients and one temporary each
+    steps = spikes.shape[1]
+    fixed = 4 * (2 * steps * sum(band_lengths(steps, 'db8', 5, 'zero')) +
+                 3 * sum(p.numel() for p in model.parameters()))
+    assert peaks['torch'] <= budget + 7 * 4 * spikes.numel() + fixed
+    assert peaks['reference'] > 4 * peaks['torch']
