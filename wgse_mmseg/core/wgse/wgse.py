@@ -188,7 +188,7 @@ class WGSE(nn.Module):
             ``'compiled'``, ``'triton'`` or ``'reference'``
             (:mod:`~wgse_mmseg.core.wgse.band_network_backends`). ``'auto'``
             picks the Triton kernel for CUDA inputs (once it passed its
-            first-use check on the device: :attr:`backend_check`) and the
+            first-use check on the device: ``backend_check``) and the
             compiled kernel for CPU inputs where they can run, else
             ``'torch'``; a named backend that cannot run, or fails that
             check, is an error. Every backend but
