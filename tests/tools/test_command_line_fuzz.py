@@ -38,7 +38,7 @@ ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 TOOL_FILES = sorted(osp.relpath(p, ROOT) for p in glob.glob(
     osp.join(ROOT, 'tools', '**', '*.py'), recursive=True))
 TOOL_MODULES = ['wgse_mmseg.benchmarks.reconstruction',
-                'wgse_mmseg.core.wgse.triton_resources',
+                'wgse_mmseg.benchmarks.triton_resources',
                 'wgse_mmseg.data_generation.training_images']
 TOOLS = TOOL_FILES + TOOL_MODULES
 

@@ -14,11 +14,16 @@ from wgse_mmseg.core.wgse import triton_band_networks
 
 pytest.importorskip('pytorch_wavelets')
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-SECTIONS = {'correctness', 'wgse', 'segmentation', 'latency', 'paper',
-            'autotune', 'targets'}
+SECTIONS = {'correctness', 'first_use', 'wgse', 'segmentation', 'latency',
+            'paper', 'autotune', 'targets'}
 
 
-def test_smoke_run_writes_every_section(tmp_path):
+@pytest.fixture(scope='module')
+def targets(load_tool):
+    return load_tool('tools/analysis_tools/gpu_report.py').TARGETS
+
+
+def test_smoke_run_writes_every_section(tmp_path, targets):
     env = {'OMP_NUM_THREADS': '1', 'PATH': '/usr/bin:/bin',
            'PYTHONPATH': ROOT}
     proc = subprocess.run(
@@ -49,6 +54,17 @@ def test_smoke_run_writes_every_section(tmp_path):
             assert row['max_rel_error'] <= \
                 triton_band_networks.TOLERANCES[precision]
 
+    # the first-use check, as 'auto' would run it, at every precision
+    checks = {r['precision']: r for r in sections['first_use']['rows']}
+    assert set(checks) == set(gpu_report.PRECISIONS)
+    assert checks['bf16']['passed'] is None
+    for precision in ('ieee', 'tf32'):
+        row = checks[precision]
+        assert row['passed'] is True and row['auto_runs'] == 'triton'
+        assert row['device'] == 'cpu' and row['backend'] == 'triton'
+        assert 0 <= row['max_error'] <= row['tolerance'] == \
+            triton_band_networks.TOLERANCES[precision]
+
     wgse = {r['impl']: r for r in sections['wgse']['rows']}
     assert {'reference', 'torch', 'triton'} <= set(wgse)
     assert wgse['triton']['backend'] == 'triton'
@@ -72,7 +88,7 @@ def test_smoke_run_writes_every_section(tmp_path):
     assert [r['enhancer'] for r in sections['paper']['rows']] == \
         ['raw', 'WGSE']
     assert sections['paper']['shape'] == list(gpu_report.SMOKE.paper_shape)
-    assert len(sections['targets']['rows']) == len(gpu_report.TARGETS)
+    assert len(sections['targets']['rows']) == len(targets)
     assert all(t['value'] is not None for t in sections['targets']['rows'])
 
     markdown = (tmp_path / 'gpu.md').read_text()
@@ -81,7 +97,8 @@ def test_smoke_run_writes_every_section(tmp_path):
     for heading in ('## Correctness against float64',
                     '## WGSE forward+backward', '## Training steps',
                     '## Latency at batch 1', "## The paper's shape",
-                    '## Autotune', '## Against the targets'):
+                    '## Autotune', '## Against the targets',
+                    '## First-use check'):
         assert heading in markdown
     assert "| WGSE, backend='triton'" in markdown
     assert markdown.count('| PSPNet R50-D8 | WGSE ') == 3  # steps, b1, paper
@@ -103,7 +120,7 @@ def _row(impl, median_s, peak_mib):
                 peak_mib=peak_mib)
 
 
-def test_targets_by_hand():
+def test_targets_by_hand(targets):
     sections = dict(
         wgse=dict(rows=[_row('reference', 1.0, 40000),
                         _row('torch', 0.1, 5000),
@@ -114,9 +131,9 @@ def test_targets_by_hand():
                  step_vs_raw=1.5, added_latency_ms=3.5)]),
         paper=dict(rows=[dict(enhancer='WGSE', status='ok',
                               memory=dict(peak_mb=20000))]))
-    found = {t['what']: t for t in gpu_report._targets(sections)}
-    time, memory, ratio, latency, paper = (found[t[0]]
-                                           for t in gpu_report.TARGETS)
+    found = {t['what']: t for t in gpu_report._targets(sections, targets)}
+    time, memory, ratio, latency, paper = (
+        found[gpu_report.FIGURES[key][0]] for key in targets)
     assert time['value'] == pytest.approx(12)  # Triton's row, in ms
     assert time['met'] and time['moonshot_met']  # <= 40, <= 15
     assert memory['value'] == 4 and memory['met'] is False  # 4 GiB > 3
@@ -126,7 +143,7 @@ def test_targets_by_hand():
     assert paper['met'] and paper['moonshot_met'] is None
 
 
-def test_targets_not_measured_when_their_jobs_failed():
+def test_targets_not_measured_when_their_jobs_failed(targets):
     failed = dict(status='failed', error='RuntimeError: CUDA out of memory')
     sections = dict(
         wgse=dict(rows=[dict(failed, impl='triton')]),
@@ -134,4 +151,4 @@ def test_targets_not_measured_when_their_jobs_failed():
                                      enhancer='WGSE')]),
         paper=dict(rows=[dict(failed, enhancer='WGSE')]))
     assert all(t['value'] is None and t['met'] is None
-               for t in gpu_report._targets(sections))
+               for t in gpu_report._targets(sections, targets))

@@ -12,7 +12,10 @@
 * :mod:`.simulator`: the simulator's throughput and spike files' load time
   (``tools/analysis_tools/benchmark_simulator.py``);
 * :mod:`.gpu_report`: everything about WGSE on a GPU in one run
-  (``tools/analysis_tools/gpu_report.py``);
+  (``tools/analysis_tools/gpu_report.py``, which holds the targets);
+* :mod:`.triton_resources`: the Triton kernels compiled ahead of time for
+  real GPUs, their registers, spills and occupancy (maintainers';
+  ``python -m wgse_mmseg.benchmarks.triton_resources``);
 * :mod:`.segmentation`: what a spike segmentor costs: parameters, FLOPs,
   time, memory (``tools/analysis_tools/benchmark.py``, the experiment
   runner);

@@ -22,10 +22,17 @@ Sections:
   (``measure_latency``: WGSE's added milliseconds).
 * ``paper``: the PSPNet step, raw and with WGSE, at the paper's shape
   (2 x 129 x 512 x 1024): time and peak memory.
+* ``first_use``: the first-use check ``backend='auto'`` runs before it
+  uses the Triton kernel on the device
+  (:mod:`~wgse_mmseg.core.wgse.first_use_check`), at each precision: passed
+  or what failed, the largest error, its seconds, and the backend ``'auto'``
+  runs then; the ``wgse`` and ``correctness`` sections have the Triton
+  kernel and the ``torch`` fallback side by side.
 * ``autotune``: the launch entries the Triton kernels chose
   (:func:`~wgse_mmseg.core.wgse.triton_band_networks.tuned_configs` of
   every process).
-* ``targets``: issue 24's targets for one H100 against those figures.
+* ``targets``: the figures of :data:`FIGURES` against the targets the
+  caller gives (``tools/analysis_tools/gpu_report.py`` holds docs/gpu.md's).
 
 A measurement that fails (out of memory, a missing package) is recorded
 with its error and the report goes on; the segmentation sections import
@@ -47,14 +54,17 @@ from typing import (Any, Callable, Dict, Iterator, List, NamedTuple,
 import torch
 
 from ..core.io import atomic_output
-from ..core.wgse import WGSE, triton_band_networks
+from ..core.wavelets import band_lengths
+from ..core.wgse import (WGSE, band_network_backends, first_use_check,
+                         triton_band_networks)
 from . import wgse as wgse_benchmark
 from .machine import machine_record, run_isolated
 from .markdown import markdown_table
 
-__all__ = ['Plan', 'GPU', 'SMOKE', 'PRECISIONS', 'MODELS', 'TARGETS',
-           'environment', 'check_correctness', 'segmentation_step',
-           'run_report', 'format_report', 'write_report']
+__all__ = ['Plan', 'GPU', 'SMOKE', 'PRECISIONS', 'MODELS', 'FIGURES',
+           'environment', 'check_correctness', 'check_first_use',
+           'segmentation_step', 'run_report', 'format_report',
+           'write_report']
 
 Shape = Tuple[int, int, int, int]
 
@@ -70,6 +80,8 @@ class Plan(NamedTuple):
     repeat: int  # timed training steps and batch-1 inferences
     warmup: int
     isolate: bool  # each segmentation job in a fresh process
+    #: pixels of the first-use check's problem (None: the backend's own)
+    check_pixels: Optional[int] = None
 
 
 #: One H100 in about 8 minutes (docs/gpu.md). T = 129 everywhere, so the
@@ -82,7 +94,7 @@ GPU = Plan('cuda', correctness_shape=(2, 129, 16, 24),
 SMOKE = Plan('cpu', correctness_shape=(1, 12, 3, 5),
              wgse_shape=(1, 12, 3, 4), wgse_repeat=1,
              train_shape=(2, 12, 32, 32), paper_shape=(2, 12, 32, 48),
-             repeat=1, warmup=1, isolate=False)
+             repeat=1, warmup=1, isolate=False, check_pixels=17)
 #: Precisions of the correctness section (TF32 off, TF32, bf16 autocast).
 PRECISIONS = ('ieee', 'tf32', 'bf16')
 #: model -> (raw-spike config, WGSE config), relative to the repository
@@ -91,15 +103,17 @@ MODELS = {
     'SegFormer-B0': ('configs/segformer_b0_raw.py',
                      'configs/segformer_b0_wgse.py'),
 }
-#: issue 24's targets on one H100: (what, unit, at most, moonshot)
-TARGETS = (
-    ('WGSE forward+backward time', 'ms', 40, 15),
-    ('WGSE forward+backward peak memory', 'GiB', 3, 1),
-    ('PSPNet + WGSE step / raw step', 'x', 1.6, 1.2),
-    ('PSPNet latency added by WGSE (batch 1)', 'ms', 3, None),
-    ("PSPNet + WGSE step at the paper's shape, peak memory", 'GB', 24,
-     None),
-)
+#: The figures a report can hold targets for: key -> (what, unit).
+FIGURES = {
+    'wgse_ms': ('WGSE forward+backward time', 'ms'),
+    'wgse_gib': ('WGSE forward+backward peak memory', 'GiB'),
+    'step_ratio': ('PSPNet + WGSE step / raw step', 'x'),
+    'added_latency_ms': ('PSPNet latency added by WGSE (batch 1)', 'ms'),
+    'paper_gb': ("PSPNet + WGSE step at the paper's shape, peak memory",
+                 'GB'),
+}
+#: Targets: figure key -> (at most, a moonshot or None).
+Targets = Dict[str, Tuple[float, Optional[float]]]
 
 
 def _shape_text(shape: Sequence[int]) -> str:
@@ -164,7 +178,6 @@ def check_correctness(shape: Shape, device: str) -> Dict[str, Any]:
     double = copy.deepcopy(model).double()
     double.backend = 'torch'
     want = _output_and_grads(double, spikes.double(), None)
-    largest = max(w.abs().max().item() for w in want)
     names = ['output'] + [name for name, _ in model.named_parameters()]
     backends = [b for b in ('triton', 'torch')
                 if b in wgse_benchmark.available_backends(device)]
@@ -181,15 +194,45 @@ def check_correctness(shape: Shape, device: str) -> Dict[str, Any]:
                                  note=_INTERPRETER_BF16))
                 continue
             got = _output_and_grads(model, spikes, precision)
-            errors = [(g.double() - w).abs().max().item() /
-                      max(w.abs().max().item(), 1e-2 * largest)
-                      for g, w in zip(got, want)]
+            errors = first_use_check.relative_errors(got, want)
             worst = max(range(len(errors)), key=errors.__getitem__)
             rows.append(dict(backend=model.backend_in_use,
                              precision=precision,
                              max_rel_error=errors[worst],
                              tensor=names[worst], tolerance=tolerance,
                              ok=errors[worst] <= tolerance))
+    return dict(rows=rows)
+
+
+def check_first_use(steps: int, device: str,
+                    check_pixels: Optional[int] = None) -> Dict[str, Any]:
+    """The first-use section's rows: the check of the Triton backend for
+    WGSE's default networks at ``T = steps`` on ``device``, at each of
+    :data:`PRECISIONS` (``'bf16'`` noted, not run, under the interpreter),
+    as ``backend='auto'`` runs it: ``{'rows': [{'precision', 'passed',
+    'max_error', 'tolerance', 'failure', 'seconds', 'auto_runs'}]}``.
+    ``check_pixels`` shrinks the problem (the smoke run's interpreter)."""
+    backend = copy.copy(band_network_backends.BACKENDS['triton'])
+    reason = backend.cannot_run(WGSE().band_networks)
+    if reason:
+        return dict(rows=[], note=f'not run: {reason}')
+    if check_pixels is not None:
+        backend.check_pixels = check_pixels
+    model = WGSE().to(device)
+    lengths = band_lengths(steps, model.wavelet, model.level, model.mode)
+    coeffs = torch.zeros(1, 1, sum(lengths), device=device)
+    rows = []
+    for precision in PRECISIONS:
+        if precision == 'bf16' and triton_band_networks.interpreting():
+            rows.append(dict(precision=precision, passed=None,
+                             note=_INTERPRETER_BF16))
+            continue
+        with _precision(precision, coeffs.device.type):
+            check = first_use_check.check_on_first_use(
+                backend, band_network_backends.BACKENDS['torch'],
+                model.band_networks, coeffs, lengths)
+        rows.append(dict(check._asdict(), precision=precision,
+                         auto_runs='triton' if check.passed else 'torch'))
     return dict(rows=rows)
 
 
@@ -304,9 +347,9 @@ def _model_rows(plan: Plan, clock: _Clock, shape: Shape, latency: bool,
     return rows
 
 
-def _targets(sections: Dict[str, Dict]) -> List[Dict[str, Any]]:
-    """Each of :data:`TARGETS` with the figure of this report, or
-    ``None`` where it was not measured."""
+def _figures(sections: Dict[str, Dict]) -> Dict[str, Optional[float]]:
+    """Each of :data:`FIGURES` in this report, ``None`` where it was not
+    measured."""
     wgse = {r['impl']: r for r in sections['wgse']['rows']
             if r['status'] == 'ok'}
     # what 'auto' runs on the device: Triton on CUDA, else the fastest
@@ -315,15 +358,25 @@ def _targets(sections: Dict[str, Dict]) -> List[Dict[str, Any]]:
               if r['model'] == 'PSPNet R50-D8' and r['enhancer'] == 'WGSE']
     paper = [r for r in sections['paper']['rows']
              if r['enhancer'] == 'WGSE' and r['status'] == 'ok']
-    values = [
-        None if row is None else 1e3 * row['median_s'],
-        None if row is None else row['peak_mib'] / 1024,
-        pspnet[0].get('step_vs_raw') if pspnet else None,
-        pspnet[0].get('added_latency_ms') if pspnet else None,
-        paper[0]['memory']['peak_mb'] * 2**20 / 1e9 if paper else None,
-    ]
+    return dict(
+        wgse_ms=None if row is None else 1e3 * row['median_s'],
+        wgse_gib=None if row is None else row['peak_mib'] / 1024,
+        step_ratio=pspnet[0].get('step_vs_raw') if pspnet else None,
+        added_latency_ms=(pspnet[0].get('added_latency_ms') if pspnet
+                          else None),
+        paper_gb=(paper[0]['memory']['peak_mb'] * 2**20 / 1e9 if paper
+                  else None))
+
+
+def _targets(sections: Dict[str, Dict],
+             targets: Targets) -> List[Dict[str, Any]]:
+    """Each of ``targets`` with the figure of this report (``None`` where
+    it was not measured) and whether it is met."""
+    figures = _figures(sections)
     found = []
-    for (what, unit, limit, moonshot), value in zip(TARGETS, values):
+    for key, (limit, moonshot) in targets.items():
+        what, unit = FIGURES[key]
+        value = figures[key]
         met = None if value is None else value <= limit
         found.append(dict(what=what, unit=unit, target=limit,
                           moonshot=moonshot, value=value, met=met,
@@ -332,12 +385,13 @@ def _targets(sections: Dict[str, Dict]) -> List[Dict[str, Any]]:
     return found
 
 
-def run_report(plan: Plan, root: str,
+def run_report(plan: Plan, root: str, targets: Targets,
                models: Optional[Dict[str, Tuple[str, str]]] = None
                ) -> Dict[str, Any]:
     """Measure every section of the module docstring; ``root`` is the
     repository (where the configs of ``models``, default :data:`MODELS`,
-    are). Returns the JSON-ready report."""
+    are), ``targets`` what the figures are judged against. Returns the
+    JSON-ready report."""
     models = MODELS if models is None else models
     clock = _Clock()
     print(f'[gpu_report] {plan.device}: {plan._asdict()}', flush=True)
@@ -355,6 +409,15 @@ def run_report(plan: Plan, root: str,
             for r in correctness['rows'] if not r['ok'])
     sections['correctness'] = dict(correctness,
                                    shape=list(plan.correctness_shape))
+    first_use = clock.attempt(
+        f'first-use check of the Triton kernel, T={plan.wgse_shape[1]}',
+        check_first_use, plan.wgse_shape[1], plan.device, plan.check_pixels)
+    if first_use['status'] == 'ok' and any(
+            r['passed'] is False for r in first_use['rows']):
+        first_use['status'] = 'failed'
+        first_use['error'] = 'failed: ' + ', '.join(
+            r['precision'] for r in first_use['rows'] if r['passed'] is False)
+    sections['first_use'] = first_use
     sections['wgse'] = _wgse_section(plan, clock)
     rows = _model_rows(plan, clock, plan.train_shape, True, models, root)
     sections['segmentation'] = dict(status=_status(rows),
@@ -381,7 +444,8 @@ def run_report(plan: Plan, root: str,
             c._asdict() for c in triton_band_networks.FORWARD_CONFIGS],
         backward_entries=[
             c._asdict() for c in triton_band_networks.BACKWARD_CONFIGS])
-    sections['targets'] = dict(status='ok', rows=_targets(sections))
+    sections['targets'] = dict(status='ok',
+                               rows=_targets(sections, targets))
     print(f'[gpu_report {clock.elapsed():6.1f} s] done', flush=True)
     return dict(plan=plan._asdict(), environment=env, sections=sections,
                 seconds=clock.elapsed())
@@ -464,6 +528,30 @@ def format_report(report: Dict[str, Any], command: str) -> str:
     if section['status'] != 'ok':
         out.append(_failed(section))
 
+    section = sections['first_use']
+    out += ['## First-use check', '',
+            "What `backend='auto'` checks before it first runs the Triton "
+            'kernel on the device: every launch entry, with and without the '
+            'input gradient, against the `torch` backend in float64 '
+            '(`wgse_mmseg/core/wgse/first_use_check.py`); where it fails, '
+            "'auto' runs `torch`.", '']
+    if section.get('rows'):
+        out.append(markdown_table(
+            ['precision', 'passed', 'max rel. error', 'tolerance', 'failure',
+             'seconds', "'auto' runs"],
+            [[r['precision'],
+              {True: 'yes', False: 'NO'}.get(r['passed'], r.get('note')),
+              _num(r.get('max_error'), '.1e'),
+              _num(r.get('tolerance'), '.0e'),
+              (r.get('failure') or '-').replace('|', '/'),
+              _num(r.get('seconds')), r.get('auto_runs', '-')]
+             for r in section['rows']]))
+        out.append('')
+    elif section.get('note'):
+        out += [section['note'], '']
+    if section['status'] != 'ok':
+        out.append(_failed(section))
+
     section = sections['wgse']
     out += ['## WGSE forward+backward', '',
             f"db8, 5 levels, 32 channels, {_shape_text(section['shape'])}, "
@@ -520,7 +608,7 @@ def format_report(report: Dict[str, Any], command: str) -> str:
     else:
         out.append('None chosen: no kernel was tuned in this run (the '
                    'interpreter runs each first entry).')
-    out += ['', '## Against the targets (issue 24, one H100)', '',
+    out += ['', '## Against the targets (one H100, docs/gpu.md)', '',
             markdown_table(
                 ['target', 'this run', 'at most', 'moonshot', 'met'],
                 [[t['what'], '-' if t['value'] is None else

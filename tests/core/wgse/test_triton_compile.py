@@ -1,7 +1,7 @@
 """WGSE's Triton kernels compile for real GPUs (sm_80, sm_89, sm_90) with no
 GPU: every variant the dispatcher can launch, and the default ones use no
 local memory and leave room for several programs per SM
-(``wgse_mmseg.core.wgse.triton_resources``; the table is in
+(``wgse_mmseg.benchmarks.triton_resources``; the table is in
 docs/wgse_speed.md)."""
 import ast
 import inspect
@@ -9,7 +9,8 @@ import textwrap
 
 import pytest
 
-from wgse_mmseg.core.wgse import triton_band_networks, triton_resources
+from wgse_mmseg.benchmarks import triton_resources
+from wgse_mmseg.core.wgse import triton_band_networks
 
 _triton_band_kernels = pytest.importorskip(
     'wgse_mmseg.core.wgse._triton_band_kernels')

@@ -8,7 +8,9 @@ differ in where they run and how fast:
 
 * ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
   every variant. ``dim=1`` runs the chunked kernel of
-  :mod:`~wgse_mmseg.core.wgse.torch_band_networks`; ``dim`` 2 and 3 run the
+  :mod:`~wgse_mmseg.core.wgse.torch_band_networks` on the CPU and the
+  ``nn.Conv1d`` modules (the device's library convolutions) in chunks of
+  :data:`DEVICE_CHUNK_BYTES` elsewhere; ``dim`` 2 and 3 run the
   ``nn.Conv3d`` modules one band and sample at a time.
 * ``'compiled'``: the C kernel of
   :mod:`~wgse_mmseg.core.wgse.compiled_band_networks`: CPU with AVX2/FMA,
@@ -23,26 +25,31 @@ differ in where they run and how fast:
 
 ``'auto'`` picks ``triton`` for CUDA tensors and ``compiled`` for CPU
 tensors where they can run the call, and ``torch`` otherwise (and while
-``torch.jit`` traces, so that FLOP counters see the convolutions). Naming a
-backend that cannot run a call is an error that says why and lists the
-choices; nothing falls back silently then.
+``torch.jit`` traces, so that FLOP counters see the convolutions). A
+backend compiled for the device (``triton``) is checked against ``torch``
+before its first use there (:mod:`.first_use_check`); where the check
+fails, ``'auto'`` runs ``torch`` and logs why. Naming a backend that cannot
+run a call, or that fails the check, is an error that says why; nothing
+falls back silently then.
 
 Every backend but ``'reference'`` keeps training memory ``O(B*T*H*W)``:
 hidden activations are recomputed in the backward pass, chunk by chunk
 (``torch``, ``compiled``) or tile by tile (``triton``), never kept for all
 pixels at once.
 """
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor, nn
 from torch.utils.checkpoint import checkpoint
 
 from . import compiled_band_networks, triton_band_networks
+from .first_use_check import (CheckResult, FirstUseCheckFailed,
+                              check_on_first_use)
 from .torch_band_networks import torch_band_networks
 
-__all__ = ['BACKENDS', 'CHOICES', 'BandNetworkBackend', 'get_backend',
-           'resolve_backend']
+__all__ = ['BACKENDS', 'CHOICES', 'DEVICE_CHUNK_BYTES', 'BandNetworkBackend',
+           'get_backend', 'resolve_backend']
 
 Weights = List[List[Tuple[Tensor, Tensor]]]
 
@@ -87,23 +94,53 @@ class BandNetworkBackend:
             self.unsupported_call(networks, coeffs))
 
     def run(self, networks: Sequence[nn.Module], coeffs: Tensor,
-            lengths: Sequence[int], spatial: Tuple[int, int]) -> Tensor:
+            lengths: Sequence[int], spatial: Tuple[int, int],
+            **launch) -> Tensor:
         """The band networks on ``coeffs`` ``(B, P, C)``, bands of
         ``lengths`` side by side, pixels of a ``spatial`` ``(H, W)``
-        frame; same shape and dtype out."""
+        frame; same shape and dtype out. ``launch``: one of
+        :meth:`check_launches` (the first-use check names each)."""
         raise NotImplementedError
+
+    # The first-use check (:mod:`.first_use_check`), for kernels compiled
+    # for the device at hand.
+
+    #: whether a variant is checked the first time it runs in a process
+    first_use_check = False
+    #: pixels of the check's problem
+    check_pixels = 67
+    #: precision of a call (:meth:`precision`) -> largest error allowed
+    #: against float64, relative to each tensor's largest magnitude
+    tolerances: Dict[str, float] = {}
+
+    def precision(self, coeffs: Tensor) -> str:
+        """The arithmetic precision of a call on ``coeffs`` made now."""
+        return str(coeffs.dtype).replace('torch.', '')
+
+    def check_launches(self) -> Sequence[Dict[str, object]]:
+        """The launch settings a call may use, each run by the check."""
+        return ({}, )
 
 
 class TorchBackend(BandNetworkBackend):
-    """torch operations: every variant, dtype and device."""
+    """torch operations: every variant, dtype and device. ``dim=1`` runs
+    in float32 (float64 for float64) whatever autocast says: on the CPU the
+    fused kernel of :mod:`.torch_band_networks`; elsewhere (CUDA: what GPU
+    users get with ``'torch'`` or when ``'auto'``'s check fails) the
+    ``nn.Conv1d`` modules, i.e. the device library's convolutions (cuDNN),
+    on chunks of pixels sized by :data:`DEVICE_CHUNK_BYTES`, each chunk
+    recomputed in the backward pass."""
 
     name = 'torch'
 
     def run(self, networks, coeffs, lengths, spatial):
         if networks[0].dim == 1 and not torch.jit.is_tracing():
-            weights, residuals = _weights(networks)
-            rows = coeffs.reshape(-1, coeffs.shape[2])
             with torch.autocast(coeffs.device.type, enabled=False):
+                if coeffs.device.type != 'cpu':
+                    return _module_bands(networks, coeffs, lengths, spatial,
+                                         recompute=True)
+                weights, residuals = _weights(networks)
+                rows = coeffs.reshape(-1, coeffs.shape[2])
                 out = torch_band_networks(rows, lengths, weights, residuals)
             return out.view(coeffs.shape)
         # nn.Conv modules: dim 2 and 3, and under tracing (FLOP counters,
@@ -123,16 +160,41 @@ class ReferenceBackend(BandNetworkBackend):
                              recompute=False)
 
 
+#: Bytes that one chunk's activations and their gradients may take when
+#: ``dim=1`` band networks run as ``nn.Conv1d`` modules chunk by chunk
+#: (:func:`_module_bands`, the ``'torch'`` backend off the CPU): what bounds
+#: the backend's memory beyond its ``O(B*T*H*W)`` inputs and outputs.
+DEVICE_CHUNK_BYTES = 1 << 29
+
+
+def _pixels_per_chunk(network: nn.Module, length: int, itemsize: int,
+                     budget: int = DEVICE_CHUNK_BYTES) -> int:
+    """How many pixels of a band of ``length`` coefficients fit ``budget``
+    bytes of activations (``itemsize`` bytes each) in a recomputed
+    forward+backward of a ``dim=1`` band network: every convolution's
+    output is kept for the backward pass (``sum`` of the output widths per
+    coefficient), and at most three more of the widest exist at once
+    (a convolution's output and its ReLU; two gradients)."""
+    widths = [conv.out_channels for conv, _ in network.layers()]
+    per_pixel = (sum(widths) + 3 * max(widths)) * length * itemsize
+    return max(1, budget // per_pixel)
+
+
 def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
                   lengths: Sequence[int], spatial: Tuple[int, int],
-                  recompute: bool) -> Tensor:
+                  recompute: bool,
+                  chunk_bytes: int = DEVICE_CHUNK_BYTES) -> Tensor:
     """The networks as ``nn.Conv`` modules on ``(B, P, C)`` coefficients.
 
     ``dim=1`` runs every pixel as a ``(1, L)`` signal; ``dim`` 2 and 3 run
-    one sample's band as a ``(1, 1, L, H, W)`` volume at a time and, with
-    ``recompute`` when gradients are wanted, recompute its activations in
-    the backward pass (``torch.utils.checkpoint``), so only one sample's
-    band activations exist at once.
+    one sample's band as a ``(1, 1, L, H, W)`` volume.
+
+    With ``recompute``, only a part of the activations exists at once:
+    ``dim=1`` runs :func:`_pixels_per_chunk` pixels at a time (within
+    ``chunk_bytes``), ``dim`` 2 and 3 one sample at a time; when gradients
+    are wanted, each part's activations are recomputed in the backward
+    pass (``torch.utils.checkpoint``). Without, every activation of every
+    pixel is kept (the ``'reference'`` backend).
     """
     batch, pixels, _ = coeffs.shape
     train = recompute and torch.is_grad_enabled() and (
@@ -142,7 +204,16 @@ def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
     for network, band in zip(networks, coeffs.split(list(lengths), dim=2)):
         length = band.shape[2]
         if network.dim == 1:
-            out = network(band.reshape(batch * pixels, 1, length))
+            signals = band.reshape(batch * pixels, 1, length)
+            step = _pixels_per_chunk(network, length, coeffs.element_size(),
+                                    chunk_bytes) if recompute else None
+            if step is None or (signals.shape[0] <= step and not train):
+                out = network(signals)
+            else:
+                out = torch.cat([
+                    checkpoint(network, chunk, use_reentrant=False)
+                    if train else network(chunk)
+                    for chunk in signals.split(step)])
             outs.append(out.reshape(batch, pixels, length).to(coeffs.dtype))
             continue
         samples = []
@@ -201,14 +272,36 @@ class TritonBackend(BandNetworkBackend):
     def unsupported_call(self, networks, coeffs):
         return triton_band_networks.unsupported_tensor(coeffs)
 
-    def run(self, networks, coeffs, lengths, spatial):
+    def run(self, networks, coeffs, lengths, spatial, **launch):
         weights, _ = _weights(networks)
-        precision = triton_band_networks.dot_precision(coeffs.device.type)
+        precision = self.precision(coeffs)
         with torch.autocast(coeffs.device.type, enabled=False):
             out = triton_band_networks.triton_band_networks(
                 coeffs.reshape(-1, coeffs.shape[2]), lengths, weights,
-                precision)
+                precision, **launch)
         return out.view(coeffs.shape)
+
+    @property
+    def first_use_check(self):
+        # compiled for a GPU; the interpreter runs what the tests checked
+        return not triton_band_networks.interpreting()
+
+    #: two tiles of the largest launch entry and a partial third
+    check_pixels = 2 * max(config.block for config in (
+        triton_band_networks.FORWARD_CONFIGS +
+        triton_band_networks.BACKWARD_CONFIGS)) + 3
+    tolerances = triton_band_networks.TOLERANCES
+
+    def precision(self, coeffs):
+        return triton_band_networks.dot_precision(coeffs.device.type)
+
+    def check_launches(self):
+        forward = triton_band_networks.FORWARD_CONFIGS
+        backward = triton_band_networks.BACKWARD_CONFIGS
+        # every entry of each list at least once
+        return [dict(forward_config=forward[min(i, len(forward) - 1)],
+                     backward_config=backward[min(i, len(backward) - 1)])
+                for i in range(max(len(forward), len(backward)))]
 
 
 #: name -> backend
@@ -254,25 +347,48 @@ def get_backend(name: str, networks: Sequence[nn.Module]
 
 
 def resolve_backend(name: str, networks: Sequence[nn.Module],
-                    coeffs: Tensor) -> BandNetworkBackend:
-    """The backend that runs ``networks`` on ``coeffs`` ``(B, P, C)`` for
-    the configured ``name`` (``'auto'`` or one of :data:`BACKENDS`).
+                    coeffs: Tensor, lengths: Sequence[int]
+                    ) -> Tuple[BandNetworkBackend, Optional[CheckResult]]:
+    """The backend that runs ``networks`` on ``coeffs`` ``(B, P, C)`` (bands
+    of ``lengths``) for the configured ``name`` (``'auto'`` or one of
+    :data:`BACKENDS`), and the first-use check behind the choice: the one
+    the backend passed, the one ``'auto'`` fell back from to ``'torch'``,
+    or ``None`` where no check applies (:mod:`.first_use_check`).
 
     Raises:
         ValueError: a named backend cannot run this call (say, ``'triton'``
             on a CPU tensor); the message says why and lists the choices.
+        FirstUseCheckFailed: a named backend failed its first-use check
+            here; the message says what failed and how to report it.
     """
     backend = get_backend(name, networks)
     if backend is None:
         if torch.jit.is_tracing():  # FLOP counters, jit.trace: see convs
-            return BACKENDS['torch']
+            return BACKENDS['torch'], None
         preferred = BACKENDS.get(_AUTO.get(coeffs.device.type, 'torch'))
-        if preferred.cannot_run(networks, coeffs) is None:
-            return preferred
-        return BACKENDS['torch']
+        if preferred.cannot_run(networks, coeffs) is not None:
+            return BACKENDS['torch'], None
+        check = _first_use_check(preferred, networks, coeffs, lengths)
+        if check is None or check.passed:
+            return preferred, check
+        return BACKENDS['torch'], check
     reason = backend.unsupported_call(networks, coeffs)
     if reason:
         raise ValueError(
             f'backend={name!r} cannot run on {coeffs.dtype} coefficients on '
             f'{coeffs.device}: {reason}. Choices: {_choices()}')
-    return backend
+    check = _first_use_check(backend, networks, coeffs, lengths)
+    if check is not None and not check.passed:
+        raise FirstUseCheckFailed(
+            f'backend={name!r} was named, so nothing falls back: '
+            f'{check.message()}')
+    return backend, check
+
+
+def _first_use_check(backend: BandNetworkBackend,
+                     networks: Sequence[nn.Module], coeffs: Tensor,
+                     lengths: Sequence[int]) -> Optional[CheckResult]:
+    if not backend.first_use_check:
+        return None
+    return check_on_first_use(backend, BACKENDS['torch'], networks, coeffs,
+                              lengths)

@@ -1,5 +1,5 @@
 """The 1-D band networks of WGSE as one fused, chunked torch kernel: the
-``'torch'`` backend of WGSE, on any device.
+``'torch'`` backend of WGSE on the CPU.
 
 :class:`~wgse_mmseg.core.wgse.wgse.BandNetwork` with ``dim=1`` runs a few tiny
 temporal convolutions (1 -> 32 -> 32 -> 1 channels, kernel 3) over every
@@ -16,12 +16,14 @@ convolution is a few matrix products on a "padded rows" layout instead:
   the zero padding of both, and are reset to zero afterwards;
 * chunks are sized so that a layer's activations stay in cache, and every
   buffer is reused from chunk to chunk (:class:`_Workspace`);
-* on the CPU, with several torch threads, whole chunks run side by side,
-  one per thread (:func:`~wgse_mmseg.core.parallel.for_each_on_threads`),
-  instead of splitting each small product; on other devices (CUDA, MPS)
-  chunks are :data:`DEVICE_ROWS_PER_CHUNK` rows, large enough to keep the
-  device busy, and run one after the other, so the memory of a chunk's
-  activations is bounded whatever the batch.
+* with several torch threads, whole chunks run side by side, one per
+  thread (:func:`~wgse_mmseg.core.parallel.for_each_on_threads`), instead
+  of splitting each small product.
+
+This is the CPU's kernel: off the CPU the ``'torch'`` backend runs the
+device library's convolutions instead
+(:mod:`~wgse_mmseg.core.wgse.band_network_backends`), since many small
+products per chunk are the opposite of what a GPU wants.
 
 The backward pass is written out by hand on the same layout. It keeps no
 activation: each chunk's are recomputed in the backward pass (activation
@@ -39,7 +41,7 @@ from torch import Tensor
 
 from ..parallel import for_each_on_threads
 
-__all__ = ['torch_band_networks', 'ROWS_PER_CHUNK', 'DEVICE_ROWS_PER_CHUNK']
+__all__ = ['torch_band_networks', 'ROWS_PER_CHUNK']
 
 #: Rows (pixel-coefficients) per chunk: 16384 rows x 32 channels x 4 bytes
 #: is 2 MiB per activation, so a chunk's layers stay in the L2/L3 caches
@@ -47,23 +49,6 @@ __all__ = ['torch_band_networks', 'ROWS_PER_CHUNK', 'DEVICE_ROWS_PER_CHUNK']
 #: (measured: 8192-32768 rows within 10% of each other on an AMD EPYC,
 #: 4096 and 65536 clearly slower).
 ROWS_PER_CHUNK = 16384
-#: Rows per chunk off the CPU: a ``(rows, 32)`` float32 activation is
-#: 64 MiB, so a chunk's workspace (about ten such buffers) stays under
-#: 1 GiB while each kernel launch covers half a million rows.
-DEVICE_ROWS_PER_CHUNK = 1 << 19
-
-
-def _for_each_chunk(task, count: int, like: Tensor) -> List['_Workspace']:
-    """Run ``task(chunk, workspace)`` for every chunk: side by side on
-    torch's threads on the CPU, one after the other with one workspace
-    elsewhere (a workspace per thread would multiply device memory)."""
-    if like.device.type == 'cpu':
-        return for_each_on_threads(task, count, lambda: _Workspace(like))
-    workspace = _Workspace(like)
-    with torch.no_grad():
-        for chunk in range(count):
-            task(chunk, workspace)
-    return [workspace]
 
 
 class Layer(NamedTuple):
@@ -301,7 +286,8 @@ class _TorchBandNetworks(torch.autograd.Function):
             out[rows, band.offset] = acts[-1].view(
                 -1, seg_len)[:, pad:pad + band.length]
 
-        _for_each_chunk(forward_chunk, len(chunks), coeffs)
+        for_each_on_threads(forward_chunk, len(chunks),
+                            lambda: _Workspace(coeffs))
         ctx.lengths, ctx.residuals, ctx.pad = lengths, residuals, pad
         ctx.save_for_backward(coeffs, *params)
         return out
@@ -329,7 +315,8 @@ class _TorchBandNetworks(torch.autograd.Function):
             if need_input_grad:
                 grad_coeffs[rows, band.offset] = grad_in
 
-        workspaces = _for_each_chunk(backward_chunk, len(chunks), coeffs)
+        workspaces = for_each_on_threads(backward_chunk, len(chunks),
+                                         lambda: _Workspace(coeffs))
         sums = [w.param_grads for w in workspaces if w.param_grads] or [
             _zero_grads(params)]  # no pixels, no chunks
         param_grads = [torch.stack(grads).sum(0) if len(grads) > 1
@@ -361,9 +348,7 @@ def _chunks(coeffs: Tensor, lengths: Tuple[int, ...],
                   for i, residual in enumerate(residuals)]
         band = _Band(index, slice(start, start + length), length)
         columns = coeffs[:, band.offset]
-        rows = ROWS_PER_CHUNK if coeffs.device.type == 'cpu' else \
-            DEVICE_ROWS_PER_CHUNK
-        step = max(1, rows // (length + 2 * pad))
+        step = max(1, ROWS_PER_CHUNK // (length + 2 * pad))
         for row in range(0, coeffs.shape[0], step):
             yield band, columns, slice(row, row + step), layers
         start += length
@@ -376,7 +361,7 @@ def torch_band_networks(coeffs: Tensor, lengths: Sequence[int],
 
     Args:
         coeffs: ``(N, C)`` coefficients of ``N`` pixels, the bands side by
-            side (``C = sum(lengths)``), float32 or float64.
+            side (``C = sum(lengths)``), float32 or float64, on the CPU.
         lengths: ``L`` of each band.
         weights: per band, per layer, ``(weight (C_out, C_in, k), bias
             (C_out,))``; every layer is a 'same'-padded 1-D convolution
@@ -389,6 +374,10 @@ def torch_band_networks(coeffs: Tensor, lengths: Sequence[int],
     Returns:
         ``(N, C)``: each band's network output, in place of its input.
     """
+    if coeffs.device.type != 'cpu':
+        raise ValueError(f'torch_band_networks runs CPU tensors, got '
+                         f'{coeffs.device} coefficients (the torch backend '
+                         f'runs nn.Conv1d chunks elsewhere)')
     if len(weights) != len(lengths) or sum(lengths) != coeffs.shape[1]:
         raise ValueError(
             f'{len(weights)} band networks and bands of lengths {lengths} '

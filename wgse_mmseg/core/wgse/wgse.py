@@ -28,6 +28,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .band_network_backends import CHOICES, get_backend, resolve_backend
+from .first_use_check import CheckResult
 from ..arguments import (Choice, Flag, Integer, check_parameter_count,
                          declare)
 from ..checks import check_finite
@@ -186,9 +187,11 @@ class WGSE(nn.Module):
         backend: what runs the band networks: ``'auto'``, ``'torch'``,
             ``'compiled'``, ``'triton'`` or ``'reference'``
             (:mod:`~wgse_mmseg.core.wgse.band_network_backends`). ``'auto'``
-            picks the Triton kernel for CUDA inputs and the compiled kernel
-            for CPU inputs where they can run, else ``'torch'``; a named
-            backend that cannot run is an error. Every backend but
+            picks the Triton kernel for CUDA inputs (once it passed its
+            first-use check on the device: ``backend_check``) and the
+            compiled kernel for CPU inputs where they can run, else
+            ``'torch'``; a named backend that cannot run, or fails that
+            check, is an error. Every backend but
             ``'reference'`` (the ``nn.Conv`` modules as they are, for
             tests) recomputes hidden activations in the backward pass.
         init: ``'default'`` or ``'lowpass'`` (:meth:`init_lowpass`).
@@ -201,6 +204,11 @@ class WGSE(nn.Module):
     Attributes:
         backend_in_use: the backend that ran the last forward pass
             (``None`` before the first).
+        backend_check: the first-use check behind it
+            (:class:`~wgse_mmseg.core.wgse.first_use_check.CheckResult`):
+            the one the backend passed, or the one ``'auto'`` fell back
+            from to ``'torch'``; ``None`` where no check applies (the CPU
+            backends, the Triton interpreter) and before the first pass.
 
     The transform runs in float32 (float64 for float64 input) even under
     autocast; so do the ``torch`` and ``compiled`` backends' ``dim=1``
@@ -240,6 +248,7 @@ class WGSE(nn.Module):
         get_backend(backend, self.band_networks)  # a clear error, early
         self.backend = backend
         self.backend_in_use: Optional[str] = None
+        self.backend_check: Optional[CheckResult] = None
         self._transforms = {}
         self.output_norm = nn.BatchNorm1d(1) if output_norm else None
         if init == 'lowpass':
@@ -311,7 +320,8 @@ class WGSE(nn.Module):
                 analysis, synthesis, lengths = self._matrices(
                     int(num_steps), spikes.device, dtype)
                 coeffs = torch.matmul(signal, analysis.t())  # (B, P, C)
-        backend = resolve_backend(self.backend, self.band_networks, coeffs)
+        backend, self.backend_check = resolve_backend(
+            self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
         enhanced = backend.run(self.band_networks, coeffs, lengths,
                                (height, width))

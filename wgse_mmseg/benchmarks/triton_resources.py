@@ -21,7 +21,7 @@ so the length does not change the resources).
 
 Triton's interpreter (``TRITON_INTERPRET=1``) replaces the kernels by
 Python functions that cannot be compiled, so the compiles run in a fresh
-process with it unset: ``python -m wgse_mmseg.core.wgse.triton_resources``
+process with it unset: ``python -m wgse_mmseg.benchmarks.triton_resources``
 (what :func:`compile_all` starts). Table: docs/wgse_speed.md.
 """
 import argparse
@@ -34,8 +34,8 @@ import sys
 import tempfile
 from typing import Dict, List, NamedTuple, Optional, Sequence
 
-from ..arguments import Choice, Integer
-from ..limits import MAX_WORKERS
+from ..core.arguments import Choice, Integer
+from ..core.limits import MAX_WORKERS
 
 __all__ = ['ARCHITECTURES', 'BAND_LENGTH', 'Variant', 'Resources',
            'variants', 'jobs_for', 'programs_per_sm', 'loop_carried',
@@ -77,7 +77,8 @@ class Variant(NamedTuple):
     def default(self) -> bool:
         """What runs untuned at the paper's widths: the first launch entry,
         16 or 32 channels, tensor-core precisions (not full float32)."""
-        from .triton_band_networks import BACKWARD_CONFIGS, FORWARD_CONFIGS
+        from ..core.wgse.triton_band_networks import (BACKWARD_CONFIGS,
+                                                      FORWARD_CONFIGS)
         first = (FORWARD_CONFIGS if self.kernel == 'band_forward' else
                  BACKWARD_CONFIGS)[0]
         return ((self.block, self.num_warps) == tuple(first) and
@@ -96,8 +97,8 @@ class Resources(NamedTuple):
 
 def variants() -> List[Variant]:
     """Every kernel variant the dispatcher can launch."""
-    from .triton_band_networks import (BACKWARD_CONFIGS, FORWARD_CONFIGS,
-                                       HIDDEN_CHANNELS, TOLERANCES)
+    from ..core.wgse.triton_band_networks import (
+        BACKWARD_CONFIGS, FORWARD_CONFIGS, HIDDEN_CHANNELS, TOLERANCES)
     found = []
     for hidden in HIDDEN_CHANNELS:
         for precision in TOLERANCES:
@@ -152,7 +153,7 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     from triton.backends.compiler import GPUTarget
     from triton.compiler import ASTSource
 
-    from . import _triton_band_kernels as kernels
+    from ..core.wgse import _triton_band_kernels as kernels
     signature = {name: '*fp32' for name in _SIGNATURES[variant.kernel]}
     signature.update(stride='i32', offset='i32', pixels='i32')
     signature.update({name: '*fp32' for name in _POINTERS})

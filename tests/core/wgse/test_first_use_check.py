@@ -1,0 +1,212 @@
+"""The first-use check of a device kernel (``first_use_check``), driven on
+the CPU: stand-ins for the Triton backend that claim the CPU and fail in
+each way a compiled kernel can (compile error, wrong output, wrong
+gradient, NaN, one bad launch entry), one that is right, and the real
+Triton kernel in triton's interpreter (``TRITON_INTERPRET=1``, set in
+``conftest.py``)."""
+import logging
+
+import mmengine.logging
+import pytest
+import torch
+
+from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
+    first_use_check, triton_band_networks
+
+pytestmark = pytest.mark.usefixtures('single_thread')
+
+TOLERANCE = 1e-4
+
+
+class _WrongGradient(torch.autograd.Function):
+    """Identity forward; the gradient scaled by 1.5."""
+
+    @staticmethod
+    def forward(ctx, x):
+        return x.clone()
+
+    @staticmethod
+    def backward(ctx, grad):
+        return 1.5 * grad
+
+
+class _StandIn(band_network_backends.TorchBackend):
+    """The ``torch`` backend posing as a checked GPU kernel on the CPU,
+    broken as ``fault`` says on the launch entries of ``broken``."""
+
+    name = 'triton'
+    first_use_check = True
+    tolerances = {'float32': TOLERANCE}
+
+    def __init__(self, fault=None, broken=(0, 1)):
+        self.fault, self.broken, self.calls = fault, broken, 0
+
+    def check_launches(self):
+        return [dict(entry=0), dict(entry=1)]
+
+    def run(self, networks, coeffs, lengths, spatial, entry=0):
+        self.calls += 1
+        out = super().run(networks, coeffs, lengths, spatial)
+        if entry not in self.broken or self.fault is None:
+            return out
+        if self.fault == 'compile':
+            raise RuntimeError('CompilationError: at 12:4: (stand-in)')
+        if self.fault == 'output':
+            return out + 0.9
+        if self.fault == 'gradient':
+            return _WrongGradient.apply(out)
+        assert self.fault == 'nan'
+        return out + torch.where(torch.arange(out.numel()).view_as(out) == 5,
+                                 float('nan'), 0.0)
+
+
+@pytest.fixture
+def log(monkeypatch):
+    """Fresh check results; the log lines (level, message) it writes."""
+    monkeypatch.setattr(first_use_check, '_RESULTS', {})
+    lines = []
+    monkeypatch.setattr(mmengine.logging, 'print_log',
+                        lambda msg, logger=None, level=logging.INFO:
+                        lines.append((level, msg)))
+    return lines
+
+
+def _install(monkeypatch, backend):
+    """``backend`` as 'triton', and 'auto''s first choice on the CPU."""
+    monkeypatch.setitem(band_network_backends.BACKENDS, 'triton', backend)
+    monkeypatch.setitem(band_network_backends._AUTO, 'cpu', 'triton')
+
+
+def _spikes(steps=12, seed=1):
+    generator = torch.Generator().manual_seed(seed)
+    return (torch.rand(2, steps, 3, 5, generator=generator) < 0.4).float()
+
+
+def _torch_result(model, spikes):
+    torch_model = WGSE(wavelet=model.wavelet, level=model.level,
+                       backend='torch')
+    torch_model.load_state_dict(model.state_dict())
+    return torch_model(spikes)
+
+
+@pytest.mark.parametrize('fault, what', [
+    ('compile', 'raised (entry=0, input gradient True): RuntimeError: '
+                'CompilationError'),
+    ('output', 'output disagrees'),
+    ('gradient', 'gradient'),
+    ('nan', 'output NaN or Inf'),
+])
+def test_auto_falls_back_and_logs_once(monkeypatch, log, fault, what):
+    stand_in = _StandIn(fault)
+    _install(monkeypatch, stand_in)
+    torch.manual_seed(0)
+    model = WGSE(wavelet='haar', level=2)
+    spikes = _spikes()
+    for _ in range(2):  # the second forward pass neither checks nor logs
+        out = model(spikes)
+    assert model.backend_in_use == 'torch'
+    check = model.backend_check
+    assert not check.passed and what in check.failure
+    assert check.device == 'cpu' and 'bands [3, 3, 6]' in check.variant
+    torch.testing.assert_close(out, _torch_result(model, spikes),
+                               rtol=0, atol=0)
+    assert len(log) == 1
+    level, message = log[0]
+    assert level == logging.WARNING
+    for part in ('FAILED its first-use check', 'on cpu', what,
+                 'largest relative error', "runs the 'torch' backend",
+                 first_use_check.REPORT_TO):
+        assert part in message
+    # named explicitly, it raises with the same message
+    model.backend = 'triton'
+    with pytest.raises(first_use_check.FirstUseCheckFailed,
+                       match="backend='triton' was named") as error:
+        model(spikes)
+    assert check.message() in str(error.value)
+
+
+def test_every_launch_entry_is_checked(monkeypatch, log):
+    _install(monkeypatch, _StandIn('output', broken=(1, )))
+    model = WGSE(wavelet='haar', level=1)
+    model(_spikes())
+    assert model.backend_in_use == 'torch'
+    assert '(entry=1, input gradient True)' in model.backend_check.failure
+
+
+def test_a_gradient_wrong_only_without_the_input_gradient(monkeypatch, log):
+    """Parameter gradients alone (coefficients that need none: WGSE in
+    training) are compared too."""
+
+    class ParameterGradientsOff(_StandIn):
+        def run(self, networks, coeffs, lengths, spatial, entry=0):
+            out = super().run(networks, coeffs, lengths, spatial, entry)
+            return out if coeffs.requires_grad else _WrongGradient.apply(out)
+
+    _install(monkeypatch, ParameterGradientsOff())
+    model = WGSE(wavelet='haar', level=1)
+    model(_spikes())
+    assert model.backend_in_use == 'torch'
+    failure = model.backend_check.failure
+    assert 'gradient of band' in failure and 'input gradient False' in failure
+
+
+def test_a_kernel_that_agrees_runs_after_one_check_per_variant(
+        monkeypatch, log):
+    stand_in = _StandIn()
+    _install(monkeypatch, stand_in)
+    model = WGSE(wavelet='haar', level=2)
+    with torch.no_grad():  # even without gradients, the check runs them
+        out = model(_spikes())
+    assert model.backend_in_use == 'triton'
+    check = model.backend_check
+    assert check.passed and check.failure is None
+    assert 0 <= check.max_error <= TOLERANCE
+    # 2 launch entries x (with, without the input gradient), one call each
+    assert stand_in.calls == 4 + 1
+    torch.testing.assert_close(out, _torch_result(model, _spikes()))
+    assert len(log) == 1 and log[0][0] == logging.INFO
+    assert 'passed its first-use check' in log[0][1]
+    model(_spikes())
+    assert stand_in.calls == 6 and len(log) == 1  # checked once
+    model(_spikes(steps=20))  # other band lengths: another variant
+    assert stand_in.calls == 6 + 5 and len(log) == 2
+
+
+def test_backends_without_a_kernel_of_their_own_are_not_checked(log):
+    model = WGSE(wavelet='haar', level=1)
+    model(_spikes())
+    assert model.backend_in_use in ('compiled', 'torch')
+    assert model.backend_check is None and not log
+
+
+def test_relative_errors():
+    want = [torch.tensor([2.0, -4.0]), torch.tensor([1e-3, 0.0])]
+    got = [torch.tensor([2.0, -3.0]), torch.tensor([2e-3, 0.0])]
+    # 1/4; the near-zero tensor against a hundredth of the largest (4)
+    assert first_use_check.relative_errors(got, want) == pytest.approx(
+        [0.25, 1e-3 / 4e-2])
+    got[1][1] = float('nan')
+    assert first_use_check.relative_errors(got, want)[1] == float('inf')
+
+
+@pytest.mark.skipif(triton_band_networks.unavailable() is not None,
+                    reason=str(triton_band_networks.unavailable()))
+def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log):
+    """The check around the real kernel: every launch entry, with and
+    without the input gradient, against float64."""
+
+    class CheckedTriton(band_network_backends.TritonBackend):
+        first_use_check = True
+        check_pixels = 17  # entry 16: a full and a partial tile; 32: partial
+
+    assert not band_network_backends.TritonBackend().first_use_check
+    _install(monkeypatch, CheckedTriton())
+    model = WGSE(wavelet='haar', level=1)
+    spikes = _spikes(steps=6)[:1, :, :1]
+    out = model(spikes)
+    assert model.backend_in_use == 'triton', model.backend_check
+    check = model.backend_check
+    assert check.passed
+    assert check.max_error <= triton_band_networks.TOLERANCES['ieee']
+    torch.testing.assert_close(out, _torch_result(model, spikes),
+                               rtol=1e-5, atol=1e-5)

@@ -1,0 +1,222 @@
+"""The check a device kernel passes before its first use in a process.
+
+A kernel compiled for the device at hand (the Triton kernel on a GPU) has
+never run there before a user's first training step, and a compiled kernel
+can differ from what the interpreter the tests use computes. So the first
+time a backend whose :attr:`~.band_network_backends.BandNetworkBackend.
+first_use_check` is set would run a *variant* (device, precision of the call,
+network shape, band lengths), :func:`check_on_first_use` runs it on a small
+random problem of that variant and compares the output and every gradient
+(of the coefficients and of each parameter) with the ``torch`` backend in
+float64 on the same device, within the backend's tolerance for that
+precision. A compile or launch error, a NaN or Inf, or an error above the
+tolerance fails the check. The result is kept for the process, and logged
+once: ``'auto'`` then runs the ``torch`` backend; a backend named
+explicitly raises :class:`FirstUseCheckFailed` with the same message.
+
+Cost (once per variant and process): the problem is the call's band
+lengths at :attr:`~.band_network_backends.BandNetworkBackend.check_pixels`
+pixels (67 for Triton: two tiles of its largest launch entry, 32 pixels,
+and a partial third); every launch entry the backend can choose is run
+forward and backward twice, with and without the coefficients' gradient
+(Triton: 2 entries x 2 = 4 forward+backward passes, one kernel launch per
+band each way: 48 launches for WGSE's 6 bands), plus one float64
+forward+backward of the ``torch`` backend. Its arithmetic is negligible on
+a GPU (67 pixels against the 524288 of a 4x129x256x512 batch); the time is
+the compiles of the variants the check meets first, which the training step
+would have paid anyway, but for the entries autotuning would not have
+picked.
+"""
+import copy
+import logging
+import time
+from typing import Dict, List, NamedTuple, Optional, Sequence
+
+import torch
+from torch import Tensor, nn
+
+__all__ = ['CheckResult', 'FirstUseCheckFailed', 'check_on_first_use',
+           'relative_errors', 'REPORT_TO']
+
+#: where a failed check asks to be reported
+REPORT_TO = ("the project's bug tracker with this line and the docs/gpu.md "
+             'and gpu.json that `bash tools/gpu_report.sh` writes on this '
+             'machine')
+
+
+class FirstUseCheckFailed(RuntimeError):
+    """A backend named explicitly failed its first-use check."""
+
+
+class CheckResult(NamedTuple):
+    """The outcome of one first-use check."""
+    backend: str
+    device: str
+    variant: str  # precision, network shape, band lengths, readable
+    passed: bool
+    max_error: Optional[float]  # largest relative error (None: no result)
+    tolerance: float
+    failure: Optional[str]  # what failed (None when it passed)
+    seconds: float
+
+    def message(self) -> str:
+        """One log line saying what was checked and how it went."""
+        where = (f'the {self.backend!r} band-network kernel on '
+                 f'{self.device} ({self.variant})')
+        error = ('-' if self.max_error is None else
+                 f'{self.max_error:.2e}')
+        if self.passed:
+            return (f'WGSE: {where} passed its first-use check against the '
+                    f"'torch' backend in float64: largest relative error "
+                    f'{error} (tolerance {self.tolerance:.0e}), '
+                    f'{self.seconds:.2f} s')
+        return (f'WGSE: {where} FAILED its first-use check against the '
+                f"'torch' backend in float64: {self.failure}; largest "
+                f'relative error {error} (tolerance {self.tolerance:.0e}). '
+                f"backend='auto' runs the 'torch' backend instead in this "
+                f'process. Please report it at {REPORT_TO}')
+
+
+#: (backend, device, variant) -> its check in this process
+_RESULTS: Dict[tuple, CheckResult] = {}
+
+
+def relative_errors(got: Sequence[Tensor], want: Sequence[Tensor]
+                    ) -> List[float]:
+    """Per tensor, ``max |got - want|`` over the largest ``|want|`` of that
+    tensor (at least a hundredth of the largest of all, so a gradient that
+    is nearly zero everywhere is not held to relative precision); ``inf``
+    where ``got`` is not finite."""
+    largest = max((w.abs().max().item() for w in want if w.numel()),
+                  default=0.0) or 1.0
+    errors = []
+    for g, w in zip(got, want):
+        if not torch.isfinite(g).all():
+            errors.append(float('inf'))
+        elif w.numel():
+            errors.append((g.double() - w.double()).abs().max().item() / max(
+                w.abs().max().item(), 1e-2 * largest))
+        else:
+            errors.append(0.0)
+    return errors
+
+
+def _variant(backend, networks: Sequence[nn.Module], coeffs: Tensor,
+             lengths: Sequence[int]) -> str:
+    net = networks[0]
+    return (f'precision {backend.precision(coeffs)}, dim={net.dim} '
+            f'kernel_size={net.kernel_size} hidden_channels='
+            f'{net.hidden_channels} num_blocks={net.num_blocks}, bands '
+            f'{list(lengths)}')
+
+
+def _problem(networks: Sequence[nn.Module], lengths: Sequence[int],
+             pixels: int, device: torch.device):
+    """Random networks like ``networks``, coefficients ``(1, pixels, C)``
+    and output weights, float64 on the CPU (seeded: the same everywhere)."""
+    generator = torch.Generator().manual_seed(0)
+    nets = copy.deepcopy(list(networks))
+    with torch.no_grad():
+        for net in nets:
+            for name, p in net.named_parameters():
+                fan_in = p[0].numel() if p.dim() > 1 else 1
+                p.copy_(torch.randn(p.shape, generator=generator,
+                                    dtype=torch.float64) / fan_in ** 0.5 +
+                        (0.1 if name.endswith('bias') else 0.0))
+    coeffs = torch.randn(1, pixels, sum(lengths), generator=generator,
+                         dtype=torch.float64)
+    weights = torch.randn(coeffs.shape, generator=generator,
+                          dtype=torch.float64)
+    return ([net.to(device, torch.float64) for net in nets],
+            coeffs.to(device), weights.to(device))
+
+
+def _output_and_grads(backend, networks, coeffs: Tensor, weights: Tensor,
+                      lengths, input_grad: bool, launch: dict
+                      ) -> List[Tensor]:
+    """The output, the coefficients' gradient (if ``input_grad``) and every
+    parameter's of ``sum(out * weights)``."""
+    coeffs = coeffs.detach().requires_grad_(input_grad)
+    params = [p for net in networks for p in net.parameters()]
+    out = backend.run(networks, coeffs, lengths, (1, coeffs.shape[1]),
+                      **launch)
+    grads = torch.autograd.grad((out * weights).sum(),
+                                ([coeffs] if input_grad else []) + params)
+    return [out.detach()] + list(grads)
+
+
+def _run_check(backend, reference, networks: Sequence[nn.Module],
+               coeffs: Tensor, lengths: Sequence[int]
+               ) -> Dict[str, object]:
+    """``passed``, ``max_error`` and ``failure`` of one check."""
+    nets64, coeffs64, weights64 = _problem(networks, lengths,
+                                           backend.check_pixels,
+                                           coeffs.device)
+    with torch.autocast(coeffs.device.type, enabled=False):
+        want = _output_and_grads(reference, nets64, coeffs64, weights64,
+                                 lengths, True, {})
+    nets32 = [copy.deepcopy(net).float() for net in nets64]
+    worst = 0.0
+    for launch in backend.check_launches():
+        for input_grad in (True, False):
+            setting = ', '.join([f'{k}={v}' for k, v in launch.items()] +
+                                [f'input gradient {input_grad}'])
+            try:
+                got = _output_and_grads(backend, nets32, coeffs64.float(),
+                                        weights64.float(), lengths,
+                                        input_grad, launch)
+            except Exception as error:  # noqa: BLE001 - the finding
+                return dict(passed=False, max_error=None, failure=(
+                    f'it raised ({setting}): {type(error).__name__}: '
+                    f'{str(error).strip()[:500]}'))
+            names = ['output'] + (['coefficient gradient'] if input_grad
+                                  else []) + [
+                f'gradient of band {band} {name}'
+                for band, net in enumerate(nets32)
+                for name, _ in net.named_parameters()]
+            compared = want if input_grad else want[:1] + want[2:]
+            errors = relative_errors(got, compared)
+            index = max(range(len(errors)), key=errors.__getitem__)
+            worst = max(worst, errors[index])
+            tolerance = backend.tolerances[backend.precision(coeffs)]
+            if not errors[index] <= tolerance:
+                what = ('NaN or Inf' if errors[index] == float('inf')
+                        else 'disagrees')
+                return dict(passed=False, max_error=errors[index],
+                            failure=f'{names[index]} {what} ({setting})')
+    return dict(passed=True, max_error=worst, failure=None)
+
+
+def check_on_first_use(backend, reference, networks: Sequence[nn.Module],
+                       coeffs: Tensor, lengths: Sequence[int]
+                       ) -> CheckResult:
+    """The first-use check of ``backend`` for the variant of this call
+    (``coeffs`` ``(B, P, C)``, bands of ``lengths``), against ``reference``
+    (the ``torch`` backend) in float64; run once per process and variant,
+    logged once (passed: info; failed: warning)."""
+    device = str(coeffs.device)
+    key = (backend.name, device, _variant(backend, networks, coeffs,
+                                          lengths))
+    if key not in _RESULTS:
+        start = time.perf_counter()
+        with torch.inference_mode(False), torch.enable_grad():
+            outcome = _run_check(backend, reference, networks, coeffs,
+                                 lengths)
+        result = _RESULTS[key] = CheckResult(
+            backend.name, device, key[2],
+            tolerance=backend.tolerances[backend.precision(coeffs)],
+            seconds=time.perf_counter() - start, **outcome)
+        _log(result)
+    return _RESULTS[key]
+
+
+def _log(result: CheckResult) -> None:
+    """Into the training log (mmengine's current logger) where mmengine
+    imports, else Python's logging."""
+    level = logging.INFO if result.passed else logging.WARNING
+    try:
+        from mmengine.logging import print_log
+    except ImportError:
+        logging.getLogger(__name__).log(level, result.message())
+    else:
+        print_log(result.message(), logger='current', level=level)
