@@ -61,10 +61,7 @@ from . import wgse as wgse_benchmark
 from .machine import machine_record, run_isolated
 from .markdown import markdown_table
 
-__all__ = ['Plan', 'GPU', 'SMOKE', 'PRECISIONS', 'MODELS', 'FIGURES',
-           'environment', 'check_correctness', 'check_first_use',
-           'segmentation_step', 'run_report', 'format_report',
-           'write_report']
+__all__ = ['run_report']
 
 Shape = Tuple[int, int, int, int]
 

@@ -37,9 +37,7 @@ from typing import Dict, List, NamedTuple, Optional, Sequence
 from ..core.arguments import Choice, Integer
 from ..core.limits import MAX_WORKERS
 
-__all__ = ['ARCHITECTURES', 'BAND_LENGTH', 'Variant', 'Resources',
-           'variants', 'jobs_for', 'programs_per_sm', 'loop_carried',
-           'compile_variant', 'compile_all', 'format_table']
+__all__ = []
 
 #: target name -> (compute capability, registers per SM, most warps per SM,
 #: most programs per SM, shared memory per SM in bytes, most per program)

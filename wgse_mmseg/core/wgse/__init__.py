@@ -14,5 +14,4 @@
 from .band_network_backends import BACKENDS, CHOICES, BandNetworkBackend
 from .wgse import WGSE, BandNetwork
 
-__all__ = ['WGSE', 'BandNetwork', 'BACKENDS', 'CHOICES',
-           'BandNetworkBackend']
+__all__ = ['WGSE']

@@ -48,8 +48,7 @@ from .first_use_check import (CheckResult, FirstUseCheckFailed,
                               check_on_first_use)
 from .torch_band_networks import torch_band_networks
 
-__all__ = ['BACKENDS', 'CHOICES', 'DEVICE_CHUNK_BYTES', 'BandNetworkBackend',
-           'get_backend', 'resolve_backend']
+__all__ = []
 
 Weights = List[List[Tuple[Tensor, Tensor]]]
 

@@ -34,8 +34,7 @@ try:
 except ImportError:  # installed without a C compiler
     _band_networks = None
 
-__all__ = ['NOT_BUILT', 'ROWS_PER_CALL', 'unavailable', 'unsupported',
-           'compiled_band_networks']
+__all__ = []
 
 #: :func:`unavailable`'s reason where the extension was not built
 NOT_BUILT = ('the compiled extension was not built (installed without a C '

@@ -35,8 +35,7 @@ from typing import Dict, List, NamedTuple, Optional, Sequence
 import torch
 from torch import Tensor, nn
 
-__all__ = ['CheckResult', 'FirstUseCheckFailed', 'check_on_first_use',
-           'relative_errors', 'REPORT_TO']
+__all__ = ['FirstUseCheckFailed']
 
 #: where a failed check asks to be reported
 REPORT_TO = ("the project's bug tracker with this line and the docs/gpu.md "

@@ -41,7 +41,7 @@ from torch import Tensor
 
 from ..parallel import for_each_on_threads
 
-__all__ = ['torch_band_networks', 'ROWS_PER_CHUNK']
+__all__ = []
 
 #: Rows (pixel-coefficients) per chunk: 16384 rows x 32 channels x 4 bytes
 #: is 2 MiB per activation, so a chunk's layers stay in the L2/L3 caches

@@ -47,10 +47,7 @@ except ImportError as error:  # triton is not installed (CPU-only torch)
     triton = kernels = None
     _IMPORT_ERROR = str(error)
 
-__all__ = ['LaunchConfig', 'FORWARD_CONFIGS', 'BACKWARD_CONFIGS',
-           'HIDDEN_CHANNELS', 'TOLERANCES', 'dot_precision', 'interpreting',
-           'unavailable', 'unsupported_network', 'unsupported_tensor',
-           'tuned_configs', 'triton_band_networks']
+__all__ = []
 
 
 class LaunchConfig(NamedTuple):

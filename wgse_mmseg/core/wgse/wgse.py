@@ -36,7 +36,7 @@ from ..limits import MAX_CHANNELS, MAX_KERNEL_SIZE, MAX_LEVEL, MAX_NUM_BLOCKS
 from ..wavelets import (SUPPORTED_MODES, analysis_matrix, band_lengths,
                         synthesis_matrix)
 
-__all__ = ['WGSE', 'BandNetwork', 'INITS']
+__all__ = ['WGSE']
 
 #: ``WGSE(init=...)``: ``'default'`` (PyTorch's initialisation of every
 #: convolution) or ``'lowpass'`` (see :meth:`WGSE.init_lowpass`)
