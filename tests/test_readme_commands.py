@@ -55,6 +55,8 @@ HOW = {
     'bash tools/quickstart.sh': RUN,
     'bash tools/run_tests.sh': CI,
     'bash tools/setup_env.sh': CI,
+    'STACK=onedl bash tools/setup_env.sh': CI,
+    'STACK=onedl bash tools/run_tests.sh': CI,
     'MMCV=full bash tools/setup_env.sh': NotHere(
         'compiles mmcv 2.1.0 for about 30 minutes and replaces mmcv-lite in '
         'the environment the other tests use', 'tests/compat/test_compat.py::'

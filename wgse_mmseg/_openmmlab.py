@@ -101,13 +101,13 @@ def _stack_list() -> str:
         for stack, packages in STACKS.items())
 
 
-def _mmcv_ops_importable() -> bool:
-    """Whether ``import mmcv.ops`` works: full mmcv, or the stand-in is
-    installed."""
-    from .compat.mmcv_ops_fallback import has_compiled_ops
+def _mmseg_importable() -> bool:
+    """Whether MMSeg imports now: mmcv's compiled ops, the stand-in
+    ``mmcv.ops`` installed, or an MMSeg that needs no ``mmcv.ops``."""
+    from .compat.mmcv_ops_fallback import has_compiled_ops, stand_in_names
     installed = sys.modules.get('mmcv.ops')
-    return has_compiled_ops() or getattr(installed, '__wgse_fallback__',
-                                         False)
+    return (has_compiled_ops() or getattr(installed, '__wgse_fallback__', False)
+            or not stand_in_names())
 
 
 def check_mmseg_layer(what: str) -> None:
@@ -116,7 +116,7 @@ def check_mmseg_layer(what: str) -> None:
     the patches were not applied (:func:`prepare_mmseg_layer`). Changes
     nothing in the process."""
     require_openmmlab(what)
-    if _mmcv_ops_importable():
+    if _mmseg_importable():
         return
     from .compat import OPT_OUT
     if os.environ.get(OPT_OUT, '') not in ('', '0'):

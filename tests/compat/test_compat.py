@@ -23,15 +23,16 @@ from wgse_mmseg.compat.checkpoint_safety import (history_buffer_statistic,
                                                  weights_only_load)
 from wgse_mmseg.compat.mmcv_ops_fallback import (PURE_PYTHON_OPS,
                                                   MissingCompiledOpError,
-                                                  _unguarded_ops_imports,
-                                                  mmseg_mmcv_ops_imports)
+                                                  _ops_imports, stand_in_names)
 
 HAS_COMPILED_OPS = importlib.util.find_spec('mmcv._ext') is not None
+#: an MMSeg that cannot import without mmcv.ops, and no compiled ops
+NEEDS_STAND_IN = not HAS_COMPILED_OPS and bool(stand_in_names())
 apply_compat()
 
 
-@pytest.mark.skipif(HAS_COMPILED_OPS or 'point_sample' not in
-                    mmseg_mmcv_ops_imports(),
+@pytest.mark.skipif(not NEEDS_STAND_IN or 'point_sample' not in
+                    stand_in_names(),
                     reason='full mmcv, or an MMSeg that needs no stand-in')
 def test_fallback_supplies_mmcv_point_sample_and_mmseg_imports():
     import mmcv.ops
@@ -52,7 +53,7 @@ def test_the_stand_in_holds_only_the_names_mmseg_imports():
     """Where a stand-in is installed, it answers exactly the names MMSeg
     imports (compiled-only ones raise when used); any other name is absent,
     as under mmcv-lite, so other libraries' probes see no op."""
-    needed = mmseg_mmcv_ops_imports()
+    needed = stand_in_names()
     if not needed:  # an MMSeg that guards its mmcv.ops imports: no stand-in
         with pytest.raises(ImportError):
             import mmcv.ops  # noqa: F401
@@ -88,11 +89,11 @@ from mmcv.ops import top_level
 if flag:
     from mmcv.ops import in_if, other
 try:
-    from mmcv.ops import only_module_not_found
+    from mmcv.ops import only_module_not_found, twice
 except ModuleNotFoundError:
     pass
 try:
-    from mmcv.ops import guarded
+    from mmcv.ops import guarded, twice
 except (OSError, ImportError):
     pass
 try:
@@ -103,6 +104,10 @@ try:
     import x
 except ImportError:
     from mmcv.ops import in_handler
+try:
+    from mmcv.ops import not_caught
+except KeyError:
+    pass
 def f():
     from mmcv.ops import in_function
 class C:
@@ -112,10 +117,14 @@ from mmcv.ops.nms import by_path
 
 
 def test_the_names_mmseg_needs_are_read_off_its_source():
-    """Imports run at module import and not caught as ImportError count;
-    imports in functions, classes and guarded ``try`` blocks do not."""
-    assert _unguarded_ops_imports(ast.parse(MODULE_SOURCE)) == {
-        'top_level', 'in_if', 'other', 'only_module_not_found', 'in_handler'}
+    """Each import run at a module's import, with its weakest guard;
+    imports in functions and classes (run later) are left out."""
+    assert _ops_imports(ast.parse(MODULE_SOURCE)) == {
+        'top_level': 'unguarded', 'in_if': 'unguarded', 'other': 'unguarded',
+        'only_module_not_found': 'ModuleNotFoundError',
+        'twice': 'ModuleNotFoundError', 'guarded': 'ImportError',
+        'guarded_by_exception': 'ImportError', 'in_handler': 'unguarded',
+        'not_caught': 'unguarded'}
 
 
 QUIET_RUN = (
@@ -234,7 +243,7 @@ def test_patches_are_applied_once_and_can_be_turned_off():
         'assert not getattr(ops, "__wgse_fallback__", False)\n'
         'wgse_mmseg.core.WGSE()(torch.zeros(1, 9, 2, 2))\n',
         WGSE_MMSEG_NO_COMPAT='1')
-    if not HAS_COMPILED_OPS:  # mmcv-lite
+    if NEEDS_STAND_IN:  # mmcv-lite under MMSeg 1.2.2
         assert 'WGSE_MMSEG_NO_COMPAT is set' in out
         assert 'wgse_mmseg.datasets needs mmcv.ops' in out
     # and by default, applying again changes nothing
@@ -269,7 +278,7 @@ def test_importing_a_layer_module_patches_nothing():
         'assert MODELS.get("WGSE") is wgse_mmseg.core.WGSE\n'
         'print("registered")\n')
     assert 'registered' in out
-    if not HAS_COMPILED_OPS:  # mmcv-lite: MMSeg needs the stand-in first
+    if NEEDS_STAND_IN:  # mmcv-lite: MMSeg 1.2.2 needs the stand-in first
         assert 'wgse_mmseg.models imports MMSeg' in out
         assert 'wgse_mmseg.register_all_modules()' in out
         assert "imports=['wgse_mmseg.mmseg_layer']" in out

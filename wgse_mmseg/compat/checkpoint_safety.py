@@ -28,9 +28,9 @@ harmless function of this module (:func:`_full_unpickling_reached`) and
 seeing whether it ran; only then it replaces the loader with
 :func:`weights_only_load`, and checks with the probe again.
 """
+import contextlib
 import importlib
 import io
-import logging
 import os
 import pickle
 import tempfile
@@ -153,16 +153,13 @@ def _loader_unpickles_in_full(loader) -> bool:
         path = os.path.join(folder, 'probe.pth')
         with open(path, 'wb') as f:
             f.write(buffer.getvalue())
-        quiet = logging.root.manager.disable  # the fallback's log line
-        logging.disable(logging.CRITICAL)
-        try:
-            with warnings.catch_warnings():
+        try:  # quietly: onedl-mmengine print()s its fallback
+            with warnings.catch_warnings(), \
+                    contextlib.redirect_stdout(io.StringIO()):
                 warnings.simplefilter('ignore')
                 loader(path, map_location='cpu')
         except Exception:  # refused: what a safe loader does
             pass
-        finally:
-            logging.disable(quiet)
     return bool(_probe_runs)
 
 

@@ -5,11 +5,14 @@ and the installed MMSeg cannot import without them.
 but not the ``mmcv._ext`` extension, so ``import mmcv.ops`` fails. Whether
 MMSeg then still imports is read off MMSeg's own source
 (:func:`mmseg_mmcv_ops_imports`): MMSegmentation 1.2.2 imports
-``point_sample`` and ``sigmoid_focal_loss`` at module level and
-``CrissCrossAttention``, ``PSAMask`` in ``try`` blocks that catch only
-``ModuleNotFoundError``; onedl-mmsegmentation 1.4.2 catches ``ImportError``
-around every such import and needs nothing. Where names are needed, this
-module installs a stand-in ``mmcv.ops`` package holding exactly those names:
+``point_sample`` and ``sigmoid_focal_loss`` unguarded, so it needs a
+stand-in; onedl-mmsegmentation 1.4.2 guards every such import with
+``except ModuleNotFoundError`` (what ``import mmcv.ops`` raises without the
+extension) and needs none. Where one is needed (:func:`stand_in_names`),
+this module installs a stand-in ``mmcv.ops`` package holding exactly the
+names MMSeg imports without an ``ImportError`` handler (a name missing from
+an importable ``mmcv.ops`` raises ``ImportError``, which a
+``ModuleNotFoundError`` handler does not catch):
 
 * the ops that mmcv itself writes in pure Python (:data:`PURE_PYTHON_OPS`),
   loaded straight from mmcv's own source files;
@@ -28,16 +31,18 @@ ranks, nor in processes started from this one (the environment variable
 :data:`NOTICE_SHOWN` carries that).
 """
 import ast
+import functools
 import importlib.util
 import os
 import os.path as osp
 import sys
 import types
-from typing import Set
+from typing import Dict, Set
 
 __all__ = ['install_mmcv_ops_fallback', 'has_compiled_ops',
-           'mmseg_mmcv_ops_imports', 'MissingCompiledOpError',
-           'PURE_PYTHON_OPS', 'NOTICE_SHOWN']
+           'mmseg_mmcv_ops_imports', 'stand_in_names',
+           'MissingCompiledOpError', 'GUARDS', 'PURE_PYTHON_OPS',
+           'NOTICE_SHOWN']
 
 #: op name -> the mmcv.ops module that defines it without the compiled
 #: extension
@@ -75,52 +80,66 @@ def has_compiled_ops() -> bool:
         return False
 
 
-def _handles_import_error(handler: ast.ExceptHandler) -> bool:
-    """Whether an ``except`` clause catches ImportError (bare, ImportError,
-    Exception or BaseException, alone or in a tuple)."""
-    if handler.type is None:
-        return True
-    kinds = (handler.type.elts if isinstance(handler.type, ast.Tuple)
-             else [handler.type])
-    return any(isinstance(kind, ast.Name) and kind.id in (
-        'ImportError', 'Exception', 'BaseException') for kind in kinds)
+#: how an ``from mmcv.ops import`` is guarded, weakest first: no handler
+#: that catches its failure; a handler for ``ModuleNotFoundError`` only (what
+#: ``import mmcv.ops`` raises without ``mmcv._ext``, but not a name missing
+#: from an ``mmcv.ops`` that imports); a handler for any ``ImportError``
+GUARDS = ('unguarded', 'ModuleNotFoundError', 'ImportError')
 
 
-def _unguarded_ops_imports(tree: ast.Module) -> Set[str]:
-    """Names of ``from mmcv.ops import ...`` run at a module's import (its
-    top level, ``if`` and ``try`` bodies) and not inside a ``try`` whose
-    handlers catch ImportError."""
-    names = set()
+def _guard_of(handlers) -> int:
+    """The index in :data:`GUARDS` of what ``except`` clauses catch."""
+    caught = 0
+    for handler in handlers:
+        if handler.type is None:
+            return 2
+        kinds = (handler.type.elts if isinstance(handler.type, ast.Tuple)
+                 else [handler.type])
+        for kind in kinds:
+            name = kind.id if isinstance(kind, ast.Name) else None
+            if name in ('ImportError', 'Exception', 'BaseException'):
+                return 2
+            if name == 'ModuleNotFoundError':
+                caught = 1
+    return caught
 
-    def visit(statements, guarded):
+
+def _ops_imports(tree: ast.Module) -> Dict[str, str]:
+    """``{name: guard}`` of ``from mmcv.ops import ...`` run at a module's
+    import (its top level, ``if`` and ``try`` bodies, handlers), each with
+    its weakest guard (:data:`GUARDS`); imports in functions and classes run
+    later, and are left out."""
+    found = {}
+
+    def visit(statements, guard):
         for node in statements:
-            if isinstance(node, ast.ImportFrom) and node.module == 'mmcv.ops' \
-                    and not guarded:
-                names.update(alias.name for alias in node.names)
+            if isinstance(node, ast.ImportFrom) and node.module == 'mmcv.ops':
+                for alias in node.names:
+                    found[alias.name] = min(found.get(alias.name, 2), guard)
             elif isinstance(node, ast.If):
-                visit(node.body, guarded)
-                visit(node.orelse, guarded)
+                visit(node.body, guard)
+                visit(node.orelse, guard)
             elif isinstance(node, ast.Try):
-                visit(node.body, guarded or any(
-                    _handles_import_error(h) for h in node.handlers))
+                visit(node.body, max(guard, _guard_of(node.handlers)))
                 for handler in node.handlers:
-                    visit(handler.body, guarded)
-                visit(node.orelse, guarded)
-                visit(node.finalbody, guarded)
+                    visit(handler.body, guard)
+                visit(node.orelse, guard)
+                visit(node.finalbody, guard)
 
-    visit(tree.body, False)
-    return names
+    visit(tree.body, 0)
+    return {name: GUARDS[guard] for name, guard in found.items()}
 
 
-def mmseg_mmcv_ops_imports() -> Set[str]:
-    """The ``mmcv.ops`` names the installed MMSeg cannot import without:
-    imported when a module of ``mmseg`` is imported, where no handler
-    catches the ImportError. Read from MMSeg's source files (parsed, never
-    run); only files that mention ``mmcv.ops`` are parsed."""
+@functools.lru_cache(maxsize=None)
+def mmseg_mmcv_ops_imports() -> Dict[str, str]:
+    """``{name: guard}`` of what the installed MMSeg imports from
+    ``mmcv.ops`` when its modules are imported (:data:`GUARDS`). Read from
+    MMSeg's source files (parsed, never run) once per process; only files
+    that mention ``mmcv.ops`` are parsed."""
     spec = importlib.util.find_spec('mmseg')
     if spec is None or not spec.submodule_search_locations:
-        return set()
-    names = set()
+        return {}
+    found = {}
     for root in spec.submodule_search_locations:
         for folder, dirs, files in os.walk(root):
             dirs[:] = [d for d in dirs if not d.startswith('.')]
@@ -129,9 +148,24 @@ def mmseg_mmcv_ops_imports() -> Set[str]:
                     continue
                 with open(osp.join(folder, file_name), 'rb') as f:
                     source = f.read()
-                if b'mmcv.ops' in source:
-                    names |= _unguarded_ops_imports(ast.parse(source))
-    return names
+                if b'mmcv.ops' not in source:
+                    continue
+                for name, guard in _ops_imports(ast.parse(source)).items():
+                    if name not in found or \
+                            GUARDS.index(guard) < GUARDS.index(found[name]):
+                        found[name] = guard
+    return found
+
+
+def stand_in_names() -> Set[str]:
+    """The names a stand-in ``mmcv.ops`` must hold for the installed MMSeg,
+    or the empty set where MMSeg imports without ``mmcv.ops`` (every import
+    guarded): with a stand-in, a name it lacks raises an ImportError that a
+    ``ModuleNotFoundError`` handler does not catch, so those are held too."""
+    imports = mmseg_mmcv_ops_imports()
+    if 'unguarded' not in imports.values():
+        return set()
+    return {name for name, guard in imports.items() if guard != 'ImportError'}
 
 
 def install_mmcv_ops_fallback() -> bool:
@@ -146,7 +180,7 @@ def install_mmcv_ops_fallback() -> bool:
     import mmcv
     if has_compiled_ops():
         return False
-    needed = mmseg_mmcv_ops_imports()
+    needed = stand_in_names()
     if not needed:
         _notice_once('wgse_mmseg: mmcv has no compiled ops here; what needs '
                      f'them is unavailable. For them, {_INSTALL_HINT}.')
