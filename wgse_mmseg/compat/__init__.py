@@ -6,33 +6,37 @@ maintained onedl-* fork (README "Install"). :func:`apply_compat` makes each
 change below only where a check of the installed stack finds it missing,
 never by version lists; what the checks find on the two pinned stacks:
 
-================================  ==============================  ==========================
-patch (where it is decided)       OpenMMLab: mmseg 1.2.2,         onedl: mmseg 1.4.2,
-                                  mmengine 0.10.7, mmcv(-lite)    mmengine 0.10.12,
-                                  2.1.0                           onedl-mmcv 2.3.6
-================================  ==============================  ==========================
-stand-in ``mmcv.ops`` with the    installed under mmcv-lite:      not installed: MMSeg
-names MMSeg imports               MMSeg imports 4 ``mmcv.ops``    guards every ``mmcv.ops``
-(:func:`install_mmcv_ops_         names unguarded; nothing under  import
-fallback`: ``mmcv._ext``, and     full mmcv
-MMSeg's source read)
-torch allowlist of mmengine's     added (torch >= 2.4)            added (torch >= 2.4)
-checkpoint classes (:func:`allow_
-mmengine_checkpoints`)
-mmengine's checkpoint loader      left alone: loads               replaced: its
-without full unpickling           ``weights_only`` already        ``_safe_torch_load``
-(:func:`guard_mmengine_           (torch's default)               retries with
-checkpoint_loader`: a probe                                       ``weights_only=False``
-checkpoint)
-``mmseg::`` scope -> installed    left alone: ``mmsegmentation``  ``mmseg`` ->
-distribution (:func:`map_scopes_  is installed                    ``onedl-mmsegmentation``
-to_installed_distributions`)
-warnings quieted                  MMSeg's ``build_loss`` /        mmcv's missing
-(:data:`QUIETED_WARNINGS`, where  ``build_pixel_sampler``         ``MultiScaleDeformable
-they are raised)                  deprecations, mmcv's missing    Attention`` (without ops)
-                                  ``MultiScaleDeformable
-                                  Attention`` (mmcv-lite)
-================================  ==============================  ==========================
+.. list-table::
+   :header-rows: 1
+
+   * - patch (what decides it)
+     - OpenMMLab: mmseg 1.2.2, mmengine 0.10.7, mmcv(-lite) 2.1.0
+     - onedl: mmseg 1.4.2, mmengine 0.10.12, onedl-mmcv 2.3.6
+   * - stand-in ``mmcv.ops`` with the names MMSeg imports
+       (:func:`install_mmcv_ops_fallback`: ``mmcv._ext`` present, and how
+       MMSeg's source guards its ``mmcv.ops`` imports)
+     - installed under mmcv-lite (``point_sample`` and
+       ``sigmoid_focal_loss`` are imported unguarded); nothing under full
+       mmcv
+     - not installed: every ``mmcv.ops`` import is guarded
+   * - torch's allowlist gets mmengine's checkpoint classes
+       (:func:`allow_mmengine_checkpoints`: ``add_safe_globals`` exists)
+     - added
+     - added
+   * - mmengine's checkpoint loader without full unpickling
+       (:func:`guard_mmengine_checkpoint_loader`: a probe checkpoint)
+     - left alone: it loads weights-only (torch's default)
+     - replaced: its ``_safe_torch_load`` retries with
+       ``weights_only=False``
+   * - ``mmseg::`` scope to the installed distribution
+       (:func:`map_scopes_to_installed_distributions`: the named
+       distribution is missing)
+     - left alone: ``mmsegmentation`` is installed
+     - ``mmseg`` to ``onedl-mmsegmentation``
+   * - warnings quieted (:data:`QUIETED_WARNINGS`, where raised)
+     - MMSeg's ``build_loss``/``build_pixel_sampler`` deprecations; mmcv's
+       missing ``MultiScaleDeformableAttention`` under mmcv-lite
+     - mmcv's missing ``MultiScaleDeformableAttention`` (no ops)
 
 :func:`apply_compat` is the explicit set-up of the MMSeg layer, called
 before MMSeg is imported (:func:`wgse_mmseg.register_all_modules`, also made
