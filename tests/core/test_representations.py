@@ -12,8 +12,7 @@ wgse_mmseg.register_all_modules()  # before MMSeg: these tests build from it
 from mmseg.registry import MODELS  # noqa: E402
 from wgse_mmseg.utils.config import load_config  # noqa: E402
 from wgse_mmseg.core.representations import (  # noqa: E402
-    TFI, TFP, SpatialMeanFilter,
-                                               TemporalMeanFilter)
+    TFI, TFP, SpatialMeanFilter, TemporalMeanFilter)
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
