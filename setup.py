@@ -2,9 +2,14 @@
 
 Like MMSegmentation, the package carries its ``configs/`` and ``tools/`` inside
 ``wgse_mmseg/.mim/`` so that ``mim train wgse_mmseg configs/<config>.py``
-finds both from a regular install. A regular build copies them there; an
-editable install (``pip install -e .``, i.e. ``setup.py develop``) links them,
-so edits in the repository take effect at once.
+finds both from a regular install. A regular build copies them there. The
+editable installs of the two stacks' mims differ (README "Install"):
+OpenMMLab's mim 0.3.8 looks in ``wgse_mmseg/.mim`` of an egg-link install
+(``setup.py develop``), so that links them and edits take effect at once;
+onedl-mim takes a PEP 660 install (``editable_wheel``) to be this checkout,
+whose root holds ``configs/`` and ``tools/`` and where it searches a config
+by its name, so there ``.mim`` is left out (a second copy would make every
+name ambiguous).
 """
 import os
 import os.path as osp
@@ -25,9 +30,15 @@ def version():
 
 
 def add_mim_extension():
-    """Place configs/ and tools/ under wgse_mmseg/.mim (links when editable)."""
-    editable = 'develop' in sys.argv or 'editable_wheel' in sys.argv
+    """Place configs/ and tools/ under wgse_mmseg/.mim: copies for a regular
+    build, links for an egg-link install, nothing for a PEP 660 one."""
     mim_root = osp.join(ROOT, 'wgse_mmseg', '.mim')
+    if 'editable_wheel' in sys.argv:
+        if osp.islink(mim_root) or osp.isfile(mim_root):
+            os.remove(mim_root)
+        elif osp.isdir(mim_root):
+            shutil.rmtree(mim_root)
+        return
     os.makedirs(mim_root, exist_ok=True)
     for name in MIM_DIRS:
         src, dst = osp.join(ROOT, name), osp.join(mim_root, name)
@@ -35,7 +46,7 @@ def add_mim_extension():
             os.remove(dst)
         elif osp.isdir(dst):
             shutil.rmtree(dst)
-        if editable:
+        if 'develop' in sys.argv:
             os.symlink(osp.relpath(src, mim_root), dst)
         else:
             shutil.copytree(src, dst, ignore=shutil.ignore_patterns('__pycache__', '*.pyc'))
@@ -55,17 +66,28 @@ if __name__ == '__main__':
         include_package_data=True,
         package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*', '.mim/**/**/**/*',
                                      'weights/*.pth', 'core/quality/data/*']},
+        # The OpenMMLab stack is an extra, one per stack: both publish the
+        # import packages mmseg, mmengine, mmcv and mim, so naming one here
+        # would install it over the other (README "Install";
+        # tools/setup_env.sh pins either). The MMSeg layer says at import
+        # which is missing (wgse_mmseg._openmmlab.require_openmmlab).
         install_requires=[
             'torch>=2.0',
-            'mmengine>=0.10,<0.11',
-            'mmsegmentation>=1.2,<1.3',
             'numpy',
             'PyWavelets>=1.4',
-            'opencv-python>=4.8,<5',
+            'opencv-python>=4.8,<5',  # 5 rejects arrays of > 128 channels
             'PyYAML>=6',  # core: scene files (core.simulation.scene)
             'tqdm',
         ],
-        extras_require={'tests': ['pytest>=7', 'hypothesis>=6.80'], 'mim': ['openmim==0.3.8']},
+        extras_require={
+            'tests': ['pytest>=7', 'hypothesis>=6.80'],
+            # mmcv-lite or mmcv 2.1: tools/setup_env.sh picks (MMCV=lite|full)
+            'openmmlab': ['mmengine>=0.10,<0.11', 'mmsegmentation>=1.2,<1.3',
+                          'openmim==0.3.8'],
+            'onedl': ['onedl-mmengine>=0.10.12,<0.11',
+                      'onedl-mmsegmentation>=1.4.2,<1.5',
+                      'onedl-mmcv>=2.3.6,<2.4', 'onedl-mim>=0.5.1,<0.6'],
+        },
         # Two small CPU kernels: the simulator's one-pass integrate-and-fire
         # and WGSE's band networks. Optional: without a C compiler the
         # install goes on and each falls back to its torch path (the same

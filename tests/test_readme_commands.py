@@ -55,11 +55,14 @@ HOW = {
     'bash tools/quickstart.sh': RUN,
     'bash tools/run_tests.sh': CI,
     'bash tools/setup_env.sh': CI,
+    'STACK=onedl bash tools/setup_env.sh': CI,
+    'STACK=onedl bash tools/run_tests.sh': CI,
     'MMCV=full bash tools/setup_env.sh': NotHere(
         'compiles mmcv 2.1.0 for about 30 minutes and replaces mmcv-lite in '
         'the environment the other tests use', 'tests/compat/test_compat.py::'
         'test_full_mmcv_is_left_alone'),
     'source .venv/bin/activate': RUN,
+    'source .venv-onedl/bin/activate': RUN,
     'CONFIG=configs/pspnet_wgse.py': RUN,
     'python tools/train.py $CONFIG': TRAIN_TESTS,
     'python tools/train.py $CONFIG --resume': TRAIN_TESTS,
@@ -152,12 +155,25 @@ PRINTS = {
         r'\| WGSE +\| +\d+\.\d+ \|',
 }
 
+def _suite_stack() -> str:
+    """The stack (``STACK=`` of tools/setup_env.sh) this suite runs on."""
+    from wgse_mmseg._openmmlab import installed_stacks
+    (stack,) = installed_stacks()
+    return stack
+
+
 #: environment a command run here gets: the quickstart's documented
-#: variables, for its shortest schedule into a temporary directory
+#: variables, for its shortest schedule into a temporary directory, on the
+#: stack of this suite (in that stack's virtual environment of the checkout)
 ENVIRONMENT = {
     'bash tools/quickstart.sh': lambda tmp: dict(
-        EPOCHS='2', DATA=str(tmp / 'data'), WORK=str(tmp / 'work')),
+        EPOCHS='2', DATA=str(tmp / 'data'), WORK=str(tmp / 'work'),
+        STACK=_suite_stack()),
 }
+#: ``source`` commands, each for one stack's virtual environment: run in
+#: the stage of CI whose suite runs in it
+ACTIVATES = {'source .venv/bin/activate': '.venv',
+             'source .venv-onedl/bin/activate': '.venv-onedl'}
 
 #: what a command run here reads, made for it in its working directory
 INPUTS = {
@@ -238,6 +254,10 @@ RUN_HERE = [c for c in readme_commands() if HOW.get(c) == RUN]
 def test_readme_command_runs(command, tmp_path):
     if '../shared' in command and not osp.isdir(SHARED):
         pytest.skip(f'{SHARED} is absent (fresh clone)')
+    if command in ACTIVATES and osp.realpath(
+            osp.join(ROOT, ACTIVATES[command])) != osp.realpath(sys.prefix):
+        pytest.skip(f'this suite runs in {sys.prefix}; CI runs the suite in '
+                    f'{ACTIVATES[command]} too')
     # The quickstart sets up .venv in the checkout itself (an editable
     # install of the checkout), so it runs there; its outputs go to tmp.
     cwd = ROOT if command == 'bash tools/quickstart.sh' else \

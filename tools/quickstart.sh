@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The main job on a fresh machine, start to finish on CPU:
-#   1. the pinned environment (.venv; tools/setup_env.sh, idempotent),
+#   1. the pinned environment (tools/setup_env.sh, idempotent: .venv, or
+#      .venv-onedl with STACK=onedl),
 #   2. the embedded dataset (procedural street scenes as spikes, T=41),
 #   3. SegFormer-B0 + WGSE trained on it (resumes if interrupted),
 #   4. the final checkpoint evaluated: mIoU, mAcc and aAcc.
 # Variables: CONFIG (default configs/segformer_b0_wgse.py), EPOCHS (default 5),
-# DATA (dataset root), WORK (work dir).
+# DATA (dataset root), WORK (work dir); STACK, VENV as for tools/setup_env.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -13,14 +14,14 @@ CONFIG=${CONFIG:-configs/segformer_b0_wgse.py}
 EPOCHS=${EPOCHS:-5}
 DATA=${DATA:-data/synthetic_spike_cityscapes}
 WORK=${WORK:-work_dirs/quickstart_$(basename "$CONFIG" .py)}
-PY=.venv/bin/python
 # a one-epoch warm-up, then the decay: two epochs at least
 if ! [[ "$EPOCHS" =~ ^[0-9]+$ ]] || [ "$EPOCHS" -lt 2 ]; then
     echo "quickstart.sh: EPOCHS must be an integer >= 2 (one warm-up epoch, then the decay), got '$EPOCHS'" >&2
     exit 2
 fi
 
-bash tools/setup_env.sh
+source tools/setup_env.sh  # sets VENV
+PY=$VENV/bin/python
 "$PY" tools/dataset_converters/make_synthetic_dataset.py "$DATA" --num-steps 41
 
 # The embedded data: T=41, 128x256 frames, 64x128 crops; a one-epoch warm-up

@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # The test command (what CI runs): the pinned environment, then pytest.
+#   bash tools/run_tests.sh               # OpenMMLab's final releases, in .venv
+#   STACK=onedl bash tools/run_tests.sh   # the onedl-* fork, in .venv-onedl
+# STACK, VENV and MMCV as for tools/setup_env.sh; arguments go to pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash tools/setup_env.sh
-exec .venv/bin/python -m pytest tests -p no:cacheprovider "$@"
+source tools/setup_env.sh  # sets VENV
+exec "$VENV/bin/python" -m pytest tests -p no:cacheprovider "$@"

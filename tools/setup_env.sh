@@ -1,62 +1,102 @@
 #!/usr/bin/env bash
-# Create (or bring up to date) the project's virtual environment in .venv.
+# Create (or bring up to date) a virtual environment with one of the two
+# OpenMMLab stacks the package runs on (README "Install"):
 #
-#   bash tools/setup_env.sh            # mmcv-lite + bundled op fallbacks: ~3 minutes
-#   MMCV=full bash tools/setup_env.sh  # full mmcv 2.1.0 with compiled ops: ~30 minutes on 2 cores
+#   bash tools/setup_env.sh                  # STACK=openmmlab in .venv: OpenMMLab's final releases
+#   STACK=onedl bash tools/setup_env.sh      # the maintained onedl-* fork, in .venv-onedl
+#   MMCV=full bash tools/setup_env.sh        # mmcv with compiled ops, built from source (~30 min on 2 cores)
+#   STACK=onedl MMCV=full MMCV_WHEELS=URL bash tools/setup_env.sh   # the fork's prebuilt CUDA wheels
 #
-# Idempotent: a second run only checks the pins. Variables: VENV (default .venv),
-# MMCV (lite|full), PYTHON (default python3.11, else python3).
+# Idempotent: a second run only checks the pins. Variables: STACK (openmmlab|onedl),
+# VENV (default .venv, .venv-onedl for onedl), MMCV (lite|full), MMCV_WHEELS (the fork's
+# wheel index for your torch and CUDA, https://mmwheels.onedl.ai/), TORCH (default 2.13.0),
+# PYTHON (default python3.11, else python3). Sourced (tools/run_tests.sh), it leaves VENV set.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
-VENV=${VENV:-.venv}
+STACK=${STACK:-openmmlab}
 MMCV=${MMCV:-lite}
+TORCH_PIN=torch==${TORCH:-2.13.0}
 PYTHON=${PYTHON:-$(command -v python3.11 || command -v python3)}
-TORCH_PIN=torch==2.13.0
-MMCV_VERSION=2.1.0
+# What differs between the stacks: the venv's default place, the requirements
+# file with the stack's pins, the mmcv distribution and version, the tools pip
+# needs for the editable install (see "Editable install" below).
+case "$STACK" in
+  openmmlab)
+    VENV=${VENV:-.venv}
+    MMCV_LITE=mmcv-lite MMCV_FULL=mmcv MMCV_VERSION=2.1.0 MMCV_CACHE=()
+    # setuptools < 80 keeps pkg_resources (mmengine 0.10.7, mim 0.3.8) and
+    # `setup.py develop`'s egg-link; pip < 25.3 still runs it.
+    BUILD_TOOLS=("setuptools>=61,<80" "pip>=21,<25.3") ;;
+  onedl)
+    VENV=${VENV:-.venv-onedl}
+    # onedl-mmcv is one distribution: without torch in pip's isolated build
+    # environment it builds without its compiled ops (the lite install).
+    # pip's wheel cache does not tell the two builds apart: no cache.
+    MMCV_LITE=onedl-mmcv MMCV_FULL=onedl-mmcv MMCV_VERSION=2.3.6 MMCV_CACHE=(--no-cache-dir)
+    BUILD_TOOLS=("setuptools>=80" "pip>=25") ;;  # onedl-mim needs setuptools >= 80
+  *) echo "[setup_env] STACK must be 'openmmlab' or 'onedl', not '$STACK'" >&2; exit 2 ;;
+esac
+case "$MMCV" in lite|full) ;; *) echo "[setup_env] MMCV must be 'lite' or 'full', not '$MMCV'" >&2; exit 2 ;; esac
 
 if [ ! -x "$VENV/bin/python" ]; then
-    echo "[setup_env] creating $VENV with $PYTHON"
+    echo "[setup_env] creating $VENV ($STACK stack) with $PYTHON"
     "$PYTHON" -m venv "$VENV"
+    echo "$STACK" > "$VENV/wgse-stack"
+fi
+# One stack per venv: pip would install the other's distributions over the
+# same import packages (mmseg, mmengine, mmcv, mim).
+if [ "$(cat "$VENV/wgse-stack" 2>/dev/null || echo openmmlab)" != "$STACK" ]; then
+    echo "[setup_env] $VENV holds the $(cat "$VENV/wgse-stack") stack, not $STACK: give another VENV=..., or remove $VENV" >&2
+    exit 2
 fi
 PIP=("$VENV/bin/python" -m pip --disable-pip-version-check)
 
-# torch first and pinned exactly: an unpinned torch pulls several GB of CUDA wheels.
-# setuptools < 80 keeps pkg_resources (mmengine, mim) and `setup.py develop`'s
-# egg-link (below); pip < 25.3 still runs it; wheel and ninja build mmcv.
-"${PIP[@]}" install -q "$TORCH_PIN" "setuptools>=61,<80" "pip>=21,<25.3" wheel ninja
+# torch first and pinned exactly: an unpinned torch pulls several GB of CUDA
+# wheels. wheel and ninja build mmcv's ops.
+"${PIP[@]}" install -q "$TORCH_PIN" "${BUILD_TOOLS[@]}" wheel ninja
+# opencv-python 5 (what onedl-mmcv brings) rejects arrays of more than 128
+# channels; the paper's T is 129.
+printf '%s\n' "$TORCH_PIN" "opencv-python<5" > "$VENV/constraints.txt"
 
 installed_mmcv() { "$VENV/bin/python" - <<'PY'
-import importlib.metadata as md
-for name in ("mmcv", "mmcv-lite"):
+import importlib.metadata as md, importlib.util
+for name in ("mmcv", "mmcv-lite", "onedl-mmcv"):
     try:
-        print(name, md.version(name)); break
+        version = md.version(name)
     except md.PackageNotFoundError:
-        pass
+        continue
+    ops = importlib.util.find_spec("mmcv._ext") is not None
+    print(name, version, "full" if ops else "lite"); break
 PY
 }
 
-case "$MMCV" in
-  lite)
-    if [ "$(installed_mmcv)" != "mmcv-lite $MMCV_VERSION" ]; then
-        "${PIP[@]}" uninstall -q -y mmcv mmcv-lite >/dev/null 2>&1 || true
-        "${PIP[@]}" install -q "mmcv-lite==$MMCV_VERSION"
-    fi ;;
-  full)
-    if [ "$(installed_mmcv)" != "mmcv $MMCV_VERSION" ]; then
-        "${PIP[@]}" uninstall -q -y mmcv mmcv-lite >/dev/null 2>&1 || true
-        echo "[setup_env] compiling mmcv $MMCV_VERSION with ops (about 30 minutes on 2 cores; pip caches the wheel)"
-        MMCV_WITH_OPS=1 "${PIP[@]}" install --no-build-isolation "mmcv==$MMCV_VERSION"
-    fi ;;
-  *) echo "[setup_env] MMCV must be 'lite' or 'full', not '$MMCV'" >&2; exit 2 ;;
-esac
+if [ "$MMCV" = lite ]; then MMCV_DIST=$MMCV_LITE; else MMCV_DIST=$MMCV_FULL; fi
+if [ "$(installed_mmcv)" != "$MMCV_DIST $MMCV_VERSION $MMCV" ]; then
+    "${PIP[@]}" uninstall -q -y mmcv mmcv-lite onedl-mmcv >/dev/null 2>&1 || true
+    if [ "$MMCV" = lite ]; then
+        # onedl-mmcv's sdist, built in isolation, has no torch: no ops
+        "${PIP[@]}" install -q "${MMCV_CACHE[@]}" -c "$VENV/constraints.txt" "$MMCV_DIST==$MMCV_VERSION"
+    elif [ -n "${MMCV_WHEELS:-}" ]; then
+        "${PIP[@]}" install -c "$VENV/constraints.txt" --only-binary "$MMCV_DIST" \
+            -f "$MMCV_WHEELS" "$MMCV_DIST==$MMCV_VERSION"
+    else
+        echo "[setup_env] compiling $MMCV_DIST $MMCV_VERSION with ops (about 30 minutes on 2 cores; pip caches the wheel)"
+        MMCV_WITH_OPS=1 "${PIP[@]}" install "${MMCV_CACHE[@]}" --no-build-isolation -c "$VENV/constraints.txt" "$MMCV_DIST==$MMCV_VERSION"
+    fi
+fi
 
-# The rest of the stack; the torch constraint stops any dependency from upgrading torch.
-echo "$TORCH_PIN" > "$VENV/torch-constraint.txt"
-"${PIP[@]}" install -q -c "$VENV/torch-constraint.txt" -r requirements/runtime.txt -r requirements/tests.txt -r requirements/docs.txt
-# Editable, as `setup.py develop` (an egg-link to this checkout), not PEP 660:
-# mim finds configs/ and tools/ through pkg_resources' location of the package,
-# which is this checkout for an egg-link but site-packages for a PEP 660 install.
-"${PIP[@]}" install -q --no-build-isolation --no-deps --no-use-pep517 -e .
+# The rest of the stack; the constraints stop any dependency from upgrading torch or opencv.
+"${PIP[@]}" install -q -c "$VENV/constraints.txt" -r "requirements/$STACK.txt" \
+    -r requirements/runtime.txt -r requirements/tests.txt -r requirements/docs.txt
+# Editable: each stack's mim finds configs/ and tools/ where its own lookup
+# says the package is. mim 0.3.8 asks pkg_resources, which names this checkout
+# for `setup.py develop`'s egg-link (site-packages for a PEP 660 install);
+# onedl-mim reads a PEP 660 install's direct_url.json: this checkout's root.
+if [ "$STACK" = openmmlab ]; then
+    "${PIP[@]}" install -q --no-build-isolation --no-deps --no-use-pep517 -e .
+else
+    "${PIP[@]}" install -q --no-build-isolation --no-deps -e .
+fi
 
-"$VENV/bin/python" -c "import wgse_mmseg, mmseg, mmcv, torch; print('[setup_env] ready: torch', torch.__version__, '| mmcv', mmcv.__version__, '| mmseg', mmseg.__version__, '| wgse_mmseg', wgse_mmseg.__version__)"
+"$VENV/bin/python" -c "import wgse_mmseg, mmseg, mmcv, torch; print('[setup_env] ready ($STACK in $VENV): torch', torch.__version__, '| mmcv', mmcv.__version__, '| mmseg', mmseg.__version__, '| wgse_mmseg', wgse_mmseg.__version__)"

@@ -14,7 +14,8 @@
 # (default ../shared/data/reds_sample), IMAGES (default
 # data/reconstruction_images), WORK (work dir), ITERS (default: the config's
 # 800), OUT (default work_dirs/.../wgse_reconstruction_cpu.pth; copy it over
-# wgse_mmseg/weights/wgse_reconstruction_cpu.pth to ship it).
+# wgse_mmseg/weights/wgse_reconstruction_cpu.pth to ship it), PY (default
+# .venv/bin/python; .venv-onedl/bin/python on the onedl stack).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

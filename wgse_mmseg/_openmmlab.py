@@ -15,16 +15,27 @@ importing a layer package: each of those only checks, with
 :func:`check_mmseg_layer`, that it can import MMSeg, and says which call is
 missing where it cannot.
 """
+import functools
+import importlib.metadata as metadata
 import importlib.util
 import os
 import sys
-from typing import List
+from typing import Dict, List
 
 __all__ = []
 
-#: import name -> distribution to install
-OPENMMLAB = {'mmengine': 'mmengine', 'mmcv': 'mmcv-lite',
-             'mmseg': 'mmsegmentation'}
+#: the import names of the stack
+OPENMMLAB = ('mmengine', 'mmcv', 'mmseg')
+#: stack (``STACK=`` of tools/setup_env.sh) -> import name -> the
+#: distributions that provide it (README "Install")
+STACKS = {
+    'openmmlab': {'mmengine': ('mmengine',), 'mmcv': ('mmcv-lite', 'mmcv'),
+                  'mmseg': ('mmsegmentation',)},
+    'onedl': {'mmengine': ('onedl-mmengine',), 'mmcv': ('onedl-mmcv',),
+              'mmseg': ('onedl-mmsegmentation',)},
+}
+_SETUP_HINT = ('`bash tools/setup_env.sh` (OpenMMLab\'s releases) or `STACK='
+               'onedl bash tools/setup_env.sh` (the maintained onedl-* fork)')
 
 
 def missing_openmmlab() -> List[str]:
@@ -40,26 +51,62 @@ def missing_openmmlab() -> List[str]:
     return missing
 
 
+@functools.lru_cache(maxsize=None)
+def installed_stacks() -> Dict[str, Dict[str, str]]:
+    """stack -> ``{distribution: version}`` of its distributions that are
+    installed, for the stacks with any installed."""
+    found = {}
+    for stack, packages in STACKS.items():
+        for distributions in packages.values():
+            for distribution in distributions:
+                try:
+                    version = metadata.version(distribution)
+                except metadata.PackageNotFoundError:
+                    continue
+                found.setdefault(stack, {})[distribution] = version
+    return found
+
+
 def require_openmmlab(what: str) -> None:
-    """Raise a clear ImportError for ``what`` where the stack is missing."""
+    """Raise a clear ImportError for ``what`` where the stack is missing, or
+    where distributions of both stacks are installed (each overwrites the
+    other's files of the same import packages)."""
     missing = missing_openmmlab()
     if missing:
         raise ImportError(
-            f'{what} needs {", ".join(OPENMMLAB[n] for n in missing)} '
-            f'(import names: {", ".join(missing)}), which cannot be imported '
-            f'here. wgse_mmseg.core (spike I/O, wavelets, representations, '
-            f'WGSE, the simulator) works without them; for the rest run '
-            f'`bash tools/setup_env.sh` or, on a GPU machine without network, '
-            f'`bash tools/gpu_bundle.sh install` (docs/wgse_speed.md).')
+            f'{what} needs mmengine, mmcv and mmseg (missing here: '
+            f'{", ".join(missing)}) from one of the two stacks: '
+            f'{_stack_list()}. wgse_mmseg.core (spike I/O, wavelets, '
+            f'representations, WGSE, the simulator) works without them; for '
+            f'the rest run {_SETUP_HINT} or, on a GPU machine without '
+            f'network, `bash tools/gpu_bundle.sh install` (docs/wgse_speed.md).')
+    stacks = installed_stacks()
+    if len(stacks) > 1:
+        found = '; '.join(
+            f'{stack}: ' + ', '.join(f'{d} {v}' for d, v in sorted(dists.items()))
+            for stack, dists in sorted(stacks.items()))
+        raise ImportError(
+            f'{what}: distributions of both OpenMMLab stacks are installed '
+            f'({found}); they share the import packages mmseg, mmengine and '
+            f'mmcv, so neither is whole. Use a fresh environment made by '
+            f'{_SETUP_HINT}, or uninstall one stack\'s distributions '
+            f'(installing wgse_mmseg never pulls a stack in: choose one with '
+            f'the extras [openmmlab] or [onedl]).')
 
 
-def _mmcv_ops_importable() -> bool:
-    """Whether ``import mmcv.ops`` works: full mmcv, or the stand-in is
-    installed."""
-    from .compat.mmcv_ops_fallback import has_compiled_ops
+def _stack_list() -> str:
+    return '; '.join(
+        f'{stack}: ' + ', '.join(' or '.join(dists) for dists in packages.values())
+        for stack, packages in STACKS.items())
+
+
+def _mmseg_importable() -> bool:
+    """Whether MMSeg imports now: mmcv's compiled ops, the stand-in
+    ``mmcv.ops`` installed, or an MMSeg that needs no ``mmcv.ops``."""
+    from .compat.mmcv_ops_fallback import has_compiled_ops, stand_in_names
     installed = sys.modules.get('mmcv.ops')
-    return has_compiled_ops() or getattr(installed, '__wgse_fallback__',
-                                         False)
+    return (has_compiled_ops() or getattr(installed, '__wgse_fallback__', False)
+            or not stand_in_names())
 
 
 def check_mmseg_layer(what: str) -> None:
@@ -68,7 +115,7 @@ def check_mmseg_layer(what: str) -> None:
     the patches were not applied (:func:`prepare_mmseg_layer`). Changes
     nothing in the process."""
     require_openmmlab(what)
-    if _mmcv_ops_importable():
+    if _mmseg_importable():
         return
     from .compat import OPT_OUT
     if os.environ.get(OPT_OUT, '') not in ('', '0'):

@@ -5,10 +5,14 @@ import os.path as osp
 import pytest
 import torch
 
-from mmseg.registry import MODELS
-from wgse_mmseg.utils.config import load_config
-from wgse_mmseg.core.representations import (TFI, TFP, SpatialMeanFilter,
-                                               TemporalMeanFilter)
+import wgse_mmseg
+
+wgse_mmseg.register_all_modules()  # before MMSeg: these tests build from it
+
+from mmseg.registry import MODELS  # noqa: E402
+from wgse_mmseg.utils.config import load_config  # noqa: E402
+from wgse_mmseg.core.representations import (  # noqa: E402
+    TFI, TFP, SpatialMeanFilter, TemporalMeanFilter)
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 

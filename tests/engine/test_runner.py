@@ -50,3 +50,30 @@ def test_a_checkpoint_with_its_config_as_data_still_loads(runner, tmp_path):
                     meta=dict(cfg=runner.cfg.pretty_text, iter=1)), path)
     checkpoint = runner.load_checkpoint(path, strict=True)
     assert checkpoint['meta']['iter'] == 1
+
+
+class _OpensAFile:
+    """Pickles as ``open(path, 'w')``: code run by a full unpickling."""
+
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __reduce__(self):
+        return open, (self.path, 'w')
+
+
+@pytest.mark.parametrize('how', ['load_from', 'resume'])
+def test_a_checkpoint_that_pickles_code_is_refused(runner, tmp_path, how):
+    """As ``load_from`` or to resume, on either stack: refused by the
+    weights-only loader (the fork's mmengine would retry in full), an error
+    naming the file, and the pickled call never runs."""
+    marker = tmp_path / 'ran'
+    path = str(tmp_path / 'downloaded.pth')
+    torch.save(dict(state_dict=runner.model.state_dict(),
+                    meta=dict(epoch=0, iter=1, x=_OpensAFile(marker))), path)
+    with pytest.raises(CheckpointError, match=r'downloaded.pth: refused'):
+        if how == 'resume':
+            runner.resume(path)
+        else:
+            runner.load_checkpoint(path)
+    assert not marker.exists()

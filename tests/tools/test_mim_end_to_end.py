@@ -1,7 +1,7 @@
 """mim with the package, in both install modes a user has.
 
-* The README's: ``tools/setup_env.sh``'s editable install, the one these
-  tests run in. ``mim train``, ``mim test`` and ``mim run`` from the
+* The README's: ``tools/setup_env.sh``'s editable install of the stack
+  these tests run in (each stack's own mim). ``mim train``, ``mim test`` and ``mim run`` from the
   repository root and from another directory.
 * A regular install: a wheel built from a copy of the repository, installed
   into a fresh directory placed first on PYTHONPATH, so that mim finds the
@@ -43,7 +43,11 @@ def test_mim_in_the_readme_install_mode(tiny_spike_dataset, tiny_run_options,
                                         tmp_path):
     """mim train / test / run against this checkout's editable install."""
     from mim.utils import get_installed_path
-    assert get_installed_path('wgse_mmseg') == osp.join(ROOT, 'wgse_mmseg'), (
+
+    # mim 0.3.8 sees the egg-link's package folder (with .mim), onedl-mim
+    # the PEP 660 install's checkout (README "Install")
+    assert get_installed_path('wgse_mmseg') in (
+        osp.join(ROOT, 'wgse_mmseg'), ROOT), (
         'not the README install mode: run `bash tools/setup_env.sh`')
     data = tiny_spike_dataset
     env = dict(os.environ, PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
@@ -83,7 +87,7 @@ def installed(tmp_path_factory):
     work = tmp_path_factory.mktemp('install')
     source = work / 'src'
     shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(
-        '.venv', '.git', 'work_dirs', 'data', '__pycache__', '*.egg-info',
+        '.venv*', '.git', 'work_dirs', 'data', '__pycache__', '*.egg-info',
         '.mim', 'build', '.pytest_cache', '.hypothesis'))
     env = dict(os.environ)
     run([sys.executable, '-m', 'pip', 'wheel', '--no-deps',
@@ -106,6 +110,14 @@ def test_mim_train_and_test_from_a_regular_install(installed,
     data = tiny_spike_dataset
     env = dict(os.environ, PYTHONPATH=str(installed),
                PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
+    found = run([sys.executable, '-c', 'from mim.utils import '
+                 'get_installed_path; print(get_installed_path("wgse_mmseg"))'],
+                cwd=tmp_path, env=env).strip().splitlines()[-1]
+    if found.endswith('.dist-info'):
+        pytest.skip('this mim (onedl-mim 0.5.1) takes the first file of a '
+                    'wheel install\'s RECORD, wgse_mmseg-*.dist-info, for '
+                    'the package: README "Known limits"')
+    assert found == str(installed / 'wgse_mmseg')
     work_dir = tmp_path / 'work'
     mim = osp.join(BIN, 'mim')
     options = tiny_run_options(data, *EVERY_EPOCH, batch_size=4)

@@ -11,6 +11,7 @@ The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 """
 import os
 import os.path as osp
+import pickle
 
 from mmengine.dist import master_only
 from mmengine.logging import print_log
@@ -20,6 +21,7 @@ from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from .._openmmlab import prepare_mmseg_layer
+from ..core.limits import cut
 from ..utils.checkpoint import CheckpointError
 from ..utils.cross_checks import check_training_fits
 from ..utils.spike_settings import apply_spike_settings
@@ -63,8 +65,16 @@ class SpikeRunner(Runner):
         :meth:`resume` executes that text (``Config.fromstring``) to compare
         GPU counts, so a checkpoint from elsewhere would run code. mmengine
         itself writes the config under ``meta['cfg']``, which nothing
-        executes."""
-        checkpoint = super().load_checkpoint(filename, *args, **kwargs)
+        executes. A file that weights-only loading refuses (one that pickles
+        code) is a :class:`CheckpointError` naming it, on both stacks
+        (:mod:`wgse_mmseg.compat.checkpoint_safety`)."""
+        try:
+            checkpoint = super().load_checkpoint(filename, *args, **kwargs)
+        except pickle.UnpicklingError as err:
+            raise CheckpointError(
+                f'{filename}: refused: it holds objects that weights-only '
+                f'loading does not allow, and a checkpoint is never unpickled '
+                f'in full ({cut(str(err))})') from err
         meta = checkpoint.get('meta')
         if isinstance(meta, dict) and 'config' in meta:
             raise CheckpointError(

@@ -73,6 +73,19 @@ class SpikeVisualizationHook(SegVisualizationHook):
         args['num_steps'] = args['num_steps'] or num_steps
         return spike_clip_image(path, **args)
 
+    # Both stacks' validation and test iterations come here: MMSeg 1.2.2's
+    # hook draws in mmengine's _after_iter, onedl-mmsegmentation 1.4.2's in
+    # after_val_iter/after_test_iter of its own, which read img_path as an
+    # image file.
+    def after_val_iter(self, runner: Runner, batch_idx: int, data_batch: dict,
+                       outputs: Sequence[SegDataSample]) -> None:
+        self._after_iter(runner, batch_idx, data_batch, outputs, mode='val')
+
+    def after_test_iter(self, runner: Runner, batch_idx: int,
+                        data_batch: dict,
+                        outputs: Sequence[SegDataSample]) -> None:
+        self._after_iter(runner, batch_idx, data_batch, outputs, mode='test')
+
     def _after_iter(self, runner: Runner, batch_idx: int, data_batch: dict,
                     outputs: Sequence[SegDataSample],
                     mode: str = 'val') -> None:

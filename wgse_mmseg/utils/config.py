@@ -16,6 +16,7 @@ from mmengine.config import Config, DictAction
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
+from .._openmmlab import prepare_mmseg_layer
 from ..core.arguments import Choice, Integer, Path
 from ..core.limits import MAX_WORKERS, excerpt
 from .distributed import prepare_launcher
@@ -38,7 +39,11 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
     ``Config.merge_from_dict`` (so ``val_dataloader.dataset.data_root=A``
     beside ``data_root=B`` keeps ``A``); then the fields are checked against
     the settings once more (see :mod:`wgse_mmseg.utils.spike_settings`).
+    Sets the MMSeg layer up first (:func:`~wgse_mmseg._openmmlab.
+    prepare_mmseg_layer`), which the configs' ``mmseg::`` bases need on the
+    onedl stack.
     """
+    prepare_mmseg_layer('load_config')
     options = dict(cfg_options or {})
     settings = {setting.name: options.pop(setting.name)
                 for setting in SPIKE_SETTINGS if setting.name in options}

@@ -16,10 +16,13 @@ from mmengine.config import Config
 from .settings import EPOCHS, ITERATIONS, check_schedule
 from ...core.arguments import declare
 
-#: where the package keeps its ``configs/`` and ``tools/`` (``setup.py``
-#: links them into ``wgse_mmseg/.mim``, MMSeg's convention for mim)
-PROJECT_ROOT = osp.join(
-    osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__)))), '.mim')
+_PACKAGE = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+#: where the package keeps its ``configs/`` and ``tools/``: ``wgse_mmseg/.mim``
+#: (MMSeg's convention for mim; ``setup.py`` copies or links them there), or
+#: the checkout itself for a PEP 660 editable install, which has no ``.mim``
+PROJECT_ROOT = (osp.join(_PACKAGE, '.mim')
+                if osp.isdir(osp.join(_PACKAGE, '.mim', 'configs'))
+                else osp.dirname(_PACKAGE))
 ENHANCER_KEY = 'model.data_preprocessor.enhancer'
 
 
