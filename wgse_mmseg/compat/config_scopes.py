@@ -16,7 +16,7 @@ import importlib.metadata as metadata
 import importlib.util
 from typing import Dict
 
-__all__ = ['map_scopes_to_installed_distributions']
+__all__ = []
 
 
 def _installed(distribution: str) -> bool:

@@ -43,6 +43,8 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
     prepare_mmseg_layer`), which the configs' ``mmseg::`` bases need on the
     onedl stack.
     """
+    if not osp.isfile(path):
+        raise FileNotFoundError(f'{path}: no such config file')
     prepare_mmseg_layer('load_config')
     options = dict(cfg_options or {})
     settings = {setting.name: options.pop(setting.name)
