@@ -229,3 +229,19 @@ def test_state_is_never_appended_to_through_a_link(tmp_path):
     with open_append(str(tmp_path / 'new.csv')) as f:
         f.write(b'row\n')
     assert (tmp_path / 'new.csv').read_bytes() == b'row\n'
+
+
+@pytest.mark.parametrize('record', [b'[' * 4000, b'\xff\xfe', b'{"pid": []}',
+                                    b''])
+def test_a_damaged_writer_record_still_refuses_clearly(tmp_path, record):
+    """Whatever the lock file holds (nesting past the parser's recursion,
+    bytes that are not UTF-8, fields of the wrong kind, nothing), a second
+    writer is refused with the package's error, not the parser's."""
+    with own_folder(str(tmp_path)):
+        with open(tmp_path / '.lock', 'r+b') as lock:
+            lock.truncate(0)
+            lock.write(record)
+        with pytest.raises(OutputFolderError,
+                           match='a process that has not yet recorded'):
+            with own_folder(str(tmp_path)):
+                pass

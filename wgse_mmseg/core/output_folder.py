@@ -88,7 +88,7 @@ def _describe_writer(fd: int) -> str:
                 f'{str(record["host"])[:100]}, started '
                 f'{str(record["started"])[:40]}: '
                 f'{str(record["command"])[:300]}')
-    except (OSError, ValueError, TypeError, KeyError):
+    except (OSError, ValueError, TypeError, KeyError, RecursionError):
         return 'a process that has not yet recorded itself'
 
 
