@@ -147,8 +147,7 @@ def parse_json(text: str, source: str, what: str,
     """
     if len(text) > limit:
         raise ValueError(
-            f'{source}: a {what} longer than {limit} characters is refused '
-            f'(wgse_mmseg.core.limits.TEXT_FILE_LIMIT_BYTES)')
+            f'{source}: a {what} longer than {limit} characters is refused')
     depth = json_depth(text)
     if depth > MAX_JSON_DEPTH:
         raise ValueError(

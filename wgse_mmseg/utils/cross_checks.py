@@ -26,7 +26,7 @@ from typing import Callable, Iterator, Optional, Tuple
 import torch
 from torch import nn
 
-from ..core.limits import MAX_IMAGE_SIDE
+from ..core.limits import MAX_IMAGE_SIDE, cut
 
 __all__ = ['ModelFitError']
 
@@ -127,7 +127,7 @@ def check_training_fits(cfg, model: nn.Module) -> None:
             raise ModelFitError(
                 f'{name}: the model runs on no input up to '
                 f'{MAX_IMAGE_SIDE}x{MAX_IMAGE_SIDE} (num_steps={num_steps}):'
-                f' {type(failure).__name__}: {str(failure)[:300]}')
+                f' {type(failure).__name__}: {cut(str(failure), 300)}')
         if min(crop) < side:
             raise ModelFitError(
                 f'{name}: crop_size={crop} is below the smallest input the '
@@ -141,6 +141,6 @@ def check_training_fits(cfg, model: nn.Module) -> None:
                 model, num_steps, 2, *probe, training=True) is None:
             raise ModelFitError(
                 f'{name}: train_dataloader.batch_size=1 does not train this '
-                f'model: {str(failure)[:200]} (a batch norm after a pooled '
+                f'model: {cut(str(failure), 200)} (a batch norm after a pooled '
                 f'1x1 branch sees one value per channel); the smallest '
                 f'batch_size that works is 2')

@@ -35,6 +35,8 @@ from typing import Dict, List, NamedTuple, Optional, Sequence
 import torch
 from torch import Tensor, nn
 
+from ..limits import cut
+
 __all__ = ['FirstUseCheckFailed']
 
 #: where a failed check asks to be reported
@@ -167,7 +169,7 @@ def _run_check(backend, reference, networks: Sequence[nn.Module],
             except Exception as error:  # noqa: BLE001 - the finding
                 return dict(passed=False, max_error=None, failure=(
                     f'it raised ({setting}): {type(error).__name__}: '
-                    f'{str(error).strip()[:500]}'))
+                    f'{cut(str(error).strip(), 500)}'))
             names = ['output'] + (['coefficient gradient'] if input_grad
                                   else []) + [
                 f'gradient of band {band} {name}'
