@@ -42,17 +42,22 @@ EVERY_EPOCH = ('train_cfg.val_interval=1',
 def test_mim_in_the_readme_install_mode(tiny_spike_dataset, tiny_run_options,
                                         tmp_path):
     """mim train / test / run against this checkout's editable install."""
-    from mim.utils import get_installed_path
-
-    # mim 0.3.8 sees the egg-link's package folder (with .mim), onedl-mim
-    # the PEP 660 install's checkout (README "Install")
-    assert get_installed_path('wgse_mmseg') in (
-        osp.join(ROOT, 'wgse_mmseg'), ROOT), (
-        'not the README install mode: run `bash tools/setup_env.sh`')
     data = tiny_spike_dataset
     env = dict(os.environ, PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
     for name in ('PYTHONPATH', 'TRITON_INTERPRET'):  # the user's own shell
         env.pop(name, None)
+    # asked as mim asks, outside the checkout: in this process the checkout
+    # is on sys.path, and the other stack's setup.py develop leaves a
+    # wgse_mmseg.egg-info there that importlib.metadata would find first.
+    # mim 0.3.8 sees the egg-link's package folder (with .mim), onedl-mim
+    # the PEP 660 install's checkout (README "Install")
+    installed = run([sys.executable, '-c',
+                     'from mim.utils import get_installed_path; '
+                     "print(get_installed_path('wgse_mmseg'))"],
+                    cwd=tmp_path, env=env).strip()
+    assert installed in (osp.join(ROOT, 'wgse_mmseg'), ROOT), (
+        f'mim finds wgse_mmseg at {installed}, not in this checkout: '
+        'run `bash tools/setup_env.sh`')
     mim = osp.join(BIN, 'mim')
     work_dir = tmp_path / 'work'
     train = [mim, 'train', 'wgse_mmseg', CONFIG, '--gpus', '0',
