@@ -93,10 +93,33 @@ fi
 # says the package is. mim 0.3.8 asks pkg_resources, which names this checkout
 # for `setup.py develop`'s egg-link (site-packages for a PEP 660 install);
 # onedl-mim reads a PEP 660 install's direct_url.json: this checkout's root.
-if [ "$STACK" = openmmlab ]; then
-    "${PIP[@]}" install -q --no-build-isolation --no-deps --no-use-pep517 -e .
-else
-    "${PIP[@]}" install -q --no-build-isolation --no-deps -e .
+# Redone only when it no longer matches the checkout, so that a rerun (every
+# tools/run_tests.sh and tools/quickstart.sh) rewrites nothing that running
+# processes import: the stamp holds what the install was built from.
+editable_stamp() {
+    { echo "$STACK $PWD"; cat setup.py wgse_mmseg/version.py wgse_mmseg/core/simulation/_integrate_and_fire.c \
+        wgse_mmseg/core/wgse/_band_networks.c; } | sha256sum | cut -d' ' -f1
+}
+editable_in_place() {  # asked outside the checkout, as an installed command asks
+    local python; python="$(cd "$VENV" && pwd)/bin/python"
+    (cd / && "$python" - "$1" "$STACK" <<'PY'
+import importlib.util, os.path as osp, sys
+root, stack = sys.argv[1], sys.argv[2]
+spec = importlib.util.find_spec("wgse_mmseg")
+mim = osp.join(root, "wgse_mmseg", ".mim")
+linked = all(osp.islink(osp.join(mim, name)) for name in ("configs", "tools"))
+sys.exit(not (spec is not None and spec.origin == osp.join(root, "wgse_mmseg", "__init__.py")
+              and (linked if stack == "openmmlab" else not osp.exists(mim))))
+PY
+    )
+}
+if [ "$(cat "$VENV/wgse-editable" 2>/dev/null)" != "$(editable_stamp)" ] || ! editable_in_place "$PWD"; then
+    if [ "$STACK" = openmmlab ]; then
+        "${PIP[@]}" install -q --no-build-isolation --no-deps --no-use-pep517 -e .
+    else
+        "${PIP[@]}" install -q --no-build-isolation --no-deps -e .
+    fi
+    editable_stamp > "$VENV/wgse-editable"
 fi
 
 "$VENV/bin/python" -c "import wgse_mmseg, mmseg, mmcv, torch; print('[setup_env] ready ($STACK in $VENV): torch', torch.__version__, '| mmcv', mmcv.__version__, '| mmseg', mmseg.__version__, '| wgse_mmseg', wgse_mmseg.__version__)"
