@@ -2,8 +2,11 @@
 import json
 import os
 import os.path as osp
+import runpy
+import signal
 import subprocess
 import sys
+import traceback
 
 import cv2
 import numpy as np
@@ -439,6 +442,53 @@ def test_an_empty_dataset_folder_is_named(tmp_path):
                              seg_map_path='gtFine/train'), pipeline=[])
 
 
+CONVERTER = osp.join(osp.dirname(osp.dirname(osp.dirname(
+    osp.abspath(__file__)))), 'tools', 'dataset_converters',
+    'spike_cityscapes.py')
+
+
+def _converter_killed_at(step, when, args):
+    """The converter's command line with ``args``, in a forked child of this
+    process that SIGKILLs itself just ``before`` or ``after`` its ``step``-th
+    file-system step (1-based; every ``os.replace``, an atomic write
+    landing, and every ``os.remove``): before a replace, the temporary file
+    is written but not in place, as when the kill lands mid-write. Returns
+    the child's exit code: -9 when killed, 0 when it finished first. A fork
+    rather than a fresh interpreter: the same kill, without importing torch
+    for every run."""
+    pid = os.fork()
+    if pid:
+        return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
+    code = 1
+    try:
+        count = 0
+
+        def counted(function):
+            def wrapper(*a, **k):
+                nonlocal count
+                count += 1
+                if count == step and when == 'before':
+                    os.kill(os.getpid(), signal.SIGKILL)
+                result = function(*a, **k)
+                if count == step and when == 'after':
+                    os.kill(os.getpid(), signal.SIGKILL)
+                return result
+            return wrapper
+
+        os.replace, os.remove = counted(os.replace), counted(os.remove)
+        sys.argv = [CONVERTER, *args]
+        runpy.run_path(CONVERTER, run_name='__main__')
+        code = 0
+    except SystemExit as exit:
+        code = exit.code if isinstance(exit.code, int) else 1
+    except BaseException:
+        traceback.print_exc()
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
+
 def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
     """24 runs killed at random file-system steps, alternating between two
     settings over a finished conversion: after every kill, each sample with
@@ -458,23 +508,17 @@ def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
                for base in (0, 1)}
     out = str(tmp_path / 'out')
     shutil.copytree(refs[0], out)
-    driver = osp.join(osp.dirname(osp.abspath(__file__)),
-                      'converter_kill_run.py')
     rng = np.random.default_rng(0)
-    env = dict(os.environ, OMP_NUM_THREADS='1')
-    env.pop('TRITON_INTERPRET', None)
     killed = skips = 0
     for run in range(24):
         base_seed = run % 2
         step = int(rng.integers(1, 13))  # 3 samples x 4 steps at most
         when = str(rng.choice(['before', 'after']))
-        proc = subprocess.run(
-            [sys.executable, driver, str(step), when, '--', root, out,
-             '--height', '32', '--width', '64', '--num-steps', '9',
-             '--seed', str(base_seed)],
-            capture_output=True, text=True, env=env, timeout=600)
-        assert proc.returncode in (0, -9), proc.stderr[-3000:]
-        killed += proc.returncode == -9
+        code = _converter_killed_at(step, when, [
+            root, out, '--height', '32', '--width', '64', '--num-steps', '9',
+            '--seed', str(base_seed)])
+        assert code in (0, -9), f'run {run}: exit code {code} (stderr above)'
+        killed += code == -9
         state = _samples_state(out)
         for stem, seed in state.items():
             if seed is not None:
