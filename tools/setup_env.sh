@@ -106,10 +106,14 @@ editable_in_place() {  # asked outside the checkout, as an installed command ask
 import importlib.util, os.path as osp, sys
 root, stack = sys.argv[1], sys.argv[2]
 spec = importlib.util.find_spec("wgse_mmseg")
+if spec is None or spec.origin != osp.join(root, "wgse_mmseg", "__init__.py"):
+    sys.exit(1)
+# the C kernels built (optional: without a compiler every run tries again)
+built = all(importlib.util.find_spec(f"wgse_mmseg.{name}") is not None
+            for name in ("core.simulation._integrate_and_fire", "core.wgse._band_networks"))
 mim = osp.join(root, "wgse_mmseg", ".mim")
 linked = all(osp.islink(osp.join(mim, name)) for name in ("configs", "tools"))
-sys.exit(not (spec is not None and spec.origin == osp.join(root, "wgse_mmseg", "__init__.py")
-              and (linked if stack == "openmmlab" else not osp.exists(mim))))
+sys.exit(not (built and (linked if stack == "openmmlab" else not osp.exists(mim))))
 PY
     )
 }
