@@ -20,11 +20,14 @@ from wgse_mmseg.core.output_folder import (OutputFolderError, discard,
 #: a process that owns FOLDER (job JOB, or None), says 'held', and keeps it
 #: until its stdin closes; with WAIT, says 'trying' first and waits
 HOLDER = textwrap.dedent('''
-    import importlib.util, sys
-    spec = importlib.util.spec_from_file_location('output_folder', sys.argv[6])
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)  # alone: no torch to import
-    own_folder = module.own_folder
+    import os.path as osp, sys, types
+    core = osp.dirname(sys.argv[6])
+    # the package's folders without their __init__: no torch to import
+    for name, path in (('wgse_mmseg', osp.dirname(core)),
+                       ('wgse_mmseg.core', core)):
+        sys.modules[name] = types.ModuleType(name)
+        sys.modules[name].__path__ = [path]
+    from wgse_mmseg.core.output_folder import own_folder
     folder, job, wait, log = sys.argv[1:5]
     print('trying', flush=True)
     with own_folder(folder, None if job == '-' else job, wait == 'wait'):

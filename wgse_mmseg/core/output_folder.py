@@ -49,6 +49,8 @@ import stat
 import sys
 from typing import BinaryIO, Iterator, Optional
 
+from .limits import cut, parse_json
+
 __all__ = ['OutputFolderError']
 
 #: the lock file of a folder's (only) job; ``.lock-<job>`` for a named one
@@ -83,12 +85,13 @@ def _writer_record() -> bytes:
 def _describe_writer(fd: int) -> str:
     """The writer recorded in the lock file ``fd``, in words."""
     try:
-        record = json.loads(os.pread(fd, 4096, 0) or b'null')
+        record = parse_json(os.pread(fd, 4096, 0).decode(), 'the lock file',
+                            'writer record')
         return (f'process {int(record["pid"])} on host '
-                f'{str(record["host"])[:100]}, started '
-                f'{str(record["started"])[:40]}: '
-                f'{str(record["command"])[:300]}')
-    except (OSError, ValueError, TypeError, KeyError, RecursionError):
+                f'{cut(str(record["host"]), 100)}, started '
+                f'{cut(str(record["started"]), 40)}: '
+                f'{cut(str(record["command"]), 300)}')
+    except (OSError, ValueError, TypeError, KeyError):
         return 'a process that has not yet recorded itself'
 
 
