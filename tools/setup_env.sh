@@ -96,21 +96,23 @@ fi
 # Redone only when it no longer matches the checkout, so that a rerun (every
 # tools/run_tests.sh and tools/quickstart.sh) rewrites nothing that running
 # processes import: the stamp holds what the install was built from.
+C_SOURCES=$(find wgse_mmseg -name '*.c' | sort)  # setup.py's extensions, one a file
 editable_stamp() {
-    { echo "$STACK $PWD"; cat setup.py wgse_mmseg/version.py wgse_mmseg/core/simulation/_integrate_and_fire.c \
-        wgse_mmseg/core/wgse/_band_networks.c; } | sha256sum | cut -d' ' -f1
+    # shellcheck disable=SC2086
+    { echo "$STACK $PWD"; cat setup.py wgse_mmseg/version.py $C_SOURCES; } | sha256sum | cut -d' ' -f1
 }
 editable_in_place() {  # asked outside the checkout, as an installed command asks
     local python; python="$(cd "$VENV" && pwd)/bin/python"
-    (cd / && "$python" - "$1" "$STACK" <<'PY'
+    # shellcheck disable=SC2086
+    (cd / && "$python" - "$1" "$STACK" $C_SOURCES <<'PY'
 import importlib.util, os.path as osp, sys
-root, stack = sys.argv[1], sys.argv[2]
+root, stack, sources = sys.argv[1], sys.argv[2], sys.argv[3:]
 spec = importlib.util.find_spec("wgse_mmseg")
 if spec is None or spec.origin != osp.join(root, "wgse_mmseg", "__init__.py"):
     sys.exit(1)
 # the C kernels built (optional: without a compiler every run tries again)
-built = all(importlib.util.find_spec(f"wgse_mmseg.{name}") is not None
-            for name in ("core.simulation._integrate_and_fire", "core.wgse._band_networks"))
+built = all(importlib.util.find_spec(source[:-len(".c")].replace("/", ".")) is not None
+            for source in sources)
 mim = osp.join(root, "wgse_mmseg", ".mim")
 linked = all(osp.islink(osp.join(mim, name)) for name in ("configs", "tools"))
 sys.exit(not (built and (linked if stack == "openmmlab" else not osp.exists(mim))))
