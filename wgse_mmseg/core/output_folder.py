@@ -47,6 +47,7 @@ import shutil
 import socket
 import stat
 import sys
+import time
 from typing import BinaryIO, Iterator, Optional
 
 from .limits import cut, parse_json
@@ -73,6 +74,10 @@ def _lock_path(folder: str, job: Optional[str]) -> str:
     return osp.join(folder, f'{LOCK_NAME}-{name}')
 
 
+#: how long a refused writer waits for the lock holder's record (seconds)
+RECORD_WAIT_S = 1.0
+
+
 def _writer_record() -> bytes:
     """Who writes: process id, host, command and start time, as JSON."""
     return json.dumps(dict(
@@ -83,16 +88,23 @@ def _writer_record() -> bytes:
 
 
 def _describe_writer(fd: int) -> str:
-    """The writer recorded in the lock file ``fd``, in words."""
-    try:
-        record = parse_json(os.pread(fd, 4096, 0).decode(), 'the lock file',
-                            'writer record')
-        return (f'process {int(record["pid"])} on host '
-                f'{cut(str(record["host"]), 100)}, started '
-                f'{cut(str(record["started"]), 40)}: '
-                f'{cut(str(record["command"]), 300)}')
-    except (OSError, ValueError, TypeError, KeyError):
-        return 'a process that has not yet recorded itself'
+    """The writer recorded in the lock file ``fd``, in words. A writer
+    records itself just after it takes the lock, so an unreadable record
+    is read again for up to :data:`RECORD_WAIT_S` before it is called
+    unrecorded."""
+    deadline = time.monotonic() + RECORD_WAIT_S
+    while True:
+        try:
+            record = parse_json(os.pread(fd, 4096, 0).decode(),
+                                'the lock file', 'writer record')
+            return (f'process {int(record["pid"])} on host '
+                    f'{cut(str(record["host"]), 100)}, started '
+                    f'{cut(str(record["started"]), 40)}: '
+                    f'{cut(str(record["command"]), 300)}')
+        except (OSError, ValueError, TypeError, KeyError):
+            if time.monotonic() > deadline:
+                return 'a process that has not yet recorded itself'
+            time.sleep(0.02)
 
 
 def discard(path: str) -> None:
