@@ -158,16 +158,26 @@ def _output_and_grads(model: WGSE, spikes: torch.Tensor,
     return [out.detach()] + [p.grad for p in model.parameters()]
 
 
-_INTERPRETER_BF16 = (
-    "not run: triton 3.6's interpreter multiplies bf16 tl.dot operands as "
-    'raw 16-bit integers')
+def _not_interpreted(precision: str) -> Optional[str]:
+    """Why the Triton kernel is not run at ``precision`` in triton's CPU
+    interpreter, or ``None`` (not interpreting, or ``'ieee'`` and
+    ``'fp16'``)."""
+    if not triton_band_networks.interpreting():
+        return None
+    if precision == 'bf16':
+        return ("not run: triton 3.6's interpreter multiplies bf16 tl.dot "
+                'operands as raw 16-bit integers')
+    if precision == 'tf32':
+        return ("not run: triton's interpreter ignores tl.dot's "
+                "input_precision, so its tf32 is the 'ieee' row's arithmetic")
+    return None
 
 
 def check_correctness(shape: Shape, device: str) -> Dict[str, Any]:
     """The correctness section's rows (see the module docstring):
     ``{'rows': [{'backend', 'precision', 'max_rel_error', 'tensor',
     'tolerance', 'ok'}]}``; ``ok`` is ``None`` (and ``note`` says why) for
-    Triton's bf16 under the interpreter, which cannot run it."""
+    Triton's bf16 and tf32 under the interpreter (:func:`_not_interpreted`)."""
     torch.manual_seed(0)
     model = WGSE().to(device)
     spikes = (torch.rand(shape, generator=torch.Generator().manual_seed(1))
@@ -183,12 +193,11 @@ def check_correctness(shape: Shape, device: str) -> Dict[str, Any]:
         model.backend = backend
         for precision in PRECISIONS:
             tolerance = triton_band_networks.TOLERANCES[precision]
-            if backend == 'triton' and precision == 'bf16' and \
-                    triton_band_networks.interpreting():
+            skipped = backend == 'triton' and _not_interpreted(precision)
+            if skipped:
                 rows.append(dict(backend=backend, precision=precision,
                                  max_rel_error=None, tensor=None,
-                                 tolerance=tolerance, ok=None,
-                                 note=_INTERPRETER_BF16))
+                                 tolerance=tolerance, ok=None, note=skipped))
                 continue
             got = _output_and_grads(model, spikes, precision)
             errors = first_use_check.relative_errors(got, want)
@@ -205,7 +214,8 @@ def check_first_use(steps: int, device: str,
                     check_pixels: Optional[int] = None) -> Dict[str, Any]:
     """The first-use section's rows: the check of the Triton backend for
     WGSE's default networks at ``T = steps`` on ``device``, at each of
-    :data:`PRECISIONS` (``'bf16'`` noted, not run, under the interpreter),
+    :data:`PRECISIONS` (``'bf16'`` and ``'tf32'`` noted, not run, under the
+    interpreter),
     as ``backend='auto'`` runs it: ``{'rows': [{'precision', 'passed',
     'max_error', 'tolerance', 'failure', 'seconds', 'auto_runs'}]}``.
     ``check_pixels`` shrinks the problem (the smoke run's interpreter)."""
@@ -220,9 +230,9 @@ def check_first_use(steps: int, device: str,
     coeffs = torch.zeros(1, 1, sum(lengths), device=device)
     rows = []
     for precision in PRECISIONS:
-        if precision == 'bf16' and triton_band_networks.interpreting():
-            rows.append(dict(precision=precision, passed=None,
-                             note=_INTERPRETER_BF16))
+        skipped = _not_interpreted(precision)
+        if skipped:
+            rows.append(dict(precision=precision, passed=None, note=skipped))
             continue
         with _precision(precision, coeffs.device.type):
             check = first_use_check.check_on_first_use(
@@ -403,7 +413,7 @@ def run_report(plan: Plan, root: str, targets: Targets,
         correctness['status'] = 'failed'
         correctness['error'] = 'outside the stated tolerance: ' + ', '.join(
             f"{r['backend']} {r['precision']}"
-            for r in correctness['rows'] if not r['ok'])
+            for r in correctness['rows'] if r['ok'] is False)
     sections['correctness'] = dict(correctness,
                                    shape=list(plan.correctness_shape))
     first_use = clock.attempt(
