@@ -197,6 +197,22 @@ def test_triton_widths_and_no_wavelet(hidden):
 
 
 @needs_triton
+@pytest.mark.parametrize('steps', [1, 2])
+def test_triton_on_bands_shorter_than_its_kernel(steps):
+    """A band of one or two coefficients (the TRCNN-only variant at T = 1
+    and 2; db8's bands are 8 or longer), where every window of the
+    kernel reaches past the band's ends, with and without the input
+    gradient."""
+    model = _model(backend='triton', wavelet=None)
+    spikes = _spikes(1, steps, 3, 7, seed=steps)  # 21 pixels: 16 + 5
+    for input_grad in (True, False):
+        _assert_close(_run(model, spikes, input_grad),
+                      _reference(model, spikes, input_grad),
+                      triton_band_networks.TOLERANCES['ieee'],
+                      f'T={steps}, input_grad={input_grad}')
+
+
+@needs_triton
 @pytest.mark.parametrize('entry', range(len(
     triton_band_networks.FORWARD_CONFIGS)))
 def test_every_triton_launch_config_computes_the_same(monkeypatch, entry):

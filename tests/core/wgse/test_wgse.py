@@ -342,12 +342,17 @@ def _streams(steps, height=2, width=3):
 
 STEPS = [1, 2, 15, 16, 41, 129, 300]
 #: The Triton kernel runs in triton's CPU interpreter, about a thousand
-#: times slower: the lengths that reach each of its code paths (a band of
-#: 1 and 2 coefficients, bands shorter than and as long as db8's filter,
-#: bands of 15-28 that carry its windows through many loop steps). 129 and
-#: 300 only lengthen the same loop, and a band network has no recurrence
-#: along the band for rounding to build up in.
-INTERPRETED_STEPS = [1, 2, 15, 16, 41]
+#: times slower, and sees only the band lengths (db8, level 5, here):
+#: T = 1 gives bands of 14, 14, 14, 13, 11 and 8 coefficients (T = 2 the
+#: same), T = 15 six of 15, as long as db8's filter less one (T = 16 the
+#: same), T = 41 15 to 28, its windows carried through many loop steps.
+#: 129 and 300 only lengthen the same loop, and a band network has no
+#: recurrence along the band for rounding to build up in. Bands shorter
+#: than the kernel: test_band_network_backends.py.
+INTERPRETED_STEPS = [1, 15, 41]
+#: (H, W) of the five streams: for the Triton kernel 15 pixels, one partial
+#: tile (whole tiles and several: test_band_network_backends.py).
+FRAME = {'triton': (1, 3)}
 
 
 #: every backend this installation can run (triton in its interpreter)
@@ -357,13 +362,6 @@ BACKENDS = [name for name, backend in band_network_backends.BACKENDS.items()
 
 def _steps_of(backend):
     return INTERPRETED_STEPS if backend == 'triton' else STEPS
-
-
-#: Under autocast the Triton kernel differs only in rounding its products'
-#: operands, the same at every band length and tile: the shortest and
-#: filter-long bands, one partial tile (15 pixels); the other lengths and
-#: tiles run in float32 above.
-AUTOCAST_INTERPRETED_STEPS = [1, 16]
 
 
 #: (backend, T) of the stability tests: every backend at its lengths
@@ -384,7 +382,8 @@ def model_pair(request):
 def test_stability_float32_vs_float64(model_pair, steps):
     model, model64 = model_pair
     # the compiled kernel computes no input gradient
-    x = _streams(steps).requires_grad_(model.backend != 'compiled')
+    x = _streams(steps, *FRAME.get(model.backend, ())).requires_grad_(
+        model.backend != 'compiled')
     y = model(x)
     assert model.backend_in_use == model.backend
     assert y.shape == x.shape and torch.isfinite(y).all()
@@ -406,7 +405,7 @@ def test_stability_of_parameter_gradients(model_pair, steps):
     """Spikes that need no gradient, as in training. Output and every
     parameter gradient finite and close to float64."""
     model, model64 = model_pair
-    x = _streams(steps)
+    x = _streams(steps, *FRAME.get(model.backend, ()))
     grads = []
     for net, inp in ((model, x), (model64, x.double())):
         net.zero_grad()
@@ -434,7 +433,11 @@ def _cpu_autocast_supports(dtype):
 # max |autocast - float64| is about 3.0e-3 for bfloat16 and 3.6e-4 for
 # float16, with outputs up to ~1. The tolerances below are 5-10x that,
 # scaled by max(1, max|output|). The torch and compiled kernels run float32
-# under autocast; the Triton kernel rounds its hidden products' operands.
+# under autocast; the Triton kernel, which rounds its hidden products'
+# operands, is held to its own tolerances against float64, output and every
+# gradient, by test_triton_under_autocast_within_its_stated_tolerance.
+@pytest.mark.parametrize('model_pair', [b for b in BACKENDS if b != 'triton'],
+                         indirect=True)
 @pytest.mark.parametrize('dtype, tol', [
     (torch.bfloat16, 2.5e-2),
     (torch.float16, 5e-3),
@@ -443,10 +446,8 @@ def test_stability_under_autocast(model_pair, dtype, tol):
     if not _cpu_autocast_supports(dtype):
         pytest.skip(f'CPU autocast does not support {dtype}')
     model, _ = model_pair
-    interpreted = model.backend == 'triton'
-    frame = (1, 3) if interpreted else (2, 3)
-    for steps in AUTOCAST_INTERPRETED_STEPS if interpreted else STEPS:
-        x = _streams(steps, *frame)
+    for steps in STEPS:
+        x = _streams(steps)
         with torch.no_grad():
             ref = model(x)
             with torch.autocast('cpu', dtype=dtype):
@@ -457,8 +458,7 @@ def test_stability_under_autocast(model_pair, dtype, tol):
         scale = max(1.0, ref.abs().max().item())
         err = (y - ref).abs().max().item()
         assert err <= tol * scale, (steps, err)
-    x = _streams(16 if interpreted else 41, *frame).requires_grad_(
-        model.backend != 'compiled')
+    x = _streams(41).requires_grad_(model.backend != 'compiled')
     with torch.autocast('cpu', dtype=dtype):
         y = model(x)
     model.zero_grad()
