@@ -52,12 +52,15 @@ def test_the_recipe_runs_start_to_finish(tmp_path):
     assert model.num_steps == 41
     # the scoring table of the benchmark, on REDS_TEST
     assert '| WGSE |' in proc.stdout and '| TFP |' in proc.stdout
-    # a re-run resumes from the finished run instead of training again
-    again = _run(tmp_path, REDS_TRAIN=reds, REDS_TEST=reds)
+    # a re-run resumes from the finished run instead of training again;
+    # without a REDS_TEST folder it scores nothing
+    again = _run(tmp_path, REDS_TRAIN=reds,
+                 REDS_TEST=str(tmp_path / 'no_test_folder'))
     assert again.returncode == 0, again.stderr[-3000:]
     log = again.stdout + again.stderr
     assert 'resumed from the latest checkpoint' in log and 'iter_2.pth' in log
     assert 'Saving checkpoint at' not in log
+    assert 'exported' in again.stdout and '| WGSE |' not in again.stdout
     assert torch.load(tmp_path / 'weights.pth', weights_only=True)[
         'meta']['model']['type'] == 'SpikeReconstructor'
 
