@@ -152,12 +152,14 @@ AVAILABLE = [name for name, backend in band_network_backends.BACKENDS.items()
 # that are not a multiple of the Triton tiles (16 pixels in the first
 # launch entries) and span several of them.
 SHAPES = [(1, 41, 5, 7), (2, 3, 3, 5), (1, 9, 9, 11)]
-# The Triton kernel in its interpreter: 1x9x9x11 adds nothing to its paths
-# that 1x41x5x7 (three tiles, the last partial; bands up to 28) and 2x3x3x5
-# (bands shorter than the filter) do not reach; the launch-entry test below
-# spans several of the largest tiles.
+#: The Triton kernel in its interpreter, which runs its programs one after
+#: another: bands up to 28 over two tiles, the second partial (21 pixels),
+#: and bands of 9-14, as T=3 gives them, in one partial tile; 1x9x9x11
+#: adds nothing to its paths, and the launch-entry test below spans two of
+#: each entry's tiles.
+TRITON_SHAPES = [(1, 41, 3, 7), (1, 3, 3, 5)]
 BACKEND_SHAPES = [(backend, shape) for backend in AVAILABLE for shape in
-                  (SHAPES[:2] if backend == 'triton' else SHAPES)]
+                  (TRITON_SHAPES if backend == 'triton' else SHAPES)]
 
 
 @pytest.mark.parametrize('backend, shape', BACKEND_SHAPES,
@@ -217,7 +219,7 @@ def test_triton_on_bands_shorter_than_its_kernel(steps):
     triton_band_networks.FORWARD_CONFIGS)))
 def test_every_triton_launch_config_computes_the_same(monkeypatch, entry):
     """Each entry a GPU may choose (tile, warps) of both kernels, over
-    pixels spanning two of the largest tiles, the second partial, matches
+    pixels spanning two of its tiles, the second partial, matches
     float64 (full float32 products; the fp16/bf16 paths run the first
     entries in the autocast test below)."""
     forward = triton_band_networks.FORWARD_CONFIGS[entry]
@@ -227,7 +229,9 @@ def test_every_triton_launch_config_computes_the_same(monkeypatch, entry):
                         (backward, ))
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
     model = _model(backend='triton')
-    spikes = _spikes(1, 9, 5, 7, seed=entry)  # 35 pixels: 32 + 3
+    # two tiles of the entry, the second of one pixel
+    spikes = _spikes(1, 9, 1, max(forward.block, backward.block) + 1,
+                     seed=entry)
     _assert_close(_run(model, spikes, True), _reference(model, spikes, True),
                   triton_band_networks.TOLERANCES['ieee'],
                   f'{forward} {backward}')
@@ -252,9 +256,9 @@ def test_triton_under_autocast_within_its_stated_tolerance(dtype):
     """Under autocast the hidden products take fp16/bf16 operands; output
     and gradients stay within :data:`TOLERANCES` of float64."""
     model = _model(backend='triton')
-    # two tiles, the second partial; bands of 1-16 coefficients: the
-    # precision changes the products' operands, not the tiling
-    spikes = _spikes(1, 16, 3, 7)
+    # one partial tile; bands of 15: the precision changes the products'
+    # operands, not the tiling (two tiles: the tests above)
+    spikes = _spikes(1, 16, 3, 5)
     precision = {torch.float16: 'fp16', torch.bfloat16: 'bf16'}[dtype]
     with torch.autocast('cpu', dtype=dtype):
         assert triton_band_networks.dot_precision('cpu') == precision
