@@ -48,13 +48,15 @@ def _reference(networks, coeffs, lengths, grad_out):
 
 #: Pre-activations closer to zero than this may land on the other side of
 #: a ReLU in float32 (measured: a float64 pre-activation of 4e-8 did), where
-#: the gradient jumps; examples with one are not compared.
+#: the gradient jumps; pixels with one are not compared. (A pixel's band
+#: networks see only its own coefficients.)
 KINK_MARGIN = 1e-5
 
 
-def _smallest_preactivation(networks, coeffs, lengths):
-    """The smallest |input of a ReLU| over all bands, in float64."""
-    smallest = float('inf')
+def _clear_of_kinks(networks, coeffs, lengths):
+    """``(pixels,)`` bool: whether every ReLU input of the pixel, over all
+    bands, is at least :data:`KINK_MARGIN` from zero, in float64."""
+    clear = torch.ones(coeffs.shape[0], dtype=torch.bool)
     with torch.no_grad():
         for net, band in zip(networks, coeffs.split(lengths, 1)):
             acts = [band.double().unsqueeze(1)]
@@ -63,9 +65,9 @@ def _smallest_preactivation(networks, coeffs, lengths):
                                conv.bias.double(), padding=conv.padding)
                 if residual is not None:
                     pre = pre + acts[residual]
-                smallest = min(smallest, pre.abs().min().item())
+                clear &= pre.abs().amin(dim=(1, 2)) > KINK_MARGIN
                 acts.append(F.relu(pre))
-    return smallest
+    return clear
 
 
 def _compiled(weights, residuals, coeffs, lengths, grad_out):
@@ -90,7 +92,13 @@ def test_equals_conv_modules(seed, pixels, lengths, num_blocks,
     generator = torch.Generator().manual_seed(seed)
     coeffs = torch.randn(pixels, sum(lengths), generator=generator)
     grad_out = torch.randn(pixels, sum(lengths), generator=generator)
-    assume(_smallest_preactivation(networks, coeffs, lengths) > KINK_MARGIN)
+    # The larger examples almost always have a pixel near a kink (filtering
+    # whole examples left mostly small ones, and failed Hypothesis's health
+    # check at random): such pixels take no part in the comparison and add
+    # nothing to the gradients.
+    clear = _clear_of_kinks(networks, coeffs, lengths)
+    assume(clear.any())
+    grad_out[~clear] = 0
     compiled_band_networks.ROWS_PER_CALL = rows_per_call
     try:
         out, grads = _compiled(weights, residuals, coeffs, lengths,
@@ -99,8 +107,8 @@ def test_equals_conv_modules(seed, pixels, lengths, num_blocks,
         compiled_band_networks.ROWS_PER_CALL = 16384
     expected, expected_grads = _reference(networks, coeffs, lengths,
                                           grad_out)
-    torch.testing.assert_close(out.double(), expected, rtol=1e-5,
-                               atol=1e-5)
+    torch.testing.assert_close(out[clear].double(), expected[clear],
+                               rtol=1e-5, atol=1e-5)
     for grad, want in zip(grads, expected_grads):
         scale = want.abs().max().item() + 1e-3
         # float32 sums over up to 1,024 rows per group, in another order
