@@ -45,9 +45,10 @@ CASES = {
     'pspnet_wgse': ('pspnet_wgse.py', {}),
     'segformer_b0_raw': ('segformer_b0_raw.py', {}),
     'segformer_b0_tfp': ('segformer_b0_raw.py', TFP),
+    # segformer_b0_wgse: test_the_tool_exports_a_checkpoint_and_checks_it
+    # exports it from a checkpoint and makes the same checks (an export is
+    # about 16 s of dynamo tracing)
 }
-#: segformer_b0_wgse: the tool's test below exports it from a checkpoint and
-#: makes the same checks (each export takes about 16 s of dynamo tracing)
 
 
 def _model(config, options=None, seed=0):

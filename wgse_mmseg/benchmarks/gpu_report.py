@@ -215,9 +215,9 @@ def check_first_use(steps: int, device: str,
     """The first-use section's rows: the check of the Triton backend for
     WGSE's default networks at ``T = steps`` on ``device``, at each of
     :data:`PRECISIONS` (``'bf16'`` and ``'tf32'`` noted, not run, under the
-    interpreter),
-    as ``backend='auto'`` runs it: ``{'rows': [{'precision', 'passed',
-    'max_error', 'tolerance', 'failure', 'seconds', 'auto_runs'}]}``.
+    interpreter: :func:`_not_interpreted`), as ``backend='auto'`` runs it:
+    ``{'rows': [{'precision', 'passed', 'max_error', 'tolerance',
+    'failure', 'seconds', 'auto_runs'}]}``.
     ``check_pixels`` shrinks the problem (the smoke run's interpreter)."""
     backend = copy.copy(band_network_backends.BACKENDS['triton'])
     reason = backend.cannot_run(WGSE().band_networks)
