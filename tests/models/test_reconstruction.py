@@ -728,6 +728,30 @@ def test_multiply_adds_count_every_convolution():
     assert wgse.enhancer.backend == 'compiled'
 
 
+def test_multiply_adds_of_a_large_frame_counted_on_crops():
+    """Beyond the crops a per-pixel model's count is scaled from them, the
+    whole frame's count exactly; a model whose products are not the same at
+    every pixel is counted whole."""
+    spikes = (np.random.default_rng(1).random((5, 19, 23)) < 0.3).astype(
+        np.float32)
+    convs = [(5, 8)] + [(8, 8)] * 4 + [(8, 4), (4, 1)]
+    model = _tiny_model(enhancer=None, num_blocks=2).eval()
+    assert multiply_adds(model, spikes) == sum(
+        19 * 23 * i * o * 9 for i, o in convs)
+    wgse = _tiny_model(num_blocks=2).eval()
+    per_pixel = multiply_adds(wgse, spikes[:, :1, :1])
+    assert multiply_adds(wgse, spikes) == 19 * 23 * per_pixel
+
+    class AllPairs:
+        """Products between every pair of pixels: (H W)^2 T."""
+        enhancer = None
+
+        def reconstruct(self, window):
+            pixels = torch.as_tensor(window).flatten(1)
+            return pixels.T @ pixels
+    assert multiply_adds(AllPairs(), spikes) == (19 * 23) ** 2 * 5
+
+
 def test_benchmark_costs_and_more_models(tmp_path):
     root = _reds_folder(str(tmp_path / 'r'), steps=5, size=(16, 16))
     model = _tiny_model()

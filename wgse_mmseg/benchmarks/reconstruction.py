@@ -77,12 +77,38 @@ def _method(method: str, checkpoint: Optional[str], device: str):
     return reconstruction_method(method), None
 
 
+#: the crops' sides on which :func:`multiply_adds` counts a frame's
+#: products per pixel
+COUNT_CROPS = (8, 16)
+
+
 def multiply_adds(model: SpikeReconstructor, spikes: np.ndarray) -> int:
     """Multiply-adds of ``model.reconstruct(spikes)`` for one ``(T, H, W)``
     window: torch's ``FlopCounterMode`` FLOPs / 2, with a WGSE enhancer on
     its ``reference`` backend (its band networks' own ``nn.Conv1d``, which
     the counter sees; the ``torch`` backend's fused kernels and the compiled
-    and Triton ones compute the same products out of its sight)."""
+    and Triton ones compute the same products out of its sight).
+
+    A fully convolutional model does the same products at every pixel, so
+    the count is made on two top-left crops (:data:`COUNT_CROPS` on a side)
+    and scaled to ``H * W`` when both give the same count per pixel; any
+    other model (or a frame no larger than the crops) is counted whole."""
+    height, width = spikes.shape[-2:]
+    crops = [spikes[..., :min(side, height), :min(side, width)]
+             for side in COUNT_CROPS]
+    if crops[0].shape == crops[-1].shape:
+        return _counted_multiply_adds(model, spikes)
+    small, large = (_counted_multiply_adds(model, crop) for crop in crops)
+    small_pixels, large_pixels = (crop.shape[-2] * crop.shape[-1]
+                                  for crop in crops)
+    if small * large_pixels != large * small_pixels:
+        return _counted_multiply_adds(model, spikes)
+    return small * height * width // small_pixels
+
+
+def _counted_multiply_adds(model: SpikeReconstructor,
+                           spikes: np.ndarray) -> int:
+    """:func:`multiply_adds` counted on the whole of ``spikes``."""
     enhancer = model.enhancer
     backend = getattr(enhancer, 'backend', None)
     if backend is not None:
