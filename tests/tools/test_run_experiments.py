@@ -469,7 +469,9 @@ def test_report_gains_the_deployment_columns(tmp_path):
         runner.read_deployment(str(bad))
 
 
-def test_tiny_grid_end_to_end_and_resume(tmp_path):
+def test_tiny_grid_end_to_end_and_resume(tmp_path, capsys):
+    """The command as a user runs it, then (in this process, the same
+    ``main``) run again, and a report over more than has run."""
     data = tmp_path / 'data'
     make_synthetic_dataset(str(data), num_train=4, num_val=2, height=32,
                            width=64, num_steps=9, progress=False)
@@ -497,24 +499,22 @@ def test_tiny_grid_end_to_end_and_resume(tmp_path):
     for name in ('results.md', 'results.csv', 'accuracy_vs_time.png'):
         assert (report / name).exists()
 
-    proc = subprocess.run(command, cwd=ROOT, capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    assert 'done before, skipped' in proc.stdout
+    arguments = command[2:]  # after python and the script
+    capsys.readouterr()
+    assert cli.main(arguments) == 0
+    assert 'done before, skipped' in capsys.readouterr().out
     assert json.loads((run_dir / 'result.json').read_text()) == result
 
     # a report over more entries and seeds than have run trains nothing,
     # and needs no dataset (reporting where the data is not)
     data.rename(tmp_path / 'data_moved')
-    proc = subprocess.run(
-        command[:command.index('--seeds')] + [
-            '--seeds', '0', '1', '--max-iters', '1', '--only',
-            'segformer_b0_tfi', 'segformer_b0_raw', '--report-dir',
-            str(report), '--report-only', '--benchmark'],
-        cwd=ROOT, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    assert 'segformer_b0_raw seed 0: not run (--report-only)' in proc.stdout
-    assert 'segformer_b0_tfi seed 1: not run (--report-only)' in proc.stdout
+    assert cli.main(arguments[:arguments.index('--seeds')] + [
+        '--seeds', '0', '1', '--max-iters', '1', '--only',
+        'segformer_b0_tfi', 'segformer_b0_raw', '--report-dir',
+        str(report), '--report-only', '--benchmark']) == 0
+    printed = capsys.readouterr().out
+    assert 'segformer_b0_raw seed 0: not run (--report-only)' in printed
+    assert 'segformer_b0_tfi seed 1: not run (--report-only)' in printed
     assert not (work / 'segformer_b0_raw').exists()
     assert not (work / 'segformer_b0_tfi' / 'seed_1').exists()
     # the benchmark measured the entry that has a run, once
@@ -522,7 +522,7 @@ def test_tiny_grid_end_to_end_and_resume(tmp_path):
                            'benchmark.json').read_text())
     assert measured['crop'] == [32, 64] and measured['num_steps'] == 9
     assert measured['memory']['peak_mb'] > 0 and measured['flops'] > 0
-    assert 'benchmark segformer_b0_tfi: ' in proc.stdout
+    assert 'benchmark segformer_b0_tfi: ' in printed
     assert not (work / 'segformer_b0_raw' / 'benchmark.json').exists()
     with open(report / 'results.csv') as f:
         rows = list(csv.DictReader(f))
