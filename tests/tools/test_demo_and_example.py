@@ -182,7 +182,9 @@ def _dat_recording(path, steps, height, width, seed=0):
 
 
 def test_demo_walk_segments_each_window_as_the_one_window_demo(
-        tmp_path, varied_checkpoint):
+        tmp_path, varied_checkpoint, load_tool):
+    """The walk as a user runs it; the one-window demo (the same ``main``,
+    in this process) on a window alone gives the walk's frame of it."""
     checkpoint = varied_checkpoint
     recording = _dat_recording(tmp_path / 'rec.dat', 300, 24, 40)
     out = tmp_path / 'walk' / 'rec.gif'
@@ -205,6 +207,7 @@ def test_demo_walk_segments_each_window_as_the_one_window_demo(
     frames = tmp_path / 'walk' / 'rec_frames'
     assert len(list(frames.glob('*.png'))) == 11
     # the one-window demo on the window alone gives the walk's frame
+    demo = load_tool('tools/demo.py')
     for index in (0, 10):
         centre = centres[index]
         alone = tmp_path / f'alone{centre}.spk'
@@ -212,9 +215,9 @@ def test_demo_walk_segments_each_window_as_the_one_window_demo(
                                             start=centre - NUM_STEPS // 2,
                                             length=NUM_STEPS))
         png = tmp_path / f'alone{centre}.png'
-        proc = _demo(alone, EXAMPLE, checkpoint, '--out-file', png,
-                     cwd=tmp_path)
-        assert proc.returncode == 0, proc.stderr
+        demo.main([str(alone), EXAMPLE, str(checkpoint), '--out-file',
+                   str(png), '--device', 'cpu', '--cfg-options',
+                   f'num_steps={NUM_STEPS}'])
         np.testing.assert_array_equal(
             cv2.imread(str(frames / f'{index:06d}.png')),
             cv2.imread(str(png)))
