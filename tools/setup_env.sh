@@ -7,7 +7,8 @@
 #   MMCV=full bash tools/setup_env.sh        # mmcv with compiled ops, built from source (~30 min on 2 cores)
 #   STACK=onedl MMCV=full MMCV_WHEELS=URL bash tools/setup_env.sh   # the fork's prebuilt CUDA wheels
 #
-# Idempotent: a second run only checks the pins. Variables: STACK (openmmlab|onedl),
+# Idempotent: a second run only checks the pins (pip only when a requirement
+# file, this script, a setting or an installed distribution changed). Variables: STACK (openmmlab|onedl),
 # VENV (default .venv, .venv-onedl for onedl), MMCV (lite|full), MMCV_WHEELS (the fork's
 # wheel index for your torch and CUDA, https://mmwheels.onedl.ai/), TORCH (default 2.13.0),
 # PYTHON (default python3.11, else python3). Sourced (tools/run_tests.sh), it leaves VENV set.
@@ -52,9 +53,27 @@ if [ "$(cat "$VENV/wgse-stack" 2>/dev/null || echo openmmlab)" != "$STACK" ]; th
 fi
 PIP=("$VENV/bin/python" -m pip --disable-pip-version-check)
 
+# pip checks the pins below only when something it reads has changed since
+# its last check passed here: this script, the requirement files, the
+# settings, or the distributions installed in the venv (their names and
+# versions); otherwise its answer would be the same "all satisfied".
+pins_stamp() {
+    { echo "$STACK $MMCV ${MMCV_WHEELS:-} $TORCH_PIN"
+      cat tools/setup_env.sh "requirements/$STACK.txt" requirements/runtime.txt \
+          requirements/tests.txt requirements/docs.txt
+      "$VENV/bin/python" -c 'import importlib.metadata as md
+print(sorted(f"{d.metadata['"'"'Name'"'"']}=={d.version}" for d in md.distributions()))'
+    } | sha256sum | cut -d' ' -f1
+}
+if [ "$(cat "$VENV/wgse-pins" 2>/dev/null)" = "$(pins_stamp)" ]; then
+    PINS_CHECKED=1
+else
+    PINS_CHECKED=0
+fi
+
 # torch first and pinned exactly: an unpinned torch pulls several GB of CUDA
 # wheels. wheel and ninja build mmcv's ops.
-"${PIP[@]}" install -q "$TORCH_PIN" "${BUILD_TOOLS[@]}" wheel ninja
+[ "$PINS_CHECKED" = 1 ] || "${PIP[@]}" install -q "$TORCH_PIN" "${BUILD_TOOLS[@]}" wheel ninja
 # opencv-python 5 (what onedl-mmcv brings) rejects arrays of more than 128
 # channels; the paper's T is 129.
 printf '%s\n' "$TORCH_PIN" "opencv-python<5" > "$VENV/constraints.txt"
@@ -73,6 +92,7 @@ PY
 
 if [ "$MMCV" = lite ]; then MMCV_DIST=$MMCV_LITE; else MMCV_DIST=$MMCV_FULL; fi
 if [ "$(installed_mmcv)" != "$MMCV_DIST $MMCV_VERSION $MMCV" ]; then
+    PINS_CHECKED=0  # (a full and a lite onedl-mmcv have one name and version)
     "${PIP[@]}" uninstall -q -y mmcv mmcv-lite onedl-mmcv >/dev/null 2>&1 || true
     if [ "$MMCV" = lite ]; then
         # onedl-mmcv's sdist, built in isolation, has no torch: no ops
@@ -87,8 +107,10 @@ if [ "$(installed_mmcv)" != "$MMCV_DIST $MMCV_VERSION $MMCV" ]; then
 fi
 
 # The rest of the stack; the constraints stop any dependency from upgrading torch or opencv.
-"${PIP[@]}" install -q -c "$VENV/constraints.txt" -r "requirements/$STACK.txt" \
-    -r requirements/runtime.txt -r requirements/tests.txt -r requirements/docs.txt
+if [ "$PINS_CHECKED" = 0 ]; then
+    "${PIP[@]}" install -q -c "$VENV/constraints.txt" -r "requirements/$STACK.txt" \
+        -r requirements/runtime.txt -r requirements/tests.txt -r requirements/docs.txt
+fi
 # Editable: each stack's mim finds configs/ and tools/ where its own lookup
 # says the package is. mim 0.3.8 asks pkg_resources, which names this checkout
 # for `setup.py develop`'s egg-link (site-packages for a PEP 660 install);
@@ -129,3 +151,4 @@ if [ "$(cat "$VENV/wgse-editable" 2>/dev/null)" != "$(editable_stamp)" ] || ! ed
 fi
 
 "$VENV/bin/python" -c "import wgse_mmseg, mmseg, mmcv, torch; print('[setup_env] ready ($STACK in $VENV): torch', torch.__version__, '| mmcv', mmcv.__version__, '| mmseg', mmseg.__version__, '| wgse_mmseg', wgse_mmseg.__version__)"
+[ "$PINS_CHECKED" = 1 ] || pins_stamp > "$VENV/wgse-pins"
