@@ -229,3 +229,14 @@ def wrong_file_kinds(tmp_path_factory):
     return dict(directory=str(root), empty=str(root / 'empty.npy'),
                 text=str(root / 'text.spk'),
                 missing=str(root / 'missing.npy'))
+
+
+#: the tests that run the tools end to end, in processes of their own: the
+#: longest (a minute or two each), started first so that the two workers
+#: finish together (pytest-xdist's work stealing takes the end of a worker's
+#: queue; a long test left at the end kept the other worker idle 51 s)
+END_TO_END_FIRST = ('tests/test_readme_commands.py', 'tests/tools/')
+
+
+def pytest_collection_modifyitems(items):
+    items.sort(key=lambda item: not item.nodeid.startswith(END_TO_END_FIRST))
