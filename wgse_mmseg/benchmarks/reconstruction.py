@@ -96,7 +96,7 @@ def multiply_adds(model: SpikeReconstructor, spikes: np.ndarray) -> int:
     height, width = spikes.shape[-2:]
     crops = [spikes[..., :min(side, height), :min(side, width)]
              for side in COUNT_CROPS]
-    if crops[0].shape == crops[-1].shape:
+    if crops[-1].shape == spikes.shape:  # no larger than the crops
         return _counted_multiply_adds(model, spikes)
     small, large = (_counted_multiply_adds(model, crop) for crop in crops)
     small_pixels, large_pixels = (crop.shape[-2] * crop.shape[-1]
