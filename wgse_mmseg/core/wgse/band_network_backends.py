@@ -108,9 +108,6 @@ class BandNetworkBackend:
     first_use_check = False
     #: pixels of the check's problem
     check_pixels = 67
-    #: precision of a call (:meth:`precision`) -> largest error allowed
-    #: against float64, relative to each tensor's largest magnitude
-    tolerances: Dict[str, float] = {}
 
     def precision(self, coeffs: Tensor) -> str:
         """The arithmetic precision of a call on ``coeffs`` made now."""
@@ -289,7 +286,6 @@ class TritonBackend(BandNetworkBackend):
     check_pixels = 2 * max(config.block for config in (
         triton_band_networks.FORWARD_CONFIGS +
         triton_band_networks.BACKWARD_CONFIGS)) + 3
-    tolerances = triton_band_networks.TOLERANCES
 
     def precision(self, coeffs):
         return triton_band_networks.dot_precision(coeffs.device.type)
