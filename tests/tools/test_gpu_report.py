@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import pytest
+import torch
 
 from wgse_mmseg.benchmarks import gpu_report
 from wgse_mmseg.core.wgse import first_use_check, triton_band_networks
@@ -127,6 +128,50 @@ def test_a_backend_that_raises_is_a_row_and_the_others_run(monkeypatch):
     assert failed[0]['error'] == 'FirstUseCheckFailed: planted'
     assert [r['ok'] for r in rows if r['backend'] == 'torch'] == [
         True, None, None]
+
+
+class _RecordsPrecision(torch.autograd.Function):
+    """Identity; notes the TF32 and autocast settings each pass meets."""
+
+    seen = []
+
+    @staticmethod
+    def forward(ctx, x):
+        _RecordsPrecision.seen.append(
+            ('forward', torch.backends.cudnn.allow_tf32,
+             torch.is_autocast_enabled('cpu')))
+        return x.clone()
+
+    @staticmethod
+    def backward(ctx, grad):
+        _RecordsPrecision.seen.append(
+            ('backward', torch.backends.cudnn.allow_tf32,
+             torch.is_autocast_enabled('cpu')))
+        return grad
+
+
+@pytest.mark.parametrize('precision, tf32, autocast', [
+    ('ieee', False, False), ('tf32', True, False), ('bf16', False, True)])
+def test_a_precision_holds_for_both_passes(precision, tf32, autocast):
+    """The second GPU run measured the torch backend at 'ieee' with TF32
+    errors: its backward ran after the precision's block, under torch's
+    default TF32, and recomputed the forward there. The TF32 setting now
+    covers both passes; autocast, as in training, the forward alone."""
+
+    class Model(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.weight = torch.nn.Parameter(torch.ones(3))
+
+        def forward(self, x):
+            return _RecordsPrecision.apply(x * self.weight)
+
+    _RecordsPrecision.seen.clear()
+    default = torch.backends.cudnn.allow_tf32
+    gpu_report._output_and_grads(Model(), torch.ones(3), precision)
+    assert _RecordsPrecision.seen == [('forward', tf32, autocast),
+                                      ('backward', tf32, False)]
+    assert torch.backends.cudnn.allow_tf32 is default
 
 
 def test_a_failing_job_is_recorded_and_the_others_run(tmp_path):

@@ -49,7 +49,7 @@ import copy
 import json
 import os
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import (Any, Callable, Dict, Iterator, List, NamedTuple,
                     Optional, Sequence, Tuple, Union)
 
@@ -150,16 +150,18 @@ def _precision(name: str, device_type: str) -> Iterator[None]:
 def _output_and_grads(model: WGSE, spikes: torch.Tensor,
                       precision: Optional[str]) -> List[torch.Tensor]:
     """WGSE's output and the gradient of every parameter of
-    ``sum(out * w)`` for a fixed ``w`` (under ``precision``, if given)."""
+    ``sum(out * w)`` for a fixed ``w``, under ``precision`` if given: its
+    TF32 setting for the forward and the backward pass (the ``'torch'``
+    backend recomputes its forward in the backward), its autocast for the
+    forward alone, as in training."""
     model.zero_grad(set_to_none=True)
-    if precision is None:
+    with _precision(precision, spikes.device.type) \
+            if precision else nullcontext():
         out = model(spikes)
-    else:
-        with _precision(precision, spikes.device.type):
-            out = model(spikes)
-    weights = torch.linspace(-1, 1, out.numel(), dtype=out.dtype,
-                             device=out.device).view_as(out)
-    (out * weights).sum().backward()
+        weights = torch.linspace(-1, 1, out.numel(), dtype=out.dtype,
+                                 device=out.device).view_as(out)
+        with torch.autocast(spikes.device.type, enabled=False):
+            (out * weights).sum().backward()
     return [out.detach()] + [p.grad for p in model.parameters()]
 
 
