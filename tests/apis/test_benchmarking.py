@@ -172,3 +172,15 @@ def test_markdown_table_aligns_numbers_right():
     assert lines[0] == '| name |         ms |'
     assert lines[1] == '|------|-----------:|'
     assert lines[2] == '| a    |  1.5 ± 0.1 |'
+
+
+def test_markdown_table_keeps_any_text_in_its_cell():
+    """The first GPU report's autotune keys ('NVIDIA H200 | band_forward |
+    ...') split their rows into six columns of a three-column table."""
+    table = markdown_table(['key', 'n'], [['GPU | kernel', 16],
+                                          ['two\nlines', 4]])
+    lines = table.splitlines()
+    assert lines[2] == r'| GPU \| kernel | 16 |'
+    assert lines[3] == '| two lines     |  4 |'
+    # every row has the header's cells (an escaped bar is not a border)
+    assert {line.replace(r'\|', '').count('|') for line in lines} == {3}

@@ -83,7 +83,7 @@ class Plan(NamedTuple):
     check_pixels: Optional[int] = None
 
 
-#: One H100 in about 8 minutes (docs/gpu.md). T = 129 everywhere, so the
+#: One H200 in 292 s (docs/gpu.md). T = 129 everywhere, so the
 #: band lengths (hence the compiled kernel variants) are shared.
 GPU = Plan('cuda', correctness_shape=(2, 129, 16, 24),
            wgse_shape=(4, 129, 256, 512), wgse_repeat=10,
@@ -505,13 +505,13 @@ def _failed(section: Dict) -> str:
 
 def _row_status(row: Dict) -> str:
     return 'ok' if row['status'] == 'ok' else \
-        'failed: ' + row['error'].splitlines()[-1][:120].replace('|', '/')
+        'failed: ' + row['error'].splitlines()[-1][:120]
 
 
 def _within(row: Dict) -> str:
     """The correctness table's last column for ``row``."""
     if row.get('error'):
-        return 'NO: ' + row['error'].splitlines()[-1][:120].replace('|', '/')
+        return 'NO: ' + row['error'].splitlines()[-1][:120]
     if row['ok'] is None:
         return 'measured' if row.get('note') == REDUCED_PRECISION_NOTE \
             else row['note']
@@ -590,7 +590,7 @@ def format_report(report: Dict[str, Any], command: str) -> str:
               {True: 'yes', False: 'NO'}.get(r['passed'], r.get('note')),
               _num(r.get('max_error'), '.1e'),
               _num(r.get('tolerance'), '.0e'),
-              (r.get('failure') or '-').replace('|', '/'),
+              r.get('failure') or '-',
               _num(r.get('seconds')), r.get('auto_runs', '-')]
              for r in section['rows']]))
         out.append('')
