@@ -10,7 +10,9 @@ problem of that variant and compares the output and every gradient (of the
 coefficients and of each parameter) with the ``torch`` backend in float64
 on the same device, within :data:`TOLERANCE` at every precision. A compile
 or launch error, a NaN or Inf, or an error above the tolerance fails the
-check.
+check. The result is kept for the process, and logged once: ``'auto'``
+then runs the ``torch`` backend; a backend named explicitly raises
+:class:`FirstUseCheckFailed` with the same message.
 
 The problem lies on grids (:data:`GRIDS`) chosen so that, for the paper's
 network (the one the Triton kernel runs), every operand of the ``H x H``
@@ -21,11 +23,9 @@ decision depends on rounding. A kernel that computes what it should then
 agrees with float64 to float32's accumulation at any precision, and one
 tolerance tells it from a wrong one. On random data, TF32 or bf16 rounding
 moves a few pre-activations across zero, and the gradients behind them by
-up to a fifth of their largest magnitude (0.18 at TF32 in the first GPU
-run, docs/gpu.md's history): the precision the user chose, not a fault of
-the kernel, and the ``torch`` fallback's cuDNN rounds the same way. The result is kept for the process, and logged
-once: ``'auto'`` then runs the ``torch`` backend; a backend named
-explicitly raises :class:`FirstUseCheckFailed` with the same message.
+up to a fifth of their largest magnitude, in any implementation (cuDNN's
+too): the first GPU run's random problem failed the kernel at TF32 that
+way (0.18; docs/wgse_speed.md, "The first-use check").
 
 Cost (once per variant and process): the problem is the call's band
 lengths at :attr:`~.band_network_backends.BandNetworkBackend.check_pixels`
@@ -38,7 +38,8 @@ forward+backward of the ``torch`` backend. Its arithmetic is negligible on
 a GPU (67 pixels against the 524288 of a 4x129x256x512 batch); the time is
 the compiles of the variants the check meets first, which the training step
 would have paid anyway, but for the entries autotuning would not have
-picked.
+picked (on an H200: 26-43 s per precision in the first process on a
+machine, 0.7 s in later ones, which find triton's cache).
 """
 import copy
 import logging
