@@ -218,11 +218,13 @@ def bounded():
     return _bounded
 
 
-@pytest.fixture(scope='session')
+@pytest.fixture(scope='module')
 def wrong_file_kinds(tmp_path_factory):
     """Paths of each wrong kind a path argument is fuzzed with:
     ``directory``, ``empty`` (an empty ``.npy``), ``text`` (quotes and a
-    backslash in a ``.spk``) and ``missing``."""
+    backslash in a ``.spk``) and ``missing``. Fresh for each test module:
+    a fuzzed output argument may create ``missing`` (rightly), and a test
+    of another module on the same worker then found a file there."""
     root = tmp_path_factory.mktemp('wrong_file_kinds')
     (root / 'empty.npy').write_bytes(b'')
     (root / 'text.spk').write_text('it\'s "quoted" \\ text')
