@@ -222,16 +222,16 @@ def check_correctness(shape: Shape, device: str) -> Dict[str, Any]:
             try:
                 got = _output_and_grads(model, spikes, precision)
             except Exception as error:  # noqa: BLE001 - a finding
-                rows.append(dict(row, ok=False,
-                                 error=f'{type(error).__name__}: {error}'))
+                rows.append(dict(row, ok=False, error=_error_message(error)))
                 continue
             errors = first_use_check.relative_errors(got, want)
             worst = max(range(len(errors)), key=errors.__getitem__)
             row.update(backend=model.backend_in_use,
                        max_rel_error=errors[worst], tensor=names[worst])
-            if precision == 'ieee' or errors[worst] == float('inf'):
-                row['ok'] = errors[worst] <= row['tolerance'] \
-                    if precision == 'ieee' else False
+            if precision == 'ieee':
+                row['ok'] = errors[worst] <= row['tolerance']
+            elif errors[worst] == float('inf'):  # NaN or Inf
+                row['ok'] = False
             else:
                 row.update(ok=None, note=REDUCED_PRECISION_NOTE)
             rows.append(row)
@@ -297,6 +297,18 @@ def segmentation_step(config: str, shape: Shape, repeat: int, warmup: int,
                 tuned_configs=triton_band_networks.tuned_configs())
 
 
+def _error_message(error: Exception) -> str:
+    """What a report records of an exception: its type and message, the
+    last 2000 characters of a longer one."""
+    message = f'{type(error).__name__}: {error}'.strip()
+    return message if len(message) <= 2000 else '...' + message[-2000:]
+
+
+def _error_line(row: Dict) -> str:
+    """The last line of a row's recorded error, for a table cell."""
+    return row['error'].splitlines()[-1][:120]
+
+
 class _Clock:
     """Progress lines with the time since the report started."""
 
@@ -314,9 +326,7 @@ class _Clock:
             result = run_isolated(fn, *args, **kwargs) if isolate else \
                 fn(*args, **kwargs)
         except Exception as error:  # a failed measurement is a finding
-            message = f'{type(error).__name__}: {error}'.strip()
-            if len(message) > 2000:
-                message = '...' + message[-2000:]
+            message = _error_message(error)
             print(f'    failed: {message.splitlines()[-1]}', flush=True)
             if torch.cuda.is_available():
                 torch.cuda.empty_cache()
@@ -505,13 +515,13 @@ def _failed(section: Dict) -> str:
 
 def _row_status(row: Dict) -> str:
     return 'ok' if row['status'] == 'ok' else \
-        'failed: ' + row['error'].splitlines()[-1][:120]
+        'failed: ' + _error_line(row)
 
 
 def _within(row: Dict) -> str:
     """The correctness table's last column for ``row``."""
     if row.get('error'):
-        return 'NO: ' + row['error'].splitlines()[-1][:120]
+        return 'NO: ' + _error_line(row)
     if row['ok'] is None:
         return 'measured' if row.get('note') == REDUCED_PRECISION_NOTE \
             else row['note']
