@@ -70,7 +70,12 @@ def test_torch_backend_memory_per_pixel_on_cpu(tmp_path):
                  marks=pytest.mark.skipif(torch.cuda.is_available(),
                                           reason='a GPU is present')),
 ])
-def test_usage_errors(args, message):
-    proc = _benchmark(*args)
-    assert proc.returncode == 2
-    assert message in proc.stderr
+def test_usage_errors(args, message, monkeypatch, capsys, load_tool):
+    """The tool's own checks, in this process (the plain environment's: no
+    Triton on the CPU without TRITON_INTERPRET, read when asked)."""
+    monkeypatch.delenv('TRITON_INTERPRET', raising=False)
+    tool = load_tool('tools/analysis_tools/benchmark_wgse.py')
+    with pytest.raises(SystemExit) as exit_info:
+        tool.main(args)
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
