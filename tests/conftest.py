@@ -148,6 +148,32 @@ def interpreter_patches_each_module_once_a_launch():
 
 
 @pytest.fixture(scope='session')
+def built_once(tmp_path_factory):
+    """``built_once(name, build) -> path``: the file ``name`` that
+    ``build(path)`` writes, built once for the whole run, whichever
+    pytest-xdist worker asks first (the others wait for it and share it):
+    a module-scoped fixture is built once per worker, and work stealing
+    spreads a module's tests over the workers. Under a lock in the run's
+    base temporary directory, which the workers share."""
+    from filelock import FileLock
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get('PYTEST_XDIST_WORKER'):
+        shared = shared.parent  # the workers' directories are in one
+    shared = shared / 'built_once'
+    shared.mkdir(exist_ok=True)
+
+    def get(name: str, build):
+        path = shared / name
+        with FileLock(str(shared / f'{name}.lock')):
+            if not path.exists():
+                partial = shared / f'partial_{name}'  # its suffix kept
+                build(str(partial))
+                partial.rename(path)
+        return str(path)
+    return get
+
+
+@pytest.fixture(scope='session')
 def tiny_spike_dataset(tmp_path_factory):
     """A synthetic Spike-Cityscapes-layout set for short runs of the tools:
     4 training and 1 validation sample, T=9, 32x64. Tests that change it

@@ -121,17 +121,17 @@ EXPORTED = 'segformer_b0_raw'
 
 
 @pytest.fixture(scope='module')
-def exported(tmp_path_factory):
+def exported(built_once):
     """``(path, dataset_meta)``: the model of the case :data:`EXPORTED`
-    exported with a dataset meta."""
-    path = str(tmp_path_factory.mktemp('onnx') / 'segformer.onnx')
+    exported with a dataset meta (once for the run: read only)."""
     meta = dict(classes=[f'c{i}' for i in range(19)],  # the model's 19
                 palette=[[i, 2 * i, 255 - i] for i in range(19)])
-    config, options = CASES[EXPORTED]
-    model = _model(config, options)
-    export_onnx(SpikeSegmentorGraph(model), path, T, H, W,
-                dataset_meta=meta)
-    return path, meta
+
+    def build(path):
+        config, options = CASES[EXPORTED]
+        export_onnx(SpikeSegmentorGraph(_model(config, options)), path, T, H,
+                    W, dataset_meta=meta)
+    return built_once('segformer_b0_raw.onnx', build), meta
 
 
 def test_the_file_records_the_shape_and_the_dataset_meta(exported):
@@ -333,12 +333,24 @@ def test_the_comparison_sees_a_model_that_differs(exported):
     assert found['argmax_agreement'] < MIN_ARGMAX_AGREEMENT
 
 
-def test_measure_deployment_times_both_backends():
+def test_measure_deployment_times_both_backends(exported, monkeypatch):
     """The deployment benchmark: both backends timed on the same batch,
-    windows per second the batch over the median call, the machine named."""
+    windows per second the batch over the median call, the machine named.
+    Its export is the module's file of the same model (seed 0 both), as the
+    exporter would write it (the export itself is checked above)."""
+    import shutil
+    from wgse_mmseg.benchmarks import deployment
     from wgse_mmseg.benchmarks.deployment import (BACKENDS,
                                                   format_deployment,
                                                   measure_deployment)
+    exports = []
+
+    def export(graph, path, num_steps, height, width):
+        assert isinstance(graph, SpikeSegmentorGraph)
+        exports.append((num_steps, height, width))
+        shutil.copyfile(exported[0], path)
+        return path
+    monkeypatch.setattr(deployment, 'export_onnx', export)
     result = measure_deployment('segformer_b0_raw', osp.join(
         ROOT, 'configs', 'segformer_b0_raw.py'), None, (T, H, W),
         batch_size=2, repeat=2, warmup=0, threads=1)
@@ -348,6 +360,7 @@ def test_measure_deployment_times_both_backends():
         assert result[backend]['windows_per_s'] == pytest.approx(
             2 / seconds['median'])
     assert result['shape'] == [T, H, W] and result['batch_size'] == 2
+    assert exports == [(T, H, W)]
     assert result['environment']['onnxruntime']
     assert result['threads'] == result['environment']['torch_threads'] == 1
     table = format_deployment([result])
