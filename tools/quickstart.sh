@@ -25,11 +25,12 @@ PY=$VENV/bin/python
 "$PY" tools/dataset_converters/make_synthetic_dataset.py "$DATA" --num-steps 41
 
 # The embedded data: T=41, 128x256 frames, 64x128 crops; a one-epoch warm-up
-# and a short schedule instead of the paper's 10 of 100 epochs.
+# and a short schedule instead of the paper's 10 of 100 epochs; no
+# validation during training (step 4 evaluates the final checkpoint).
 DATA_OPTS=(data_root="$DATA" num_steps=41 crop_size=64,128)
 "$PY" tools/train.py "$CONFIG" --work-dir "$WORK" --resume --cfg-options \
     "${DATA_OPTS[@]}" \
-    train_cfg.max_epochs="$EPOCHS" train_cfg.val_interval="$EPOCHS" \
+    train_cfg.max_epochs="$EPOCHS" train_cfg.val_begin=$((EPOCHS + 1)) \
     param_scheduler.0.end=1 param_scheduler.1.begin=1 \
     param_scheduler.1.end="$EPOCHS" \
     default_hooks.checkpoint.interval=1 default_hooks.checkpoint.max_keep_ckpts=2 \
