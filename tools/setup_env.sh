@@ -78,14 +78,20 @@ fi
 # channels; the paper's T is 129.
 printf '%s\n' "$TORCH_PIN" "opencv-python<5" > "$VENV/constraints.txt"
 
+# (Extension modules are looked for as files, with the suffixes Python's
+# import takes: find_spec of a submodule would import its package, and torch.)
 installed_mmcv() { "$VENV/bin/python" - <<'PY'
-import importlib.metadata as md, importlib.util
+import importlib.machinery, importlib.metadata as md, importlib.util, os.path as osp
 for name in ("mmcv", "mmcv-lite", "onedl-mmcv"):
     try:
         version = md.version(name)
     except md.PackageNotFoundError:
         continue
-    ops = importlib.util.find_spec("mmcv._ext") is not None
+    spec = importlib.util.find_spec("mmcv")
+    ops = spec is not None and any(
+        osp.isfile(osp.join(folder, "_ext" + suffix))
+        for folder in spec.submodule_search_locations or ()
+        for suffix in importlib.machinery.EXTENSION_SUFFIXES)
     print(name, version, "full" if ops else "lite"); break
 PY
 }
@@ -127,13 +133,14 @@ editable_in_place() {  # asked outside the checkout, as an installed command ask
     local python; python="$(cd "$VENV" && pwd)/bin/python"
     # shellcheck disable=SC2086
     (cd / && "$python" - "$1" "$STACK" $C_SOURCES <<'PY'
-import importlib.util, os.path as osp, sys
+import importlib.machinery, importlib.util, os.path as osp, sys
 root, stack, sources = sys.argv[1], sys.argv[2], sys.argv[3:]
 spec = importlib.util.find_spec("wgse_mmseg")
 if spec is None or spec.origin != osp.join(root, "wgse_mmseg", "__init__.py"):
     sys.exit(1)
 # the C kernels built (optional: without a compiler every run tries again)
-built = all(importlib.util.find_spec(source[:-len(".c")].replace("/", ".")) is not None
+built = all(any(osp.isfile(osp.join(root, source[:-len(".c")] + suffix))
+                for suffix in importlib.machinery.EXTENSION_SUFFIXES)
             for source in sources)
 mim = osp.join(root, "wgse_mmseg", ".mim")
 linked = all(osp.islink(osp.join(mim, name)) for name in ("configs", "tools"))
