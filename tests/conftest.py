@@ -266,12 +266,12 @@ def wrong_file_kinds(tmp_path_factory):
                 missing=str(root / 'missing.npy'))
 
 
-#: the tests that run the tools end to end, in processes of their own: the
-#: longest (a minute or two each), started first so that the two workers
-#: finish together (pytest-xdist's work stealing takes the end of a worker's
-#: queue; a long test left at the end kept the other worker idle 51 s)
-END_TO_END_FIRST = ('tests/test_readme_commands.py', 'tests/tools/')
-
-
 def pytest_collection_modifyitems(items):
-    items.sort(key=lambda item: not item.nodeid.startswith(END_TO_END_FIRST))
+    """The tests marked ``long`` first, longest first: pytest-xdist's work
+    stealing takes the end of a worker's queue, so the short tests fill the
+    gaps and no long test is left to run alone at the end (one started
+    last kept the other worker idle 51 s)."""
+    def seconds(item):
+        marker = item.get_closest_marker('long')
+        return marker.args[0] if marker else 0
+    items.sort(key=seconds, reverse=True)  # stable: otherwise as collected

@@ -19,6 +19,7 @@ for _requirement in ('sphinx', 'myst_parser', 'furo'):
                         reason='pip install -r requirements/docs.txt')
 
 
+@pytest.mark.long(17)
 def test_the_docs_build_without_warnings(tmp_path):
     proc = subprocess.run(
         [sys.executable, '-m', 'sphinx', '-W', '--keep-going', '-q',

@@ -203,6 +203,7 @@ def readme_commands():
 
 def test_every_readme_command_is_checked():
     commands = readme_commands()
+    assert set(LONG) <= set(RUN_HERE), set(LONG) - set(RUN_HERE)
     unchecked = [c for c in commands if c not in HOW]
     stale = [c for c in HOW if c not in commands]
     assert not unchecked, ('README commands without an entry in HOW (add '
@@ -248,9 +249,23 @@ def _session(tmp_path):
 
 
 RUN_HERE = [c for c in readme_commands() if HOW.get(c) == RUN]
+#: the commands run here that take tens of seconds: ``long`` tests
+LONG = {'bash tools/quickstart.sh': 100,
+        'python -m wgse_mmseg.apis.reconstruction_benchmark '
+        '../shared/data/reds_sample': 30,
+        'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
+        '203_part2_key_id151.dat --height 250 --width 400 --stride 30 --fps 4 '
+        '--out walk.gif': 28,
+        'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
+        '203_part2_key_id151.dat --height 250 --width 400 --frames '
+        '100,150,200 --out recon/': 17,
+        'python -m wgse_mmseg.benchmarks.reconstruction '
+        '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150': 17}
 
 
-@pytest.mark.parametrize('command', RUN_HERE)
+@pytest.mark.parametrize('command', [
+    pytest.param(c, marks=pytest.mark.long(LONG[c])) if c in LONG else c
+    for c in RUN_HERE])
 def test_readme_command_runs(command, tmp_path):
     if '../shared' in command and not osp.isdir(SHARED):
         pytest.skip(f'{SHARED} is absent (fresh clone)')

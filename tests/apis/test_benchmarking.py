@@ -35,6 +35,7 @@ def count(module):
     return sum(p.numel() for p in module.parameters())
 
 
+@pytest.mark.long(28)
 def test_cli_prints_the_table_and_writes_json(tmp_path):
     out = tmp_path / 'bench.json'
     proc = subprocess.run(

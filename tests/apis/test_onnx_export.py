@@ -81,6 +81,7 @@ def _agreement(got, expected):
     return difference, scale, same
 
 
+@pytest.mark.long(20)
 @pytest.mark.parametrize('case', sorted(CASES))
 def test_exported_model_agrees_with_the_torch_model(case, tmp_path, request,
                                                     single_thread):
@@ -211,6 +212,7 @@ def test_a_model_that_does_not_export_leaves_no_file(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.long(30)
 def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys, load_tool):
     """CONFIG CKPT --shape T H W: weights from the checkpoint (read weights
     only), the check printed; a checkpoint of another T, a shape that is

@@ -489,6 +489,7 @@ def _converter_killed_at(step, when, args):
         os._exit(code)
 
 
+@pytest.mark.long(15)
 def test_converter_survives_sigkill(tmp_path, cityscapes, single_thread):
     """24 runs killed at random file-system steps, alternating between two
     settings over a finished conversion: after every kill, each sample with

@@ -24,6 +24,7 @@ def _benchmark(*args):
         list(args), capture_output=True, text=True, cwd=ROOT, env=ENV)
 
 
+@pytest.mark.long(30)
 def test_table_and_json_report_ratios_and_agreement(tmp_path):
     out = tmp_path / 'wgse.json'
     proc = _benchmark('--shapes', '1x41x4x6', '1x12x3x3', '--repeat', '1',

@@ -40,6 +40,7 @@ SHORT_RUN = ('train_cfg.max_epochs=2', 'train_cfg.val_interval=100',
              'default_hooks.checkpoint.interval=100')
 
 
+@pytest.mark.long(35)
 def test_two_processes_keep_the_enhancer_in_sync(tiny_spike_dataset,
                                                  tiny_run_options, tmp_path):
     data = tiny_spike_dataset
@@ -72,6 +73,7 @@ def test_two_processes_keep_the_enhancer_in_sync(tiny_spike_dataset,
                                    rtol=1e-4, atol=1e-6)
 
 
+@pytest.mark.long(50)
 def test_dist_train_and_dist_test_scripts_on_cpu(tiny_spike_dataset,
                                                  tiny_run_options, tmp_path):
     """MMSeg's interface as the README gives it, ``bash tools/dist_train.sh

@@ -24,6 +24,7 @@ def targets(load_tool):
     return load_tool('tools/analysis_tools/gpu_report.py').TARGETS
 
 
+@pytest.mark.long(65)
 def test_smoke_run_writes_every_section(tmp_path, targets):
     env = {'OMP_NUM_THREADS': '1', 'PATH': '/usr/bin:/bin',
            'PYTHONPATH': ROOT}

@@ -6,6 +6,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 HERE = osp.dirname(osp.abspath(__file__))
 CONFIG = osp.join(
@@ -26,6 +28,7 @@ def _run(cmd, cwd):
                           text=True, timeout=900)
 
 
+@pytest.mark.long(22)
 def test_resume_after_a_kill_during_a_checkpoint_save(tiny_spike_dataset,
                                                       tiny_run_options,
                                                       tmp_path):

@@ -39,6 +39,7 @@ EVERY_EPOCH = ('train_cfg.val_interval=1',
                'default_hooks.checkpoint.interval=1')
 
 
+@pytest.mark.long(70)
 def test_mim_in_the_readme_install_mode(tiny_spike_dataset, tiny_run_options,
                                         tmp_path):
     """mim train / test / run against this checkout's editable install."""
@@ -108,6 +109,7 @@ def installed(tmp_path_factory):
     return target
 
 
+@pytest.mark.long(40)
 def test_mim_train_and_test_from_a_regular_install(installed,
                                                    tiny_spike_dataset,
                                                    tiny_run_options,

@@ -469,6 +469,7 @@ def test_report_gains_the_deployment_columns(tmp_path):
         runner.read_deployment(str(bad))
 
 
+@pytest.mark.long(45)
 def test_tiny_grid_end_to_end_and_resume(tmp_path, capsys):
     """The command as a user runs it, then (in this process, the same
     ``main``) run again, and a report over more than has run."""

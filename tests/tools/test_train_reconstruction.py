@@ -7,6 +7,7 @@ import sys
 
 import cv2
 import numpy as np
+import pytest
 import torch
 
 import wgse_mmseg
@@ -39,6 +40,7 @@ def _run(tmp_path, **env):
                           env=env, timeout=900)
 
 
+@pytest.mark.long(60)
 def test_the_recipe_runs_start_to_finish(tmp_path):
     reds = _reds_dat_folder(str(tmp_path / 'reds'))
     proc = _run(tmp_path, REDS_TRAIN=reds, REDS_TEST=reds)
