@@ -167,6 +167,7 @@ def built_once(tmp_path_factory):
         with FileLock(str(shared / f'{name}.lock')):
             if not path.exists():
                 partial = shared / f'partial_{name}'  # its suffix kept
+                partial.unlink(missing_ok=True)  # of a build that failed
                 build(str(partial))
                 partial.rename(path)
         return str(path)

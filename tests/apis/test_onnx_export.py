@@ -15,6 +15,7 @@ enhancer's (none, TFP, WGSE); the case ``segformer_b0_raw`` checks the
 module's file that the runner's tests use.
 """
 import os.path as osp
+import shutil
 from types import SimpleNamespace
 
 import cv2
@@ -340,11 +341,7 @@ def test_measure_deployment_times_both_backends(exported, monkeypatch):
     windows per second the batch over the median call, the machine named.
     Its export is the module's file of the same model (seed 0 both), as the
     exporter would write it (the export itself is checked above)."""
-    import shutil
     from wgse_mmseg.benchmarks import deployment
-    from wgse_mmseg.benchmarks.deployment import (BACKENDS,
-                                                  format_deployment,
-                                                  measure_deployment)
     exports = []
 
     def export(graph, path, num_steps, height, width):
@@ -353,10 +350,10 @@ def test_measure_deployment_times_both_backends(exported, monkeypatch):
         shutil.copyfile(exported[0], path)
         return path
     monkeypatch.setattr(deployment, 'export_onnx', export)
-    result = measure_deployment('segformer_b0_raw', osp.join(
+    result = deployment.measure_deployment('segformer_b0_raw', osp.join(
         ROOT, 'configs', 'segformer_b0_raw.py'), None, (T, H, W),
         batch_size=2, repeat=2, warmup=0, threads=1)
-    for backend in BACKENDS:
+    for backend in deployment.BACKENDS:
         seconds = result[backend]['seconds']
         assert len(seconds['samples']) == 2
         assert result[backend]['windows_per_s'] == pytest.approx(
@@ -365,6 +362,6 @@ def test_measure_deployment_times_both_backends(exported, monkeypatch):
     assert exports == [(T, H, W)]
     assert result['environment']['onnxruntime']
     assert result['threads'] == result['environment']['torch_threads'] == 1
-    table = format_deployment([result])
+    table = deployment.format_deployment([result])
     assert '| segformer_b0_raw | 9x32x64   |     2 |' in table
     assert 'Machine: ' in table and 'threads: 1' in table
