@@ -2,7 +2,7 @@
 # WGSE on a GPU in one command, on a machine that has torch and triton but nothing of
 # OpenMMLab and no network: installs tools/gpu_bundle.sh's wheels (offline, into
 # DIR/site), then runs tools/analysis_tools/gpu_report.py, which writes docs/gpu.md
-# and gpu.json beside it (292 s on one H200).
+# and gpu.json beside it (on one H100 about 7 minutes, 3.5 with triton's cache warm).
 #
 #   bash tools/gpu_bundle.sh build        # first, here, with network (wheels for Python 3.12)
 #   bash tools/gpu_report.sh [ARGS]       # there, from a copy of the tree with gpu_bundle/

@@ -30,7 +30,8 @@ Sections:
   or what failed, the largest error, its seconds, and the backend ``'auto'``
   runs then; the ``wgse`` and ``correctness`` sections have the Triton
   kernel and the ``torch`` fallback side by side.
-* ``autotune``: the launch entries the Triton kernels chose
+* ``autotune``: the launch entries the Triton kernels chose, with the time
+  each entry took when the autotuner measured it
   (:func:`~wgse_mmseg.core.wgse.triton_band_networks.tuned_configs` of
   every process).
 * ``targets``: the figures of :data:`FIGURES` against the targets the
@@ -83,7 +84,8 @@ class Plan(NamedTuple):
     check_pixels: Optional[int] = None
 
 
-#: One H200 in 292 s (docs/gpu.md). T = 129 everywhere, so the
+#: One H100 in 209 s with triton's cache warm, about 7 minutes with it
+#: empty (docs/gpu.md). T = 129 everywhere, so the
 #: band lengths (hence the compiled kernel variants) are shared.
 GPU = Plan('cuda', correctness_shape=(2, 129, 16, 24),
            wgse_shape=(4, 129, 256, 512), wgse_repeat=10,
@@ -549,6 +551,27 @@ def _model_table(rows: Sequence[Dict], latency: bool) -> str:
     return markdown_table(headers, table)
 
 
+def _autotune_lines(section: Dict[str, Any]) -> List[str]:
+    """The report's autotune section: the entries, then per variant the
+    one chosen and every entry's measured time."""
+    out = ['## Autotune', '',
+           'Entries: forward ' + ', '.join(
+               f"{c['block']} px/{c['num_warps']} warps"
+               for c in section['forward_entries']) + '; backward ' +
+           ', '.join(f"{c['block']} px/{c['num_warps']} warps"
+                     for c in section['backward_entries']) + '.', '']
+    if section['chosen']:
+        out.append(markdown_table(
+            ['variant', 'block', 'warps', 'ms per entry (block x warps)'],
+            [[k, c['block'], c['num_warps'], ', '.join(
+                f'{entry}: {ms:.2f}' for entry, ms in c['entry_ms'].items())]
+             for k, c in sorted(section['chosen'].items())]))
+    else:
+        out.append('None chosen: no kernel was tuned in this run (the '
+                   'interpreter runs each first entry).')
+    return out
+
+
 def format_report(report: Dict[str, Any], command: str) -> str:
     """docs/gpu.md: every section as a table, the environment and the
     command that produced it."""
@@ -650,21 +673,7 @@ def format_report(report: Dict[str, Any], command: str) -> str:
             f"{_shape_text(section['shape'])} (batch x T x H x W), training "
             'step as above.', '', _model_table(section['rows'], False), '']
 
-    section = sections['autotune']
-    out += ['## Autotune', '',
-            'Entries: forward ' + ', '.join(
-                f"{c['block']} px/{c['num_warps']} warps"
-                for c in section['forward_entries']) + '; backward ' +
-            ', '.join(f"{c['block']} px/{c['num_warps']} warps"
-                      for c in section['backward_entries']) + '.', '']
-    if section['chosen']:
-        out.append(markdown_table(
-            ['variant', 'block', 'warps'],
-            [[k, c['block'], c['num_warps']]
-             for k, c in sorted(section['chosen'].items())]))
-    else:
-        out.append('None chosen: no kernel was tuned in this run (the '
-                   'interpreter runs each first entry).')
+    out += _autotune_lines(sections['autotune'])
     out += ['', '## Against the targets (one H100, docs/gpu.md)', '',
             markdown_table(
                 ['target', 'this run', 'at most', 'moonshot', 'met'],

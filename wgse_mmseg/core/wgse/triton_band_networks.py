@@ -58,14 +58,20 @@ class LaunchConfig(NamedTuple):
 
 
 #: The entries a GPU chooses from, the first being what runs untuned (the
-#: interpreter's). The first entries keep the registers low enough for
-#: several programs per SM where they can (docs/wgse_speed.md, "Compiled for
-#: GPUs": on sm_90 the forward at 16 pixels and 4 warps uses 112 registers
-#: a thread at 32 channels, 4 programs per SM; the backward, which carries
-#: the gradient's windows and three ``H x H`` parameter-gradient sums
-#: besides, 234-255, 2 programs). 64 pixels at 8 warps fitted one program
-#: per SM.
-FORWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(32, 4))
+#: interpreter's). The 16-pixel entries keep the registers low enough for
+#: several programs per SM (docs/wgse_speed.md, "Compiled for GPUs": on
+#: sm_90 the forward at 16 pixels and 4 warps uses 112 registers a thread at
+#: 32 channels, 4 programs per SM; the backward, which carries the
+#: gradient's windows and three ``H x H`` parameter-gradient sums besides,
+#: 234-255, 2 programs). The forward's 64-pixel tile fills its 254 registers
+#: without spilling and ran the longest band (72) at TF32 in 2.8 ms against
+#: the 16-pixel tile's 5.5 ms on one H100 (4x256x512 pixels; 32 pixels at 4
+#: warps took 6.1 ms, so it is no longer an entry). The backward spills at
+#: 16 pixels and 2 warps, and at 32 pixels and 4 warps it ran 5x slower
+#: than at 16 (78 against 15 ms): the autotuner keeps timing it on GPUs
+#: nobody here has measured. The report of ``bash tools/gpu_report.sh``
+#: lists each entry's time per variant (:func:`tuned_configs`).
+FORWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(64, 4))
 BACKWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(32, 4))
 #: Hidden widths the kernels take (``tl.dot`` needs powers of two >= 16).
 #: Not 64: its TF32 backward needs 116-137 KB of shared memory a program,
@@ -135,20 +141,31 @@ def _band_params(params: Sequence[Tensor], band: int) -> List[Tensor]:
     return [p.contiguous() for p in params[6 * band:6 * band + 6]]
 
 
+class _Tuned(NamedTuple):
+    """What the autotuner chose for one variant, and the time in
+    milliseconds it measured for each entry it chose from."""
+    config: LaunchConfig
+    entry_ms: Tuple[Tuple[LaunchConfig, float], ...]
+
+
 #: (device name, kernel, band length, width, precision, input gradient,
-#: pixels rounded up to a power of two) -> the entry timed fastest there
-_TUNED: Dict[tuple, LaunchConfig] = {}
+#: pixels rounded up to a power of two) -> the choice
+_TUNED: Dict[tuple, _Tuned] = {}
 
 
-def tuned_configs() -> Dict[str, Dict[str, int]]:
+def tuned_configs() -> Dict[str, Dict[str, object]]:
     """The entries chosen so far in this process, by a readable key
     (``'NVIDIA H100 | band_backward | L=72 H=32 tf32 input_grad=False |
-    <=524288 px'``): ``{'block', 'num_warps'}``."""
+    <=524288 px'``): ``{'block', 'num_warps', 'entry_ms'}``, the last
+    mapping each entry (``'16x4'``: block x warps) to its measured
+    milliseconds."""
     return {f'{device} | {kernel} | L={length} H={hidden} {precision}'
             f'{"" if grad is None else f" input_grad={grad}"} | <={px} px':
-            config._asdict()
+            dict(tuned.config._asdict(), entry_ms={
+                f'{entry.block}x{entry.num_warps}': ms
+                for entry, ms in tuned.entry_ms})
             for (device, kernel, length, hidden, precision, grad, px),
-            config in _TUNED.items()}
+            tuned in _TUNED.items()}
 
 
 def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
@@ -164,8 +181,9 @@ def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
     if full_key not in _TUNED:
         times = [triton.testing.do_bench(lambda c=c: launch(c), warmup=1,
                                          rep=5) for c in configs]
-        _TUNED[full_key] = configs[times.index(min(times))]
-    return _TUNED[full_key]
+        _TUNED[full_key] = _Tuned(configs[times.index(min(times))],
+                                  tuple(zip(configs, times)))
+    return _TUNED[full_key].config
 
 
 class _TritonBandNetworks(torch.autograd.Function):
