@@ -106,8 +106,13 @@ def test_auto_falls_back_and_logs_once(monkeypatch, log, fault, what):
     assert check.device == 'cpu' and 'bands [3, 3, 6]' in check.variant
     torch.testing.assert_close(out, _torch_result(model, spikes),
                                rtol=0, atol=0)
-    assert len(log) == 1
-    level, message = log[0]
+    assert len(log) == 2  # the start, then the outcome
+    assert log[0][0] == logging.INFO
+    assert log[0][1].startswith(
+        f"WGSE: checking the 'triton' band-network kernel on cpu "
+        f"({check.variant}) against the 'torch' backend in float64 before "
+        f"its first use")
+    level, message = log[1]
     assert level == logging.WARNING
     for part in ('FAILED its first-use check', 'on cpu', what,
                  'largest relative error', "runs the 'torch' backend",
@@ -160,12 +165,13 @@ def test_a_kernel_that_agrees_runs_after_one_check_per_variant(
     # 2 launch entries x (with, without the input gradient), one call each
     assert stand_in.calls == 4 + 1
     torch.testing.assert_close(out, _torch_result(model, _spikes()))
-    assert len(log) == 1 and log[0][0] == logging.INFO
-    assert 'passed its first-use check' in log[0][1]
+    assert [level for level, _ in log] == [logging.INFO] * 2
+    assert 'WGSE: checking' in log[0][1]
+    assert 'passed its first-use check' in log[1][1]
     model(_spikes())
-    assert stand_in.calls == 6 and len(log) == 1  # checked once
+    assert stand_in.calls == 6 and len(log) == 2  # checked once
     model(_spikes(steps=20))  # other band lengths: another variant
-    assert stand_in.calls == 6 + 5 and len(log) == 2
+    assert stand_in.calls == 6 + 5 and len(log) == 4
 
 
 def test_backends_without_a_kernel_of_their_own_are_not_checked(log):
@@ -218,7 +224,8 @@ def test_the_problem_is_exact_at_every_precision(hidden, steps):
     model = WGSE(hidden_channels=hidden)
     lengths = band_lengths(steps, model.wavelet, model.level, model.mode)
     nets, coeffs, weights = first_use_check._problem(
-        model.band_networks, lengths, 67, torch.device('cpu'))
+        model.band_networks, lengths,
+        band_network_backends.TritonBackend.check_pixels, torch.device('cpu'))
     seen = {'operands': [], 'pre-activations': []}
     for net in nets:
         layer = net.residual_layers[0]

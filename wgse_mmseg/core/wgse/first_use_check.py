@@ -10,8 +10,10 @@ problem of that variant and compares the output and every gradient (of the
 coefficients and of each parameter) with the ``torch`` backend in float64
 on the same device, within :data:`TOLERANCE` at every precision. A compile
 or launch error, a NaN or Inf, or an error above the tolerance fails the
-check. The result is kept for the process, and logged once: ``'auto'``
-then runs the ``torch`` backend; a backend named explicitly raises
+check. A log line says the check starts (in a machine's first process it
+compiles the kernel, for about a minute on an H100), and the result is kept for the
+process and logged once: where it failed, ``'auto'`` then runs the
+``torch`` backend; a backend named explicitly raises
 :class:`FirstUseCheckFailed` with the same message.
 
 The problem lies on grids (:data:`GRIDS`) chosen so that, for the paper's
@@ -29,13 +31,13 @@ way (0.18; docs/wgse_speed.md, "The first-use check").
 
 Cost (once per variant and process): the problem is the call's band
 lengths at :attr:`~.band_network_backends.BandNetworkBackend.check_pixels`
-pixels (67 for Triton: two tiles of its largest launch entry, 32 pixels,
+pixels (131 for Triton: two tiles of its largest launch entry, 64 pixels,
 and a partial third); every launch entry the backend can choose is run
 forward and backward twice, with and without the coefficients' gradient
 (Triton: 2 entries x 2 = 4 forward+backward passes, one kernel launch per
 band each way: 48 launches for WGSE's 6 bands), plus one float64
 forward+backward of the ``torch`` backend. Its arithmetic is negligible on
-a GPU (67 pixels against the 524288 of a 4x129x256x512 batch); the time is
+a GPU (131 pixels against the 524288 of a 4x129x256x512 batch); the time is
 the compiles of the variants the check meets first, which the training step
 would have paid anyway, but for the entries autotuning would not have
 picked (on an H100: 35-61 s per precision in the first process on a
@@ -76,8 +78,7 @@ class CheckResult(NamedTuple):
 
     def message(self) -> str:
         """One log line saying what was checked and how it went."""
-        where = (f'the {self.backend!r} band-network kernel on '
-                 f'{self.device} ({self.variant})')
+        where = _kernel_text(self.backend, self.device, self.variant)
         error = ('-' if self.max_error is None else
                  f'{self.max_error:.2e}')
         if self.passed:
@@ -94,6 +95,11 @@ class CheckResult(NamedTuple):
 
 #: (backend, device, variant) -> its check in this process
 _RESULTS: Dict[tuple, CheckResult] = {}
+
+
+def _kernel_text(backend: str, device: str, variant: str) -> str:
+    """What the log lines call the kernel a check is about."""
+    return f'the {backend!r} band-network kernel on {device} ({variant})'
 
 
 def relative_errors(got: Sequence[Tensor], want: Sequence[Tensor]
@@ -252,11 +258,16 @@ def check_on_first_use(backend, reference, networks: Sequence[nn.Module],
     """The first-use check of ``backend`` for the variant of this call
     (``coeffs`` ``(B, P, C)``, bands of ``lengths``), against ``reference``
     (the ``torch`` backend) in float64; run once per process and variant,
-    logged once (passed: info; failed: warning)."""
+    logged when it starts (info) and once with its result (passed: info;
+    failed: warning)."""
     device = str(coeffs.device)
     key = (backend.name, device, _variant(backend, networks, coeffs,
                                           lengths))
     if key not in _RESULTS:
+        _log(logging.INFO,
+             f'WGSE: checking {_kernel_text(*key)} against the \'torch\' '
+             f'backend in float64 before its first use; a machine\'s first '
+             f'process compiles the kernel first (about a minute on an H100)')
         start = time.perf_counter()
         with torch.inference_mode(False), torch.enable_grad():
             outcome = _run_check(backend, reference, networks, coeffs,
@@ -265,17 +276,17 @@ def check_on_first_use(backend, reference, networks: Sequence[nn.Module],
             backend.name, device, key[2],
             tolerance=TOLERANCE,
             seconds=time.perf_counter() - start, **outcome)
-        _log(result)
+        _log(logging.INFO if result.passed else logging.WARNING,
+             result.message())
     return _RESULTS[key]
 
 
-def _log(result: CheckResult) -> None:
+def _log(level: int, message: str) -> None:
     """Into the training log (mmengine's current logger) where mmengine
     imports, else Python's logging."""
-    level = logging.INFO if result.passed else logging.WARNING
     try:
         from mmengine.logging import print_log
     except ImportError:
-        logging.getLogger(__name__).log(level, result.message())
+        logging.getLogger(__name__).log(level, message)
     else:
-        print_log(result.message(), logger='current', level=level)
+        print_log(message, logger='current', level=level)
