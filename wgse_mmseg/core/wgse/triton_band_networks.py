@@ -66,7 +66,8 @@ class LaunchConfig(NamedTuple):
 #: 234-255, 2 programs). The forward's 64-pixel tile fills its 254 registers
 #: without spilling and ran the longest band (72) at TF32 in 2.8 ms against
 #: the 16-pixel tile's 5.5 ms on one H100 (4x256x512 pixels; 32 pixels at 4
-#: warps took 6.1 ms, so it is no longer an entry). The backward spills at
+#: warps took 6.1 ms, so it is no longer an entry; a one-off sweep, not a
+#: script of the repository: docs/wgse_speed.md). The backward spills at
 #: 16 pixels and 2 warps, and at 32 pixels and 4 warps it ran 5x slower
 #: than at 16 (78 against 15 ms): the autotuner keeps timing it on GPUs
 #: nobody here has measured. The report of ``bash tools/gpu_report.sh``
