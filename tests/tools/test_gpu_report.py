@@ -227,13 +227,14 @@ def test_targets_not_measured_when_their_jobs_failed(targets):
 
 def test_autotune_section_lists_each_entrys_time():
     chosen = {'GPU | band_forward | L=72 H=32 tf32 | <=524288 px': dict(
-        block=64, num_warps=4, entry_ms={'16x4': 5.4912, '64x4': 2.8})}
+        entry='64x4', entry_ms={'16x4': 5.4912, '64x4': 2.8})}
     lines = gpu_report._autotune_lines(dict(
-        chosen=chosen, forward_entries=[dict(block=16, num_warps=4)],
-        backward_entries=[dict(block=32, num_warps=4)]))
-    assert lines[2] == ('Entries: forward 16 px/4 warps; backward 32 px/4 '
-                        'warps.')
+        chosen=chosen, forward_entries=['16x4', '64x4'],
+        backward_entries=['16x4', '16x4r168']))
+    assert lines[2] == ('Entries (pixels x warps, rR: at most R registers a '
+                        'thread): forward 16x4, 64x4; backward 16x4, '
+                        '16x4r168.')
     row = lines[-1].splitlines()[-1]
     assert [cell.strip() for cell in row.replace(r'\|', '/').split('|')[1:-1]
-            ] == ['GPU / band_forward / L=72 H=32 tf32 / <=524288 px', '64',
-                  '4', '16x4: 5.49, 64x4: 2.80']
+            ] == ['GPU / band_forward / L=72 H=32 tf32 / <=524288 px', '64x4',
+                  '16x4: 5.49, 64x4: 2.80']

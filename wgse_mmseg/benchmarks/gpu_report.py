@@ -488,9 +488,9 @@ def run_report(plan: Plan, root: str, targets: Targets,
             tuned.update(row.get('tuned_configs') or {})
     sections['autotune'] = dict(
         status='ok', chosen=tuned, forward_entries=[
-            c._asdict() for c in triton_band_networks.FORWARD_CONFIGS],
+            c.name for c in triton_band_networks.FORWARD_CONFIGS],
         backward_entries=[
-            c._asdict() for c in triton_band_networks.BACKWARD_CONFIGS])
+            c.name for c in triton_band_networks.BACKWARD_CONFIGS])
     sections['targets'] = dict(status='ok',
                                rows=_targets(sections, targets))
     print(f'[gpu_report {clock.elapsed():6.1f} s] done', flush=True)
@@ -555,15 +555,13 @@ def _autotune_lines(section: Dict[str, Any]) -> List[str]:
     """The report's autotune section: the entries, then per variant the
     one chosen and every entry's measured time."""
     out = ['## Autotune', '',
-           'Entries: forward ' + ', '.join(
-               f"{c['block']} px/{c['num_warps']} warps"
-               for c in section['forward_entries']) + '; backward ' +
-           ', '.join(f"{c['block']} px/{c['num_warps']} warps"
-                     for c in section['backward_entries']) + '.', '']
+           'Entries (pixels x warps, rR: at most R registers a thread): '
+           f"forward {', '.join(section['forward_entries'])}; backward "
+           f"{', '.join(section['backward_entries'])}.", '']
     if section['chosen']:
         out.append(markdown_table(
-            ['variant', 'block', 'warps', 'ms per entry (block x warps)'],
-            [[k, c['block'], c['num_warps'], ', '.join(
+            ['variant', 'chosen', 'ms per entry'],
+            [[k, c['entry'], ', '.join(
                 f'{entry}: {ms:.2f}' for entry, ms in c['entry_ms'].items())]
              for k, c in sorted(section['chosen'].items())]))
     else:

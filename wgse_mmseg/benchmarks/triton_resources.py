@@ -63,13 +63,14 @@ _SIGNATURES = {
 class Variant(NamedTuple):
     """One compiled kernel: name, hidden width, precision, whether it
     computes the input gradient (``None`` for the forward), the launch
-    entry's ``block`` and ``num_warps``."""
+    entry's ``block``, ``num_warps`` and ``maxnreg``."""
     kernel: str
     hidden: int
     precision: str
     input_grad: Optional[bool]
     block: int
     num_warps: int
+    maxnreg: Optional[int] = None
 
     @property
     def default(self) -> bool:
@@ -79,7 +80,7 @@ class Variant(NamedTuple):
                                                       FORWARD_CONFIGS)
         first = (FORWARD_CONFIGS if self.kernel == 'band_forward' else
                  BACKWARD_CONFIGS)[0]
-        return ((self.block, self.num_warps) == tuple(first) and
+        return ((self.block, self.num_warps, self.maxnreg) == first and
                 self.hidden in (16, 32) and self.precision != 'ieee')
 
 
@@ -164,7 +165,7 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
                        signature=signature, constexprs=constants)
     compiled = triton.compile(
         source, target=GPUTarget('cuda', ARCHITECTURES[arch][0], 32),
-        options=dict(num_warps=variant.num_warps))
+        options=dict(num_warps=variant.num_warps, maxnreg=variant.maxnreg))
     with tempfile.NamedTemporaryFile(suffix='.cubin') as cubin:
         cubin.write(compiled.asm['cubin'])
         cubin.flush()
@@ -218,10 +219,12 @@ def format_table(rows: Sequence[Dict]) -> str:
              '|---|---|--:|---|---|--:|--:|--:|--:|--:|--:|']
     for r in rows:
         grad = '' if r['input_grad'] is None else str(r['input_grad'])
+        cap = '' if r['maxnreg'] is None else f" r{r['maxnreg']}"
         lines.append(
             f"| {r['arch']} | {r['kernel']}{' *' if r['default'] else ''} "
             f"| {r['hidden']} | {r['precision']} | {grad} | {r['block']} | "
-            f"{r['num_warps']} | {r['registers']} | {r['spill_bytes']} | "
+            f"{r['num_warps']}{cap} | "
+            f"{r['registers']} | {r['spill_bytes']} | "
             f"{r['shared_bytes']} | {r['programs_per_sm']} |")
     return '\n'.join(lines)
 

@@ -36,7 +36,8 @@ def test_every_launchable_variant_compiles_for_every_target(rows):
     """Forward and backward (with and without the input gradient) at every
     width, precision and launch entry, for sm_80, sm_89 and sm_90."""
     compiled = [(r['arch'], r['kernel'], r['hidden'], r['precision'],
-                 r['input_grad'], r['block'], r['num_warps']) for r in rows]
+                 r['input_grad'], r['block'], r['num_warps'], r['maxnreg'])
+                for r in rows]
     expected = {(a, *v) for v, a in triton_resources.jobs_for(
         triton_resources.ARCHITECTURES)}
     assert len(compiled) == len(set(compiled)) and set(compiled) == expected

@@ -40,8 +40,8 @@ forward+backward of the ``torch`` backend. Its arithmetic is negligible on
 a GPU (131 pixels against the 524288 of a 4x129x256x512 batch); the time is
 the compiles of the variants the check meets first, which the training step
 would have paid anyway, but for the entries autotuning would not have
-picked (on an H100: 35-61 s per precision in the first process on a
-machine, 0.2-0.9 s in later ones, which find triton's cache).
+picked (on an H100 or H200: 30-60 s per precision in the first process
+on a machine, 0.2-0.9 s in later ones, which find triton's cache).
 """
 import copy
 import logging

@@ -31,6 +31,7 @@ Triton's interpreter (``TRITON_INTERPRET=1`` in the environment before
 triton is first imported) runs the same kernels on CPU tensors; the tests
 use it, since CI has no GPU.
 """
+import functools
 import os
 from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
@@ -52,28 +53,35 @@ __all__ = []
 
 class LaunchConfig(NamedTuple):
     """How a kernel is launched: ``block`` pixels per program (``tl.dot``
-    needs at least 16) and ``num_warps`` warps per program."""
+    needs at least 16), ``num_warps`` warps per program and, where not
+    ``None``, ``maxnreg``: the most registers a thread may use (ptxas
+    spills the rest), which lets more programs share an SM."""
     block: int
     num_warps: int
+    maxnreg: Optional[int] = None
+
+    @property
+    def name(self) -> str:
+        """``'16x4'`` (block x warps), ``'16x4r168'`` with ``maxnreg``."""
+        return f'{self.block}x{self.num_warps}' + (
+            '' if self.maxnreg is None else f'r{self.maxnreg}')
 
 
 #: The entries a GPU chooses from, the first being what runs untuned (the
-#: interpreter's). The 16-pixel entries keep the registers low enough for
-#: several programs per SM (docs/wgse_speed.md, "Compiled for GPUs": on
-#: sm_90 the forward at 16 pixels and 4 warps uses 112 registers a thread at
-#: 32 channels, 4 programs per SM; the backward, which carries the
-#: gradient's windows and three ``H x H`` parameter-gradient sums besides,
-#: 234-255, 2 programs). The forward's 64-pixel tile fills its 254 registers
-#: without spilling and ran the longest band (72) at TF32 in 2.8 ms against
-#: the 16-pixel tile's 5.5 ms on one H100 (4x256x512 pixels; 32 pixels at 4
-#: warps took 6.1 ms, so it is no longer an entry; a one-off sweep, not a
-#: script of the repository: docs/wgse_speed.md). The backward spills at
-#: 16 pixels and 2 warps, and at 32 pixels and 4 warps it ran 5x slower
-#: than at 16 (78 against 15 ms): the autotuner keeps timing it on GPUs
-#: nobody here has measured. The report of ``bash tools/gpu_report.sh``
-#: lists each entry's time per variant (:func:`tuned_configs`).
+#: interpreter's). Chosen with ``tools/analysis_tools/sweep_band_kernels.py``
+#: (the longest band at T=129, 72, 32 channels, 4x256x512 pixels;
+#: docs/wgse_speed.md, "Launch entries"). The forward's 64-pixel tile fills
+#: its 254 registers on sm_90 without spilling and runs on warp-group
+#: tensor-core instructions: 2.7 ms against the 16-pixel tile's 5.2 on one
+#: H200 at TF32; the 16-pixel tile (112 registers, 4 programs an SM) stays
+#: for GPUs nobody here has measured. The backward keeps one entry: it
+#: carries the gradient's windows and three ``H x H`` parameter-gradient
+#: sums besides the forward's, 234-255 registers at 16 pixels, and every
+#: other entry measured was slower on an H100 and an H200 (2 or 8 warps;
+#: 32 or 64 pixels, which spill 1-3.5 KB a thread on every target; a
+#: register cap for more programs an SM) by 5% to 5x.
 FORWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(64, 4))
-BACKWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(32, 4))
+BACKWARD_CONFIGS = (LaunchConfig(16, 4), )
 #: Hidden widths the kernels take (``tl.dot`` needs powers of two >= 16).
 #: Not 64: its TF32 backward needs 116-137 KB of shared memory a program,
 #: more than sm_89 (L40, RTX 4090) gives one (99 KB), and spills 0.5-1.5 KB
@@ -157,14 +165,13 @@ _TUNED: Dict[tuple, _Tuned] = {}
 def tuned_configs() -> Dict[str, Dict[str, object]]:
     """The entries chosen so far in this process, by a readable key
     (``'NVIDIA H100 | band_backward | L=72 H=32 tf32 input_grad=False |
-    <=524288 px'``): ``{'block', 'num_warps', 'entry_ms'}``, the last
-    mapping each entry (``'16x4'``: block x warps) to its measured
+    <=524288 px'``): ``{'entry', 'entry_ms'}``, the chosen entry's
+    :attr:`LaunchConfig.name` and each entry's name mapped to its measured
     milliseconds."""
     return {f'{device} | {kernel} | L={length} H={hidden} {precision}'
             f'{"" if grad is None else f" input_grad={grad}"} | <={px} px':
-            dict(tuned.config._asdict(), entry_ms={
-                f'{entry.block}x{entry.num_warps}': ms
-                for entry, ms in tuned.entry_ms})
+            dict(entry=tuned.config.name, entry_ms={
+                entry.name: ms for entry, ms in tuned.entry_ms})
             for (device, kernel, length, hidden, precision, grad, px),
             tuned in _TUNED.items()}
 
@@ -187,6 +194,39 @@ def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
     return _TUNED[full_key].config
 
 
+def launch_forward(config: LaunchConfig, coeffs: Tensor, out: Tensor,
+                   offset: int, length: int, params: Sequence[Tensor],
+                   precision: str) -> None:
+    """One launch of ``band_forward``: the network of the band in columns
+    ``offset:offset + length`` of ``coeffs`` ``(N, C)``, into the same
+    columns of ``out``; ``params`` the band's six contiguous tensors."""
+    pixels, columns = coeffs.shape
+    kernels.band_forward[(triton.cdiv(pixels, config.block), )](
+        coeffs, out, columns, offset, pixels, *params, LENGTH=length,
+        HIDDEN=params[0].shape[0], BLOCK=config.block, PRECISION=precision,
+        num_warps=config.num_warps, maxnreg=config.maxnreg)
+
+
+def launch_backward(config: LaunchConfig, coeffs: Tensor, grad_out: Tensor,
+                    grad_coeffs: Optional[Tensor], offset: int, length: int,
+                    params: Sequence[Tensor], precision: str) -> Tensor:
+    """One launch of ``band_backward`` for the band of
+    :func:`launch_forward`: the input gradient into those columns of
+    ``grad_coeffs`` (none if ``None``). Returns the parameter-gradient sums,
+    one row per program ``(programs, P)``; their sum over rows is the
+    gradient of the six parameters, flattened and concatenated."""
+    pixels, columns = coeffs.shape
+    partial = coeffs.new_empty(triton.cdiv(pixels, config.block),
+                               sum(p.numel() for p in params))
+    kernels.band_backward[(partial.shape[0], )](
+        coeffs, grad_out, coeffs if grad_coeffs is None else grad_coeffs,
+        partial, columns, offset, pixels, *params, LENGTH=length,
+        HIDDEN=params[0].shape[0], BLOCK=config.block, PRECISION=precision,
+        INPUT_GRAD=grad_coeffs is not None, num_warps=config.num_warps,
+        maxnreg=config.maxnreg)
+    return partial
+
+
 class _TritonBandNetworks(torch.autograd.Function):
     """Autograd wrapper; see :func:`triton_band_networks`."""
 
@@ -194,20 +234,15 @@ class _TritonBandNetworks(torch.autograd.Function):
     def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
                 precision: str, configs: Tuple[Optional[LaunchConfig], ...],
                 *params: Tensor) -> Tensor:
-        pixels, columns = coeffs.shape
+        pixels = coeffs.shape[0]
         hidden = params[0].shape[0]
         out = torch.empty_like(coeffs)
         offset = 0
         for band, length in enumerate(lengths):
-            band_params = _band_params(params, band)
-
-            def launch(config, offset=offset, length=length,
-                       band_params=band_params):
-                kernels.band_forward[(triton.cdiv(pixels, config.block), )](
-                    coeffs, out, columns, offset, pixels, *band_params,
-                    LENGTH=length, HIDDEN=hidden, BLOCK=config.block,
-                    PRECISION=precision, num_warps=config.num_warps)
-
+            launch = functools.partial(launch_forward, coeffs=coeffs, out=out,
+                                       offset=offset, length=length,
+                                       params=_band_params(params, band),
+                                       precision=precision)
             if pixels:
                 launch(configs[0] or _choose(
                     FORWARD_CONFIGS, ('band_forward', length, hidden,
@@ -222,7 +257,7 @@ class _TritonBandNetworks(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_out: Tensor):
         coeffs, *params = ctx.saved_tensors
-        pixels, columns = coeffs.shape
+        pixels = coeffs.shape[0]
         hidden = params[0].shape[0]
         input_grad = ctx.needs_input_grad[0]
         grad_out = grad_out.contiguous()
@@ -231,20 +266,11 @@ class _TritonBandNetworks(torch.autograd.Function):
         for band, length in enumerate(ctx.lengths):
             band_params = _band_params(params, band)
             sizes = [p.numel() for p in band_params]
-
-            def launch(config, offset=offset, length=length,
-                       band_params=band_params, sizes=sizes):
-                # one row of parameter-gradient sums per program
-                partial = coeffs.new_empty(triton.cdiv(pixels, config.block),
-                                           sum(sizes))
-                kernels.band_backward[(partial.shape[0], )](
-                    coeffs, grad_out, coeffs if grad_coeffs is None else
-                    grad_coeffs, partial, columns, offset, pixels,
-                    *band_params, LENGTH=length, HIDDEN=hidden,
-                    BLOCK=config.block, PRECISION=ctx.precision,
-                    INPUT_GRAD=input_grad, num_warps=config.num_warps)
-                return partial
-
+            launch = functools.partial(launch_backward, coeffs=coeffs,
+                                       grad_out=grad_out,
+                                       grad_coeffs=grad_coeffs, offset=offset,
+                                       length=length, params=band_params,
+                                       precision=ctx.precision)
             if pixels:
                 total = launch(ctx.backward_config or _choose(
                     BACKWARD_CONFIGS, ('band_backward', length, hidden,
