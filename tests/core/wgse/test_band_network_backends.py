@@ -215,28 +215,37 @@ def test_triton_on_bands_shorter_than_its_kernel(steps):
 
 
 @needs_triton
-@pytest.mark.parametrize('entry', range(max(
-    len(triton_band_networks.FORWARD_CONFIGS),
-    len(triton_band_networks.BACKWARD_CONFIGS))))
-def test_every_triton_launch_config_computes_the_same(monkeypatch, entry):
-    """Each entry a GPU may choose (tile, warps) of both kernels, over
-    pixels spanning two of its tiles, the second partial, matches
-    float64 (full float32 products; the fp16/bf16 paths run the first
-    entries in the autocast test below)."""
-    forward, backward = (
-        configs[min(entry, len(configs) - 1)] for configs in (
-            triton_band_networks.FORWARD_CONFIGS,
-            triton_band_networks.BACKWARD_CONFIGS))
+@pytest.mark.parametrize('kernel, entry', [
+    ('backward', i) for i in range(len(
+        triton_band_networks.BACKWARD_CONFIGS))] + [
+    ('forward', i) for i in range(1, len(
+        triton_band_networks.FORWARD_CONFIGS))])
+def test_every_triton_launch_config_computes_the_same(monkeypatch, kernel,
+                                                      entry):
+    """Each entry a GPU may choose (tile, warps) of each kernel, over
+    pixels spanning two of its tiles, the second partial, matches float64
+    (full float32 products; the fp16/bf16 paths run the first entries in
+    the autocast test below): each backward entry forward and backward
+    behind the first forward entry, each further forward entry alone."""
+    forward = triton_band_networks.FORWARD_CONFIGS[
+        entry if kernel == 'forward' else 0]
+    backward = triton_band_networks.BACKWARD_CONFIGS[
+        entry if kernel == 'backward' else 0]
     monkeypatch.setattr(triton_band_networks, 'FORWARD_CONFIGS', (forward, ))
     monkeypatch.setattr(triton_band_networks, 'BACKWARD_CONFIGS',
                         (backward, ))
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
     model = _model(backend='triton')
     # two tiles of the entry, the second of one pixel
-    spikes = _spikes(1, 9, 1, max(forward.block, backward.block) + 1,
-                     seed=entry)
-    _assert_close(_run(model, spikes, True), _reference(model, spikes, True),
-                  triton_band_networks.TOLERANCES['ieee'],
+    block = (forward if kernel == 'forward' else backward).block
+    spikes = _spikes(1, 9, 1, block + 1, seed=entry)
+    want = _reference(model, spikes, True)
+    if kernel == 'forward':
+        with torch.no_grad():
+            got, want = [model(spikes)], want[:1]
+    else:
+        got = _run(model, spikes, True)
+    _assert_close(got, want, triton_band_networks.TOLERANCES['ieee'],
                   f'{forward} {backward}')
 
 
