@@ -3,7 +3,9 @@
     python tools/train.py configs/pspnet_wgse.py [--work-dir DIR] [--resume]
         [--cfg-options num_steps=41 data_root=DIR crop_size=128,256 ...]
 
-``mim train wgse_mmseg configs/pspnet_wgse.py`` runs this script.
+``mim train wgse_mmseg configs/pspnet_wgse.py`` runs this script. A second
+training into a work dir that a training is writing is refused, naming it
+(``--wait`` waits for it instead).
 """
 import argparse
 import os.path as osp
@@ -11,6 +13,7 @@ import sys
 
 from wgse_mmseg.core.arguments import Path
 from wgse_mmseg.core.io import SpikeFileError
+from wgse_mmseg.core.output_folder import OutputFolderError, add_wait_option
 from wgse_mmseg.utils.checkpoint import CheckpointError
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
@@ -26,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--amp', action='store_true', default=False,
                         help='enable automatic-mixed-precision training')
     add_runner_arguments(parser)
+    add_wait_option(parser)
     return parser
 
 
@@ -37,12 +41,15 @@ def main():
             cfg.optim_wrapper.type = 'AmpOptimWrapper'
             cfg.optim_wrapper.loss_scale = 'dynamic'
         cfg.resume = args.resume
+        if args.wait:  # for SpikeRunner.train
+            cfg.wait_for_work_dir = True
         runner = build_runner(cfg)
     except (ValueError, OSError) as err:  # the config, the model, the files
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     try:
         runner.train()
-    except ModelFitError as err:  # names the setting and what works
+    except (ModelFitError, OutputFolderError) as err:
+        # a setting and what works; the work dir's other writer
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     except (FileNotFoundError, SpikeFileError, CheckpointError) as err:
         # data and checkpoint files: the message names the file

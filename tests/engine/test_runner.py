@@ -1,11 +1,16 @@
 """SpikeRunner loads checkpoints as data: config text in one is never
-executed."""
+executed; a training owns its work dir."""
+import os
 import os.path as osp
+import sys
+import threading
+import time
 
 import pytest
 import torch
 
 import wgse_mmseg
+from wgse_mmseg.core.output_folder import OutputFolderError, own_folder
 from wgse_mmseg.utils.checkpoint import CheckpointError
 from wgse_mmseg.utils.config import build_runner, load_config
 
@@ -77,3 +82,60 @@ def test_a_checkpoint_that_pickles_code_is_refused(runner, tmp_path, how):
         else:
             runner.load_checkpoint(path)
     assert not marker.exists()
+
+
+def _training_runner(work_dir, **settings):
+    """The CPU reconstruction config's runner (synthetic data made on the
+    fly) for one iteration, nothing validated."""
+    cfg = load_config(osp.join(ROOT, 'configs', 'reconstruction',
+                               'wgse_resnet_cpu.py'),
+                      {'model.channels': 4, 'model.mid_channels': 4,
+                       'train_cfg.max_iters': 1, 'train_cfg.val_interval': 2,
+                       'default_hooks.checkpoint.interval': 2, **settings})
+    cfg.work_dir = str(work_dir)
+    return build_runner(cfg)
+
+
+def test_a_second_training_into_a_work_dir_is_refused_naming_the_first(
+        tmp_path):
+    """Another training owns the work dir (here: this process, through
+    the same lock): this one stops before it writes its config or a
+    checkpoint there, naming the owner; the owner's lock stays."""
+    work = tmp_path / 'work'
+    runner = _training_runner(work)
+    with own_folder(str(work), job='train'):
+        with pytest.raises(OutputFolderError,
+                           match=rf'work: another process is writing this '
+                           rf'output \(process {os.getpid()} on '):
+            runner.train()
+        assert (work / '.lock-train').is_file()
+    assert not list(work.glob('*.py')) and not list(work.glob('*.pth'))
+    assert not (work / '.lock-train').exists()
+
+
+def test_the_train_tool_stops_naming_the_owner_or_waits_with_wait(
+        load_tool, tmp_path, monkeypatch):
+    """``tools/train.py`` into an owned work dir: its error line names the
+    work dir and the owner; with ``--wait`` it trains once it is free."""
+    work = tmp_path / 'work'
+    argv = ['train.py', osp.join(ROOT, 'configs', 'reconstruction',
+                                 'wgse_resnet_cpu.py'),
+            '--work-dir', str(work), '--cfg-options', 'model.channels=4',
+            'model.mid_channels=4', 'train_cfg.max_iters=1',
+            'train_cfg.val_interval=2', 'default_hooks.checkpoint.interval=2']
+    train = load_tool('tools/train.py')
+    monkeypatch.setattr(sys, 'argv', argv)
+    with own_folder(str(work), job='train'), \
+            pytest.raises(SystemExit) as stop:
+        train.main()
+    assert str(stop.value.code).startswith(
+        f'train.py: error: {work}: another process is writing this output')
+    monkeypatch.setattr(sys, 'argv', argv + ['--wait'])
+    owner = own_folder(str(work), job='train')
+    owner.__enter__()
+    threading.Timer(1.0, owner.__exit__, (None, None, None)).start()
+    start = time.monotonic()
+    train.main()  # waits, then owns the work dir and trains its iteration
+    assert time.monotonic() - start >= 1.0
+    assert list(work.glob('*.py')) and (work / 'last_checkpoint').is_file()
+    assert not (work / '.lock-train').exists()  # let go at the end

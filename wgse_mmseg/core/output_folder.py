@@ -2,7 +2,7 @@
 
 Every tool that writes an output a re-run may resume (a walk's state
 folder, a conversion, the synthetic dataset, the training images, the ONNX
-export) writes it inside :func:`own_folder`:
+export, a training's work dir) writes it inside :func:`own_folder`:
 
 One writer at a time
     The folder's lock file ``<folder>/.lock`` (``.lock-<job>`` for one job

@@ -1,19 +1,20 @@
 """The shipped configs' runner: mmengine's ``Runner`` that first gives the
 config's spike settings (``num_steps``, ``data_root``, ``crop_size``) to
 the fields that carry them
-(:func:`wgse_mmseg.utils.spike_settings.apply_spike_settings`), writes each
-checkpoint whole or not at all, and never executes config text a checkpoint
-carries.
+(:func:`wgse_mmseg.utils.spike_settings.apply_spike_settings`), trains in a
+work dir no other training writes, writes each checkpoint whole or not at
+all, and never executes config text a checkpoint carries.
 
 The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 ``tools/train.py``, which builds ``RUNNERS.build(cfg)`` when a config has a
 ``runner_type``, uses it as this package's tools do.
 """
+import contextlib
 import os
 import os.path as osp
 import pickle
 
-from mmengine.dist import master_only
+from mmengine.dist import broadcast_object_list, is_main_process, master_only
 from mmengine.logging import print_log
 # mmengine's root registry: RUNNERS.build(cfg) looks the runner up there
 # (a config's default_scope is not in force yet)
@@ -22,6 +23,7 @@ from mmengine.runner import Runner
 
 from .._openmmlab import prepare_mmseg_layer
 from ..core.limits import cut
+from ..core.output_folder import OutputFolderError, own_folder
 from ..utils.checkpoint import CheckpointError
 from ..utils.cross_checks import check_training_fits
 from ..utils.spike_settings import apply_spike_settings
@@ -35,8 +37,8 @@ class SpikeRunner(Runner):
     MMSeg layer (:func:`~wgse_mmseg._openmmlab.prepare_mmseg_layer`, once
     per process) and applies the config's spike settings first (also those ``--cfg-options`` of MMSeg's
     own tools merged in), whose :meth:`train` first checks that the crop
-    and the batch fit the model (:mod:`wgse_mmseg.utils.cross_checks`),
-    whose :meth:`save_checkpoint` is atomic on
+    and the batch fit the model (:mod:`wgse_mmseg.utils.cross_checks`) and
+    owns the work dir while it trains, whose :meth:`save_checkpoint` is atomic on
     local disks and whose :meth:`load_checkpoint` refuses config text that
     mmengine would execute; otherwise the same."""
 
@@ -55,9 +57,58 @@ class SpikeRunner(Runner):
         """mmengine's, after the cross-field checks of the config against
         the built model (:func:`~wgse_mmseg.utils.cross_checks.
         check_training_fits`: the crop, the batch), before any data is
-        read."""
+        read, and with the work dir owned for the whole run
+        (:func:`~wgse_mmseg.core.output_folder.own_folder`, job
+        ``'train'``: its lock file is ``.lock-train``, so a grid runner
+        that owns the folder for its own state can train in it): a second
+        training into the same work dir, which would
+        interleave its checkpoints and ``last_checkpoint`` with this one's,
+        is refused with an :class:`~wgse_mmseg.core.output_folder.
+        OutputFolderError` naming this process before it writes its config
+        or a checkpoint there (only its log, in its own timestamped folder,
+        as every run's), or with ``wait_for_work_dir=True`` in the config
+        (``tools/train.py --wait``) waits for it. A test or validation run
+        of a checkpoint in that work dir is not refused: it writes its own
+        timestamped folder."""
         check_training_fits(self.cfg, self.model)
-        return super().train()
+        with self._work_dir_owned():
+            super().dump_config()
+            return super().train()
+
+    def val(self) -> dict:
+        """mmengine's, with the config dumped as it starts."""
+        super().dump_config()
+        return super().val()
+
+    def test(self) -> dict:
+        """mmengine's, with the config dumped as it starts."""
+        super().dump_config()
+        return super().test()
+
+    def dump_config(self) -> None:
+        """Nothing when the runner is built (mmengine dumps the config
+        then): :meth:`train`, :meth:`val` and :meth:`test` dump it when
+        they start, training once it owns the work dir."""
+
+    @contextlib.contextmanager
+    def _work_dir_owned(self):
+        """The work dir's lock, taken by the main process for the block;
+        every process learns whether it was (a refused distributed run
+        stops on every rank, none waits in a collective)."""
+        local = osp.isdir(self.work_dir) and is_main_process()
+        with contextlib.ExitStack() as owned:
+            refusal = [None]
+            if local:
+                try:
+                    owned.enter_context(own_folder(
+                        self.work_dir, job='train',
+                        wait=bool(self.cfg.get('wait_for_work_dir', False))))
+                except OutputFolderError as err:
+                    refusal = [str(err)]
+            broadcast_object_list(refusal)
+            if refusal[0] is not None:
+                raise OutputFolderError(refusal[0])
+            yield
 
     def load_checkpoint(self, filename: str, *args, **kwargs) -> dict:
         """mmengine's, but a checkpoint with a ``meta['config']`` entry is
