@@ -33,8 +33,21 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _amp_device_missing() -> bool:
+    """Whether mmengine's ``AmpOptimWrapper`` (``--amp``) has no device here:
+    it trains on CUDA, NPU, MLU or MUSA only."""
+    from mmengine.device import (is_cuda_available, is_mlu_available,
+                                 is_musa_available, is_npu_available)
+    return not (is_cuda_available() or is_npu_available() or
+                is_mlu_available() or is_musa_available())
+
+
 def main():
     args = build_parser().parse_args()
+    if args.amp and _amp_device_missing():
+        sys.exit(f'{osp.basename(__file__)}: error: --amp: mixed-precision '
+                 f'training needs a GPU (CUDA; or an NPU, MLU or MUSA '
+                 f'device), and torch sees none here; train without --amp')
     try:
         cfg = config_from_args(args)
         if args.amp:

@@ -139,3 +139,16 @@ def test_the_train_tool_stops_naming_the_owner_or_waits_with_wait(
     assert time.monotonic() - start >= 1.0
     assert list(work.glob('*.py')) and (work / 'last_checkpoint').is_file()
     assert not (work / '.lock-train').exists()  # let go at the end
+
+
+def test_the_train_tool_refuses_amp_without_a_gpu(load_tool, monkeypatch):
+    """``--amp`` on a machine without a GPU: one line naming the option,
+    before anything is built (mmengine's AmpOptimWrapper would stop with
+    an AssertionError from deep inside the runner)."""
+    monkeypatch.setattr(sys, 'argv', [
+        'train.py', osp.join(ROOT, 'configs', 'pspnet_wgse.py'), '--amp'])
+    monkeypatch.setattr(torch.cuda, 'is_available', lambda: False)
+    with pytest.raises(SystemExit) as stop:
+        load_tool('tools/train.py').main()
+    assert str(stop.value.code).startswith(
+        'train.py: error: --amp: mixed-precision training needs a GPU')
