@@ -56,9 +56,9 @@ def launch_entry(text: str) -> tbn.LaunchConfig:
     if block < 16 or block & (block - 1) or warps & (warps - 1) or \
             not 1 <= warps <= 16 or \
             (registers is not None and not 24 <= registers <= 255):
-        raise ValueError(f'{excerpt(text)}: the block must be a power of two >= 16 '
-                         f'(tl.dot), the warps a power of two in [1, 16], '
-                         f'the registers in [24, 255]')
+        raise ValueError(f'{excerpt(text)}: the block must be a power of '
+                         f'two >= 16 (tl.dot), the warps a power of two in '
+                         f'[1, 16], the registers in [24, 255]')
     return tbn.LaunchConfig(block, warps, registers)
 
 
@@ -129,7 +129,8 @@ def sweep(kernel: str, entries: Sequence[tbn.LaunchConfig], band: Dict,
         if device == 'cuda':
             torch.cuda.synchronize()
         compile_s = time.perf_counter() - start
-        first = first or results
+        if first is None:
+            first = results
         rows.append(dict(kernel=kernel, entry=entry.name,
                          listed=entry in listed, compile_s=compile_s,
                          ms=_milliseconds(lambda: run(entry), device, repeat),

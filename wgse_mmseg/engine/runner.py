@@ -35,12 +35,13 @@ __all__ = ['SpikeRunner']
 class SpikeRunner(Runner):
     """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` sets up the
     MMSeg layer (:func:`~wgse_mmseg._openmmlab.prepare_mmseg_layer`, once
-    per process) and applies the config's spike settings first (also those ``--cfg-options`` of MMSeg's
-    own tools merged in), whose :meth:`train` first checks that the crop
-    and the batch fit the model (:mod:`wgse_mmseg.utils.cross_checks`) and
-    owns the work dir while it trains, whose :meth:`save_checkpoint` is atomic on
-    local disks and whose :meth:`load_checkpoint` refuses config text that
-    mmengine would execute; otherwise the same."""
+    per process) and applies the config's spike settings first (also those
+    ``--cfg-options`` of MMSeg's own tools merged in), whose :meth:`train`
+    first checks that the crop and the batch fit the model
+    (:mod:`wgse_mmseg.utils.cross_checks`) and owns the work dir while it
+    trains, whose :meth:`save_checkpoint` is atomic on local disks and
+    whose :meth:`load_checkpoint` refuses config text that mmengine would
+    execute; otherwise the same."""
 
     @classmethod
     def from_cfg(cls, cfg) -> 'SpikeRunner':
