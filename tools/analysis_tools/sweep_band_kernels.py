@@ -1,5 +1,7 @@
 r"""Time WGSE's Triton band kernels at any launch entry, one band at a time:
 how the library's ``FORWARD_CONFIGS`` and ``BACKWARD_CONFIGS`` are chosen.
+The backward entry times the backward kernel alone, after the forward
+kernel has written its output gradient.
 
 A maintainers' tool. For one band (``--length`` coefficients, ``--hidden``
 channels, ``--precision`` of the ``H x H`` products) over ``--pixels``
@@ -16,7 +18,7 @@ machine it ran on; entries the library lists are marked ``*``.
 
     python tools/analysis_tools/sweep_band_kernels.py    # L=72, 4x256x512 px
     python tools/analysis_tools/sweep_band_kernels.py --precision bf16 \
-        --backward 16x4 16x4r168
+        --backward 32x4 64x4
     TRITON_INTERPRET=1 python tools/analysis_tools/sweep_band_kernels.py \
         --pixels 40 --length 9 --forward 16x4 32x4 --backward 16x4
 """
@@ -33,15 +35,15 @@ import torch
 from wgse_mmseg.benchmarks.machine import machine_record
 from wgse_mmseg.benchmarks.markdown import markdown_table
 from wgse_mmseg.benchmarks.timing import time_calls
-from wgse_mmseg.benchmarks.triton_resources import BAND_LENGTH
 from wgse_mmseg.core.arguments import (Choice, Integer, Path, Text,
                                        excerpt)
 from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_mmseg.core.wgse import triton_band_networks as tbn
 
-DEFAULT_FORWARD = ['16x4', '16x2', '32x2', '64x2', '64x4', '128x4', '128x8']
-DEFAULT_BACKWARD = ['16x4', '16x2', '16x8', '16x4r168', '16x4r128',
-                    '32x4r255', '64x4', '64x8']
+#: the longest band of WGSE's default (db8, 5 levels) at T = 129
+BAND_LENGTH = 72
+DEFAULT_FORWARD = ['64x4', '32x4', '64x8', '128x8']
+DEFAULT_BACKWARD = ['32x4', '64x4', '16x4', '64x8', '32x2']
 
 
 def launch_entry(text: str) -> tbn.LaunchConfig:
@@ -63,8 +65,8 @@ def launch_entry(text: str) -> tbn.LaunchConfig:
 
 
 def _band(length: int, hidden: int, pixels: int, device: str) -> Dict:
-    """Coefficients ``(pixels, length)``, an output gradient of the same
-    shape and one band network's six parameters, seeded."""
+    """Coefficients ``(1, length, pixels)``, an output gradient of the
+    same shape and one band network's six parameters, seeded."""
     generator = torch.Generator().manual_seed(0)
     layers = [torch.nn.Conv1d(1, hidden, 3),
               torch.nn.Conv1d(hidden, hidden, 3),
@@ -74,8 +76,8 @@ def _band(length: int, hidden: int, pixels: int, device: str) -> Dict:
             layer.bias.uniform_(-0.2, 0.4, generator=generator)
     params = [t.detach().to(device).contiguous() for layer in layers
               for t in (layer.weight, layer.bias)]
-    coeffs = torch.randn(pixels, length, generator=generator).to(device)
-    grad_out = torch.randn(pixels, length, generator=generator).to(device)
+    coeffs = torch.randn(1, length, pixels, generator=generator).to(device)
+    grad_out = torch.randn(1, length, pixels, generator=generator).to(device)
     return dict(coeffs=coeffs, grad_out=grad_out, params=params)
 
 
@@ -83,18 +85,22 @@ def _runner(kernel: str, band: Dict, precision: str, input_grad: bool):
     """A function of a launch entry that runs ``kernel`` once and returns
     what it computed (a list of tensors)."""
     coeffs, length = band['coeffs'], band['coeffs'].shape[1]
-    common = dict(coeffs=coeffs, offset=0, length=length,
-                  params=band['params'], precision=precision)
+    inputs = tbn.band_kernel_inputs([length], band['params'])
+    d3 = torch.empty_like(coeffs)
+    if kernel == 'band_backward':  # the backward kernel's input
+        tbn.launch_forward(tbn.FORWARD_CONFIGS[0], coeffs, d3, inputs,
+                           precision, grad_out=band['grad_out'])
+    slots = tbn.backward_slots(coeffs.device, 1)
 
     def run(config):
         if kernel == 'band_forward':
             out = torch.empty_like(coeffs)
-            tbn.launch_forward(config, out=out, **common)
+            tbn.launch_forward(config, coeffs, out, inputs, precision)
             return [out]
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
-        partial = tbn.launch_backward(config, grad_out=band['grad_out'],
-                                      grad_coeffs=grad_coeffs, **common)
-        return [partial.sum(0)] + ([grad_coeffs] if input_grad else [])
+        grads = tbn.launch_backward(config, coeffs, d3, grad_coeffs, inputs,
+                                    precision, slots)
+        return grads + ([grad_coeffs] if input_grad else [])
 
     return run
 
@@ -121,7 +127,7 @@ def sweep(kernel: str, entries: Sequence[tbn.LaunchConfig], band: Dict,
     ``difference`` (from the first entry's results)."""
     run = _runner(kernel, band, precision, input_grad)
     listed = (tbn.FORWARD_CONFIGS if kernel == 'band_forward' else
-              tbn.BACKWARD_CONFIGS)
+              tbn.backward_configs())
     rows, first = [], None
     for entry in entries:
         start = time.perf_counter()

@@ -490,7 +490,7 @@ def run_report(plan: Plan, root: str, targets: Targets,
         status='ok', chosen=tuned, forward_entries=[
             c.name for c in triton_band_networks.FORWARD_CONFIGS],
         backward_entries=[
-            c.name for c in triton_band_networks.BACKWARD_CONFIGS])
+            c.name for c in triton_band_networks.backward_configs()])
     sections['targets'] = dict(status='ok',
                                rows=_targets(sections, targets))
     print(f'[gpu_report {clock.elapsed():6.1f} s] done', flush=True)

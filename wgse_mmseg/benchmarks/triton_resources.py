@@ -11,13 +11,21 @@ loop carries from one step to the next in triton's IR
 (:func:`loop_carried`): triton carries a name only if one pass over the
 loop body changes its value, which the interpreter does not model.
 
-Every variant the dispatcher can launch is compiled: forward and backward
-(with and without the input gradient), each precision of
+Every variant the dispatcher can launch is compiled: forward (which also
+writes the backward pass's output gradient) and backward (with and without
+the input gradient), each precision of
 :data:`~wgse_mmseg.core.wgse.triton_band_networks.TOLERANCES`, each width of
-``HIDDEN_CHANNELS`` and each launch entry, for sm_80 (A100), sm_89 (L40,
-RTX 4090) and sm_90 (H100), at the longest band of the default WGSE at
-``T = 129`` (:data:`BAND_LENGTH`; the loop over the band is not unrolled,
-so the length does not change the resources).
+``HIDDEN_CHANNELS`` and each launch entry of the target, for sm_80 (A100),
+sm_89 (L40, RTX 4090) and sm_90 (H100). Band lengths are run-time values
+of the kernels, so one compile serves every band.
+
+The cost model (:func:`step_cost`) reads the compiled code: the
+instructions of the loop over a band's coefficients (the step every
+coefficient of a tile takes), all and tensor-core ones (``HMMA``,
+``HGMMA``), as warp instructions per coefficient position (times the
+warps, over the pixels of a tile). An SM issues at most one warp
+instruction per scheduler and clock, so :func:`predicted_ms` turns those
+counts into a lower bound on a pass's time at a GPU's clock.
 
 Triton's interpreter (``TRITON_INTERPRET=1``) replaces the kernels by
 Python functions that cannot be compiled, so the compiles run in a fresh
@@ -46,8 +54,6 @@ ARCHITECTURES = {
     'sm_89': (89, 65536, 48, 24, 100 * 1024, 99 * 1024),
     'sm_90': (90, 65536, 64, 32, 228 * 1024, 227 * 1024),
 }
-#: the longest band of WGSE's default (db8, 5 levels) at T = 129
-BAND_LENGTH = 72
 #: registers are allocated per warp in units of this many
 _REGISTER_UNIT = 256
 #: shared memory the CUDA runtime reserves per program (sm_80 and later)
@@ -55,33 +61,37 @@ _RESERVED_SHARED = 1024
 
 _POINTERS = ['w1_ptr', 'b1_ptr', 'w2_ptr', 'b2_ptr', 'w3_ptr', 'b3_ptr']
 _SIGNATURES = {
-    'band_forward': ['x_ptr', 'y_ptr'],
-    'band_backward': ['x_ptr', 'gy_ptr', 'gx_ptr', 'partial_ptr'],
+    'band_forward': dict(x_ptr='*fp32', gy_ptr='*fp32', out_ptr='*fp32',
+                         pixels='i32', columns='i32',
+                         tiles_per_sample='i32', lengths_ptr='*i32',
+                         offsets_ptr='*i32'),
+    'band_backward': dict(x_ptr='*fp32', d3_ptr='*fp32', gx_ptr='*fp32',
+                          partial_ptr='*fp32', work_ptr='*i32',
+                          pixels='i32', columns='i32',
+                          tiles_per_sample='i32', tiles='i32',
+                          lengths_ptr='*i32', offsets_ptr='*i32'),
 }
 
 
 class Variant(NamedTuple):
     """One compiled kernel: name, hidden width, precision, whether it
-    computes the input gradient (``None`` for the forward), the launch
-    entry's ``block``, ``num_warps`` and ``maxnreg``."""
+    computes the input gradient (the forward: whether it writes the output
+    gradient), the launch entry's ``block``, ``num_warps`` and
+    ``maxnreg``."""
     kernel: str
     hidden: int
     precision: str
-    input_grad: Optional[bool]
+    input_grad: bool
     block: int
     num_warps: int
     maxnreg: Optional[int] = None
 
     @property
-    def default(self) -> bool:
-        """What runs untuned at the paper's widths: the first launch entry,
-        16 or 32 channels, tensor-core precisions (not full float32)."""
-        from ..core.wgse.triton_band_networks import (BACKWARD_CONFIGS,
-                                                      FORWARD_CONFIGS)
-        first = (FORWARD_CONFIGS if self.kernel == 'band_forward' else
-                 BACKWARD_CONFIGS)[0]
-        return ((self.block, self.num_warps, self.maxnreg) == first and
-                self.hidden in (16, 32) and self.precision != 'ieee')
+    def tensor_cores(self) -> bool:
+        """Whether its products run on tensor cores: every precision but
+        full float32 (``'ieee'``, where TF32 is turned off), which
+        multiplies on the FMA units and may spill."""
+        return self.precision != 'ieee'
 
 
 class Resources(NamedTuple):
@@ -91,26 +101,31 @@ class Resources(NamedTuple):
     local_bytes: int
     shared_bytes: int  # static + dynamic, per program
     programs_per_sm: int
-    loop_carried: int  # values the loop carries to its next step
+    loop_carried: int  # values the loops carry to their next step
+    step_instructions: int  # warp instructions of the step loop, a warp
+    step_tensor_core: int  # of which HMMA/HGMMA
 
 
-def variants() -> List[Variant]:
-    """Every kernel variant the dispatcher can launch."""
+def variants(arch: str) -> List[Variant]:
+    """Every kernel variant the dispatcher can launch on ``arch``."""
     from ..core.wgse.triton_band_networks import (
-        BACKWARD_CONFIGS, FORWARD_CONFIGS, HIDDEN_CHANNELS, TOLERANCES)
+        FORWARD_CONFIGS, HIDDEN_CHANNELS, TOLERANCES, backward_configs)
+    capability = ARCHITECTURES[arch][0]
     found = []
     for hidden in HIDDEN_CHANNELS:
         for precision in TOLERANCES:
-            found += [Variant('band_forward', hidden, precision, None, *c)
-                      for c in FORWARD_CONFIGS]
+            found += [Variant('band_forward', hidden, precision, grad, *c)
+                      for grad in (False, True) for c in FORWARD_CONFIGS]
             found += [Variant('band_backward', hidden, precision, grad, *c)
-                      for grad in (False, True) for c in BACKWARD_CONFIGS]
+                      for grad in (False, True)
+                      for c in backward_configs(capability, grad,
+                                                precision)]
     return found
 
 
 def jobs_for(archs: Sequence[str]) -> List[tuple]:
-    """``(variant, arch)``: every variant for each target of ``archs``."""
-    return [(v, a) for a in archs for v in variants()]
+    """``(variant, arch)``: every variant of each target of ``archs``."""
+    return [(v, a) for a in archs for v in variants(a)]
 
 
 def programs_per_sm(registers: int, num_warps: int, shared_bytes: int,
@@ -126,13 +141,59 @@ def programs_per_sm(registers: int, num_warps: int, shared_bytes: int,
 
 
 def loop_carried(ttir: str) -> int:
-    """The number of values the ``scf.for`` loop in a kernel's triton IR
-    (``compiled.asm['ttir']``) carries from one iteration to the next."""
+    """The number of values the ``scf.for`` loops in a kernel's triton IR
+    (``compiled.asm['ttir']``) carry from one iteration to the next."""
     loops = re.findall(r'scf\.for .*? iter_args\((.*?)\) ->', ttir)
-    if len(loops) != 1:
-        raise ValueError(f'expected one scf.for loop in the kernel, found '
-                         f'{len(loops)}')
-    return loops[0].count('=')
+    if not loops:
+        raise ValueError('expected an scf.for loop in the kernel, found none')
+    return sum(loop.count('=') for loop in loops)
+
+
+#: SASS opcodes of the tensor cores' matrix products
+TENSOR_CORE_OPCODES = ('HMMA', 'HGMMA')
+
+
+def step_loop(sass: str) -> List[str]:
+    """The opcodes of the innermost loop of ``cuobjdump -sass`` text: the
+    shortest range that a backward branch closes (the step over a band's
+    coefficients; the backward kernel's loop over tiles encloses it)."""
+    code = re.findall(r'/\*([0-9a-f]{4,})\*/\s+(@!?U?P\w+\s+)?([A-Z][\w.]*)'
+                      r'\s*([^;]*);', sass)
+    addresses = [int(address, 16) for address, *_ in code]
+    loops = []
+    for index, (address, _, opcode, operands) in enumerate(code):
+        target = re.match(r'\s*(?:`\()?(0x[0-9a-f]+)', operands)
+        if opcode.startswith('BRA') and target and \
+                int(target.group(1), 16) < addresses[index]:
+            start = addresses.index(int(target.group(1), 16))
+            loops.append(code[start:index + 1])
+    if not loops:
+        raise ValueError('no loop in the compiled kernel')
+    return [opcode for _, _, opcode, _ in min(loops, key=len)]
+
+
+def step_cost(opcodes: Sequence[str]) -> tuple:
+    """``(instructions, tensor-core instructions)`` of a step loop's
+    opcodes (:func:`step_loop`)."""
+    return len(opcodes), sum(op.split('.')[0] in TENSOR_CORE_OPCODES
+                             for op in opcodes)
+
+
+def per_position(step_instructions: int, num_warps: int, block: int
+                 ) -> float:
+    """Warp instructions a coefficient position costs: a step of every
+    warp of a program, over the pixels of its tile."""
+    return step_instructions * num_warps / block
+
+
+def predicted_ms(positions: float, instructions_per_position: float,
+                 sms: int, clock_ghz: float, schedulers: int = 4) -> float:
+    """The least time ``positions`` coefficient positions take at
+    ``instructions_per_position`` warp instructions each, on ``sms`` SMs
+    of ``schedulers`` issuing one warp instruction a clock each at
+    ``clock_ghz``: every cycle issuing, none waiting."""
+    return positions * instructions_per_position / (
+        sms * schedulers * clock_ghz * 1e6)
 
 
 def _cuobjdump() -> str:
@@ -153,13 +214,12 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     from triton.compiler import ASTSource
 
     from ..core.wgse import _triton_band_kernels as kernels
-    signature = {name: '*fp32' for name in _SIGNATURES[variant.kernel]}
-    signature.update(stride='i32', offset='i32', pixels='i32')
+    signature = dict(_SIGNATURES[variant.kernel])
     signature.update({name: '*fp32' for name in _POINTERS})
-    constants = dict(LENGTH=BAND_LENGTH, HIDDEN=variant.hidden,
-                     BLOCK=variant.block, PRECISION=variant.precision)
-    if variant.input_grad is not None:
-        constants['INPUT_GRAD'] = variant.input_grad
+    constants = dict(HIDDEN=variant.hidden, BLOCK=variant.block,
+                     PRECISION=variant.precision)
+    constants['INPUT_GRAD' if variant.kernel == 'band_backward' else
+              'OUTPUT_GRAD'] = variant.input_grad
     signature.update({name: 'constexpr' for name in constants})
     source = ASTSource(fn=getattr(kernels, variant.kernel),
                        signature=signature, constexprs=constants)
@@ -169,9 +229,10 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     with tempfile.NamedTemporaryFile(suffix='.cubin') as cubin:
         cubin.write(compiled.asm['cubin'])
         cubin.flush()
-        dump = subprocess.run([_cuobjdump(), '--dump-resource-usage',
-                               cubin.name], capture_output=True, text=True,
-                              check=True).stdout
+        dump, sass = (subprocess.run(
+            [_cuobjdump(), option, cubin.name], capture_output=True,
+            text=True, check=True).stdout
+            for option in ('--dump-resource-usage', '--dump-sass'))
     match = re.search(r'REG:(\d+) STACK:(\d+) SHARED:(\d+) LOCAL:(\d+)',
                       dump)
     if match is None:
@@ -182,13 +243,20 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     return Resources(registers, stack, local, shared,
                      programs_per_sm(registers, variant.num_warps, shared,
                                      arch),
-                     loop_carried(compiled.asm['ttir']))
+                     loop_carried(compiled.asm['ttir']),
+                     *step_cost(step_loop(sass)))
 
 
 def _compile_row(job) -> Dict:
     variant, arch = job
-    return dict(arch=arch, **variant._asdict(), default=variant.default,
-                **compile_variant(variant, arch)._asdict())
+    resources = compile_variant(variant, arch)
+    return dict(arch=arch, **variant._asdict(),
+                tensor_cores=variant.tensor_cores, **resources._asdict(),
+                per_position=per_position(resources.step_instructions,
+                                          variant.num_warps, variant.block),
+                tensor_core_per_position=per_position(
+                    resources.step_tensor_core, variant.num_warps,
+                    variant.block))
 
 
 def _compile_here(archs: Sequence[str], jobs: int) -> List[Dict]:
@@ -199,7 +267,9 @@ def _compile_here(archs: Sequence[str], jobs: int) -> List[Dict]:
 def compile_all(archs: Sequence[str] = tuple(ARCHITECTURES),
                 jobs: Optional[int] = None) -> List[Dict]:
     """One row per variant and target (:func:`jobs_for`): the variant's
-    fields, ``arch``, ``default`` and the :class:`Resources`. Runs in a
+    fields, ``arch``, ``tensor_cores``, the :class:`Resources` and the
+    step's warp instructions per coefficient position, all
+    (``per_position``) and tensor-core ones. Runs in a
     fresh process with ``TRITON_INTERPRET`` unset, ``jobs`` compiles side by
     side (default: the CPUs)."""
     env = {k: v for k, v in os.environ.items() if k != 'TRITON_INTERPRET'}
@@ -213,27 +283,31 @@ def compile_all(archs: Sequence[str] = tuple(ARCHITECTURES),
 
 
 def format_table(rows: Sequence[Dict]) -> str:
-    """The rows as a Markdown table, defaults marked with ``*``."""
-    lines = ['| arch | kernel | H | precision | input grad | block | warps '
-             '| registers | spills B | shared B | programs/SM |',
-             '|---|---|--:|---|---|--:|--:|--:|--:|--:|--:|']
+    """The rows as a Markdown table; full-float32 variants (no tensor
+    cores) marked with ``-``."""
+    lines = ['| arch | kernel | H | precision | grad | block | warps '
+             '| registers | spills B | shared B | programs/SM '
+             '| step instr | TC instr | instr/position | TC/position |',
+             '|---|---|--:|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|']
     for r in rows:
-        grad = '' if r['input_grad'] is None else str(r['input_grad'])
         cap = '' if r['maxnreg'] is None else f" r{r['maxnreg']}"
         lines.append(
-            f"| {r['arch']} | {r['kernel']}{' *' if r['default'] else ''} "
-            f"| {r['hidden']} | {r['precision']} | {grad} | {r['block']} | "
-            f"{r['num_warps']}{cap} | "
+            f"| {r['arch']} | {r['kernel']} | {r['hidden']} | "
+            f"{r['precision']}{'' if r['tensor_cores'] else ' -'} | "
+            f"{r['input_grad']} | {r['block']} | {r['num_warps']}{cap} | "
             f"{r['registers']} | {r['spill_bytes']} | "
-            f"{r['shared_bytes']} | {r['programs_per_sm']} |")
+            f"{r['shared_bytes']} | {r['programs_per_sm']} | "
+            f"{r['step_instructions']} | {r['step_tensor_core']} | "
+            f"{r['per_position']:.1f} | {r['tensor_core_per_position']:.2f} |")
     return '\n'.join(lines)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description='Compile every WGSE Triton kernel variant for GPU '
-        'targets (no GPU needed) and print registers, spills, shared memory '
-        'and programs per SM.')
+        'targets (no GPU needed) and print registers, spills, shared memory, '
+        'programs per SM and the step loop\'s instructions per coefficient '
+        'position (all and tensor-core).')
     parser.add_argument('--archs', nargs='+',
                         type=Choice(list(ARCHITECTURES)),
                         default=list(ARCHITECTURES),

@@ -215,43 +215,45 @@ def test_triton_on_bands_shorter_than_its_kernel(steps):
 
 
 @needs_triton
-@pytest.mark.parametrize('kernel, entry', [
-    ('backward', i) for i in range(len(
-        triton_band_networks.BACKWARD_CONFIGS))] + [
-    ('forward', i) for i in range(1, len(
-        triton_band_networks.FORWARD_CONFIGS))])
-def test_every_triton_launch_config_computes_the_same(monkeypatch, kernel,
-                                                      entry):
-    """Each entry a GPU may choose (tile, warps) of each kernel, over
-    pixels spanning two of its tiles, the second partial, matches float64
-    (full float32 products; the fp16/bf16 paths run the first entries in
-    the autocast test below): each backward entry forward and backward
-    behind the first forward entry, each further forward entry alone."""
-    forward = triton_band_networks.FORWARD_CONFIGS[
-        entry if kernel == 'forward' else 0]
-    backward = triton_band_networks.BACKWARD_CONFIGS[
-        entry if kernel == 'backward' else 0]
-    monkeypatch.setattr(triton_band_networks, 'FORWARD_CONFIGS', (forward, ))
-    monkeypatch.setattr(triton_band_networks, 'BACKWARD_CONFIGS',
-                        (backward, ))
+@pytest.mark.parametrize('entry', triton_band_networks.backward_configs(),
+                         ids=lambda c: c.name)
+def test_every_triton_backward_entry_computes_the_same(monkeypatch, entry):
+    """Each backward entry a GPU may run (every target's, with and without
+    the input gradient), behind the forward's entry, over two samples of
+    two tiles and a partial third each, so that its programs (two a band
+    here) run several tiles, matches float64 (full float32 products; the
+    fp16/bf16 paths run in the autocast test below)."""
+    monkeypatch.setattr(triton_band_networks, 'backward_configs',
+                        lambda *args: (entry, ))
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
     model = _model(backend='triton')
-    # two tiles of the entry, the second of one pixel
-    block = (forward if kernel == 'forward' else backward).block
-    spikes = _spikes(1, 9, 1, block + 1, seed=entry)
-    want = _reference(model, spikes, True)
-    if kernel == 'forward':
-        with torch.no_grad():
-            got, want = [model(spikes)], want[:1]
-    else:
-        got = _run(model, spikes, True)
-    _assert_close(got, want, triton_band_networks.TOLERANCES['ieee'],
-                  f'{forward} {backward}')
+    spikes = _spikes(2, 9, 1, 2 * entry.block + 1, seed=entry.block)
+    for input_grad in (True, False):
+        _assert_close(_run(model, spikes, input_grad),
+                      _reference(model, spikes, input_grad),
+                      triton_band_networks.TOLERANCES['ieee'],
+                      f'{entry}, input gradient {input_grad}')
+
+
+@needs_triton
+def test_the_work_division_shares_programs_by_band_length():
+    """About the slots, in proportion to a band's steps, one at least and
+    no more than its tiles; each band's programs start at tiles 0 .. n-1
+    and step by n, so together they run every tile once."""
+    division = triton_band_networks.work_division([18, 18, 72], 100, 40)
+    counts = {band: step for band, first, step in division if first == 0}
+    assert counts == {0: 7, 1: 7, 2: 26}
+    for band, count in counts.items():
+        tiles = sorted(t for b, first, step in division if b == band
+                       for t in range(first, 100, step))
+        assert tiles == list(range(100))
+    assert triton_band_networks.work_division([5, 500], 3, 8) == [
+        (0, 0, 1), (1, 0, 3), (1, 1, 3), (1, 2, 3)]
 
 
 @needs_triton
 def test_triton_rejects_a_launch_config_not_in_its_lists():
-    coeffs = torch.zeros(4, 5)
+    coeffs = torch.zeros(1, 5, 4)
     model = _model(backend='triton')
     weights = [[(conv.weight, conv.bias) for conv, _ in net.layers()]
                for net in model.band_networks[:1]]
@@ -285,7 +287,7 @@ def test_the_autotuner_keeps_the_fastest_entry_and_each_entrys_time(
     monkeypatch.setattr(torch.cuda, 'get_device_name',
                         lambda device=None: 'Test GPU')
     monkeypatch.setattr(triton.testing, 'do_bench', do_bench)
-    key = ('band_forward', 72, 32, 'tf32', None)
+    key = ('band_backward', (72, ), 32, 'tf32', False)
     choose = triton_band_networks._choose  # what both kernels' calls use
     assert choose(tuple(times), key + (300_000, ), torch.device('cpu'),
                   launched.append) == config(64, 4)
@@ -294,7 +296,8 @@ def test_the_autotuner_keeps_the_fastest_entry_and_each_entrys_time(
     assert choose(tuple(times), key + (1 << 19, ), torch.device('cpu'),
                   no_second_timing) == config(64, 4)
     assert triton_band_networks.tuned_configs() == {
-        'Test GPU | band_forward | L=72 H=32 tf32 | <=524288 px': dict(
+        'Test GPU | band_backward | L=(72,) H=32 tf32 input_grad=False | '
+        '<=524288 px': dict(
             entry='64x4', entry_ms={'16x4': 5.5, '64x4': 2.75})}
 
 
@@ -377,7 +380,7 @@ def test_torch_device_path_keeps_no_hidden_activation():
     """What the backward pass keeps is the chunks' inputs (the coefficients,
     once), not the 32-channel activations of any pixel."""
     model = _model()
-    coeffs = torch.randn(1, 300, 15, requires_grad=True)
+    coeffs = torch.randn(1, 15, 300, requires_grad=True)
     lengths = [5, 10]
     saved = {}
     for recompute in (True, False):
@@ -422,7 +425,7 @@ def test_device_path_cost_as_docs_state():
 
     network = _model().band_networks[0]
     pixels, length = 40, 7
-    coeffs = torch.randn(1, 2 * pixels, length)
+    coeffs = torch.randn(1, length, 2 * pixels)
     budget = pixels * 161 * length * 4  # two chunks of 40 pixels
     forward = 2 * 3 * (32 + 32 * 32 + 32)
     for train, flops_per_coefficient in ((False, forward),

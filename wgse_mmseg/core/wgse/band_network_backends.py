@@ -1,9 +1,10 @@
 """The backends that run WGSE's band networks, behind one interface.
 
 A backend takes the band networks (:class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`,
-one per wavelet band) and every pixel's wavelet coefficients ``(B, P, C)``
-(``P = H*W`` pixels, the bands side by side along ``C``) and returns the
-networks' outputs in the same layout. All compute the same function; they
+one per wavelet band) and every pixel's wavelet coefficients ``(B, C, P)``
+(``P = H*W`` pixels; the bands one after another along ``C``, so that one
+coefficient of every pixel is a contiguous row) and returns the networks'
+outputs in the same layout. All compute the same function; they
 differ in where they run and how fast:
 
 * ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
@@ -95,7 +96,7 @@ class BandNetworkBackend:
     def run(self, networks: Sequence[nn.Module], coeffs: Tensor,
             lengths: Sequence[int], spatial: Tuple[int, int],
             **launch) -> Tensor:
-        """The band networks on ``coeffs`` ``(B, P, C)``, bands of
+        """The band networks on ``coeffs`` ``(B, C, P)``, bands of
         ``lengths`` side by side, pixels of a ``spatial`` ``(H, W)``
         frame; same shape and dtype out. ``launch``: one of
         :meth:`check_launches` (the first-use check names each)."""
@@ -136,9 +137,9 @@ class TorchBackend(BandNetworkBackend):
                     return _module_bands(networks, coeffs, lengths, spatial,
                                          recompute=True)
                 weights, residuals = _weights(networks)
-                rows = coeffs.reshape(-1, coeffs.shape[2])
-                out = torch_band_networks(rows, lengths, weights, residuals)
-            return out.view(coeffs.shape)
+                out = torch_band_networks(_pixel_rows(coeffs), lengths,
+                                          weights, residuals)
+            return _band_major(out, coeffs.shape)
         # nn.Conv modules: dim 2 and 3, and under tracing (FLOP counters,
         # jit.trace see the convolutions). They follow autocast.
         return _module_bands(networks, coeffs, lengths, spatial,
@@ -180,7 +181,7 @@ def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
                   lengths: Sequence[int], spatial: Tuple[int, int],
                   recompute: bool,
                   chunk_bytes: int = DEVICE_CHUNK_BYTES) -> Tensor:
-    """The networks as ``nn.Conv`` modules on ``(B, P, C)`` coefficients.
+    """The networks as ``nn.Conv`` modules on ``(B, C, P)`` coefficients.
 
     ``dim=1`` runs every pixel as a ``(1, L)`` signal; ``dim`` 2 and 3 run
     one sample's band as a ``(1, 1, L, H, W)`` volume.
@@ -192,15 +193,15 @@ def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
     pass (``torch.utils.checkpoint``). Without, every activation of every
     pixel is kept (the ``'reference'`` backend).
     """
-    batch, pixels, _ = coeffs.shape
+    batch, _, pixels = coeffs.shape
     train = recompute and torch.is_grad_enabled() and (
         coeffs.requires_grad or any(p.requires_grad for net in networks
                                     for p in net.parameters()))
     outs = []
-    for network, band in zip(networks, coeffs.split(list(lengths), dim=2)):
-        length = band.shape[2]
+    for network, band in zip(networks, coeffs.split(list(lengths), dim=1)):
+        length = band.shape[1]
         if network.dim == 1:
-            signals = band.reshape(batch * pixels, 1, length)
+            signals = band.transpose(1, 2).reshape(batch * pixels, 1, length)
             step = _pixels_per_chunk(network, length, coeffs.element_size(),
                                     chunk_bytes) if recompute else None
             if step is None or (signals.shape[0] <= step and not train):
@@ -210,18 +211,29 @@ def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
                     checkpoint(network, chunk, use_reentrant=False)
                     if train else network(chunk)
                     for chunk in signals.split(step)])
-            outs.append(out.reshape(batch, pixels, length).to(coeffs.dtype))
+            outs.append(out.reshape(batch, pixels, length).transpose(1, 2)
+                        .to(coeffs.dtype))
             continue
         samples = []
-        for sample in band.transpose(1, 2).reshape(batch, 1, length,
-                                                   *spatial).split(1):
+        for sample in band.reshape(batch, 1, length, *spatial).split(1):
             samples.append(checkpoint(network, sample, use_reentrant=False)
                            if train else network(sample))
         out = torch.cat(samples) if samples else band.new_empty(
             0, 1, length, *spatial)
-        outs.append(out.reshape(batch, length, pixels).transpose(1, 2)
-                    .to(coeffs.dtype))
-    return torch.cat(outs, dim=2)
+        outs.append(out.reshape(batch, length, pixels).to(coeffs.dtype))
+    return torch.cat(outs, dim=1)
+
+
+def _pixel_rows(coeffs: Tensor) -> Tensor:
+    """``(B, C, P)`` coefficients as ``(B*P, C)`` rows, one pixel a row:
+    the CPU kernels' layout."""
+    return coeffs.transpose(1, 2).reshape(-1, coeffs.shape[1])
+
+
+def _band_major(rows: Tensor, shape: torch.Size) -> Tensor:
+    """:func:`_pixel_rows`' ``(B*P, C)`` back to ``shape`` ``(B, C, P)``."""
+    batch, columns, pixels = shape
+    return rows.view(batch, pixels, columns).transpose(1, 2).contiguous()
 
 
 class CompiledBackend(BandNetworkBackend):
@@ -239,16 +251,15 @@ class CompiledBackend(BandNetworkBackend):
 
     def unsupported_call(self, networks, coeffs):
         weights, residuals = _weights(networks)
-        return compiled_band_networks.unsupported(
-            coeffs.reshape(-1, coeffs.shape[2]), weights, residuals)
+        return compiled_band_networks.unsupported(_pixel_rows(coeffs),
+                                                  weights, residuals)
 
     def run(self, networks, coeffs, lengths, spatial):
         weights, residuals = _weights(networks)
         with torch.autocast(coeffs.device.type, enabled=False):
             out = compiled_band_networks.compiled_band_networks(
-                coeffs.reshape(-1, coeffs.shape[2]), lengths, weights,
-                residuals)
-        return out.view(coeffs.shape)
+                _pixel_rows(coeffs), lengths, weights, residuals)
+        return _band_major(out, coeffs.shape)
 
 
 class TritonBackend(BandNetworkBackend):
@@ -272,10 +283,8 @@ class TritonBackend(BandNetworkBackend):
         weights, _ = _weights(networks)
         precision = self.precision(coeffs)
         with torch.autocast(coeffs.device.type, enabled=False):
-            out = triton_band_networks.triton_band_networks(
-                coeffs.reshape(-1, coeffs.shape[2]), lengths, weights,
-                precision, **launch)
-        return out.view(coeffs.shape)
+            return triton_band_networks.triton_band_networks(
+                coeffs, lengths, weights, precision, **launch)
 
     @property
     def first_use_check(self):
@@ -285,14 +294,16 @@ class TritonBackend(BandNetworkBackend):
     #: two tiles of the largest launch entry and a partial third
     check_pixels = 2 * max(config.block for config in (
         triton_band_networks.FORWARD_CONFIGS +
-        triton_band_networks.BACKWARD_CONFIGS)) + 3
+        triton_band_networks.backward_configs())) + 3
 
     def precision(self, coeffs):
         return triton_band_networks.dot_precision(coeffs.device.type)
 
     def check_launches(self):
         forward = triton_band_networks.FORWARD_CONFIGS
-        backward = triton_band_networks.BACKWARD_CONFIGS
+        backward = triton_band_networks.backward_configs(
+            None if triton_band_networks.interpreting() else
+            triton_band_networks.capability(torch.device('cuda')))
         # every entry of each list at least once
         return [dict(forward_config=forward[min(i, len(forward) - 1)],
                      backward_config=backward[min(i, len(backward) - 1)])
@@ -344,7 +355,7 @@ def get_backend(name: str, networks: Sequence[nn.Module]
 def resolve_backend(name: str, networks: Sequence[nn.Module],
                     coeffs: Tensor, lengths: Sequence[int]
                     ) -> Tuple[BandNetworkBackend, Optional[CheckResult]]:
-    """The backend that runs ``networks`` on ``coeffs`` ``(B, P, C)`` (bands
+    """The backend that runs ``networks`` on ``coeffs`` ``(B, C, P)`` (bands
     of ``lengths``) for the configured ``name`` (``'auto'`` or one of
     :data:`BACKENDS`), and the first-use check behind the choice: the one
     the backend passed, the one ``'auto'`` fell back from to ``'torch'``,

@@ -34,14 +34,15 @@ lengths at :attr:`~.band_network_backends.BandNetworkBackend.check_pixels`
 pixels (131 for Triton: two tiles of its largest launch entry, 64 pixels,
 and a partial third); every launch entry the backend can choose is run
 forward and backward twice, with and without the coefficients' gradient
-(Triton: 2 entries x 2 = 4 forward+backward passes, one kernel launch per
-band each way: 48 launches for WGSE's 6 bands), plus one float64
-forward+backward of the ``torch`` backend. Its arithmetic is negligible on
+(Triton: one launch of each kernel each way, all bands at once), plus one
+float64 forward+backward of the ``torch`` backend. Its arithmetic is negligible on
 a GPU (131 pixels against the 524288 of a 4x129x256x512 batch); the time is
 the compiles of the variants the check meets first, which the training step
 would have paid anyway, but for the entries autotuning would not have
-picked (on an H100 or H200: 30-60 s per precision in the first process
-on a machine, 0.2-0.9 s in later ones, which find triton's cache).
+picked (measured with the former kernels, which compiled one variant per
+band length, on an H100 or H200: 30-60 s per precision in the first
+process on a machine, 0.2-0.9 s in later ones, which find triton's cache;
+the present kernels compile four variants a precision for any T).
 """
 import copy
 import logging
@@ -174,7 +175,7 @@ def _on_grid(shape, grid: Grid, generator: torch.Generator,
 def _problem(networks: Sequence[nn.Module], lengths: Sequence[int],
              pixels: int, device: torch.device):
     """Networks like ``networks`` on :data:`GRIDS`, coefficients
-    ``(1, pixels, C)`` and the loss's weights, float64 (seeded: the same
+    ``(1, C, pixels)`` and the loss's weights, float64 (seeded: the same
     everywhere)."""
     generator = torch.Generator().manual_seed(0)
     nets = copy.deepcopy(list(networks))
@@ -190,7 +191,7 @@ def _problem(networks: Sequence[nn.Module], lengths: Sequence[int],
                 conv.bias.copy_(_on_grid(conv.bias.shape,
                                          GRIDS['biases'][which], generator,
                                          odd_halves=True))
-    shape = (1, pixels, sum(lengths))
+    shape = (1, sum(lengths), pixels)
     coeffs = _on_grid(shape, GRIDS['coefficients'], generator)
     weights = _on_grid(shape, GRIDS['loss_weights'], generator)
     return ([net.to(device, torch.float64) for net in nets],
@@ -204,7 +205,7 @@ def _output_and_grads(backend, networks, coeffs: Tensor, weights: Tensor,
     parameter's of ``sum(out * weights)``."""
     coeffs = coeffs.detach().requires_grad_(input_grad)
     params = [p for net in networks for p in net.parameters()]
-    out = backend.run(networks, coeffs, lengths, (1, coeffs.shape[1]),
+    out = backend.run(networks, coeffs, lengths, (1, coeffs.shape[2]),
                       **launch)
     grads = torch.autograd.grad((out * weights).sum(),
                                 ([coeffs] if input_grad else []) + params)
@@ -256,7 +257,7 @@ def check_on_first_use(backend, reference, networks: Sequence[nn.Module],
                        coeffs: Tensor, lengths: Sequence[int]
                        ) -> CheckResult:
     """The first-use check of ``backend`` for the variant of this call
-    (``coeffs`` ``(B, P, C)``, bands of ``lengths``), against ``reference``
+    (``coeffs`` ``(B, C, P)``, bands of ``lengths``), against ``reference``
     (the ``torch`` backend) in float64; run once per process and variant,
     logged when it starts (info) and once with its result (passed: info;
     failed: warning)."""

@@ -62,30 +62,36 @@ class LaunchConfig(NamedTuple):
 
     @property
     def name(self) -> str:
-        """``'16x4'`` (block x warps), ``'16x4r168'`` with ``maxnreg``."""
+        """``'64x4'`` (block x warps), ``'64x4r168'`` with ``maxnreg``."""
         return f'{self.block}x{self.num_warps}' + (
             '' if self.maxnreg is None else f'r{self.maxnreg}')
 
 
-#: The entries a GPU chooses from, the first being what runs untuned (the
-#: interpreter's). Chosen with ``tools/analysis_tools/sweep_band_kernels.py``
-#: (the longest band at T=129, 72, 32 channels, 4x256x512 pixels;
-#: docs/wgse_speed.md, "Launch entries"). The forward's 64-pixel tile fills
-#: its 254 registers on sm_90 without spilling and runs on warp-group
-#: tensor-core instructions: 2.7 ms against the 16-pixel tile's 5.2 on one
-#: H200 at TF32; the 16-pixel tile (112 registers, 4 programs an SM) stays
-#: for GPUs nobody here has measured. The backward keeps one entry: it
-#: carries the gradient's windows and three ``H x H`` parameter-gradient
-#: sums besides the forward's, 234-255 registers at 16 pixels, and every
-#: other entry measured was slower on an H100 and an H200 (2 or 8 warps;
-#: 32 or 64 pixels, which spill 1-3.5 KB a thread on every target; a
-#: register cap for more programs an SM) by 5% to 5x.
-FORWARD_CONFIGS = (LaunchConfig(16, 4), LaunchConfig(64, 4))
-BACKWARD_CONFIGS = (LaunchConfig(16, 4), )
+#: The forward kernel's one launch entry: 64-pixel tiles, 4 warps (one
+#: warp group: warp-group tensor-core instructions on sm_90), 240-247
+#: registers without spilling on sm_80, sm_89 and sm_90 at TF32, two
+#: programs an SM.
+FORWARD_CONFIGS = (LaunchConfig(64, 4), )
+#: The backward kernel's entries (:func:`backward_configs`), the first of a
+#: list running untuned. Each compiles without spilling to at least two
+#: programs an SM at TF32, fp16 and bf16 on sm_80, sm_89 and sm_90 (the
+#: resources tool's table, docs/wgse_speed.md, "Compiled for GPUs"). 32
+#: pixels, 48 KB of shared memory at TF32: two programs share sm_89's 100 KB.
+#: On sm_90 at TF32 the 64-pixel tile fits too (255 registers, 73 KB of
+#: shared memory) and takes a third fewer instructions a coefficient; it
+#: spills at fp16 and bf16 and on the older GPUs. The input gradient
+#: (WGSE's coefficients need none in training: they come from the data)
+#: carries three more vectors and runs 16 pixels.
+BACKWARD_CONFIGS = dict(
+    default=(LaunchConfig(32, 4), ),
+    sm_90_tf32=(LaunchConfig(64, 4), LaunchConfig(32, 4)),
+    input_grad=(LaunchConfig(16, 4), ))
+#: Programs of the backward kernel per SM the work is divided for: what
+#: every entry above fits at once.
+PROGRAMS_PER_SM = 2
 #: Hidden widths the kernels take (``tl.dot`` needs powers of two >= 16).
-#: Not 64: its TF32 backward needs 116-137 KB of shared memory a program,
-#: more than sm_89 (L40, RTX 4090) gives one (99 KB), and spills 0.5-1.5 KB
-#: a thread on every target; the 'torch' backend runs it.
+#: Not 64: its TF32 backward needs more shared memory a program than sm_89
+#: (L40, RTX 4090) gives one, and spills; the 'torch' backend runs it.
 HIDDEN_CHANNELS = (16, 32)
 #: Largest error against float64, relative to the largest magnitude of the
 #: output or of each gradient, that the tests allow per
@@ -95,9 +101,54 @@ HIDDEN_CHANNELS = (16, 32)
 TOLERANCES = {'ieee': 1e-4, 'tf32': 3e-2, 'fp16': 3e-2, 'bf16': 2.5e-1}
 
 
+def backward_configs(capability: Optional[int] = None,
+                     input_grad: Optional[bool] = None,
+                     precision: Optional[str] = None
+                     ) -> Tuple[LaunchConfig, ...]:
+    """The backward entries (:data:`BACKWARD_CONFIGS`) for a GPU of
+    ``capability`` (``90`` for sm_90), computing the input gradient or not,
+    at a :func:`dot_precision`; a ``None`` admits every value, and the
+    entries of all that it admits are returned, the first for the newest
+    GPUs first."""
+    if input_grad:
+        return BACKWARD_CONFIGS['input_grad']
+    found = []
+    if (capability is None or capability >= 90) and \
+            precision in (None, 'tf32'):
+        found += BACKWARD_CONFIGS['sm_90_tf32']
+    found += BACKWARD_CONFIGS['default']
+    if input_grad is None:
+        found += BACKWARD_CONFIGS['input_grad']
+    return tuple(dict.fromkeys(found))
+
+
 def interpreting() -> bool:
     """Whether triton runs kernels in its CPU interpreter."""
     return os.environ.get('TRITON_INTERPRET', '0') not in ('', '0')
+
+
+def _interpreter_reads_scalar_bounds() -> None:
+    """triton 3.6's interpreter holds a scalar as a one-element array and
+    turns it into a Python ``int`` (the kernels' ``range(0, length + 2)``,
+    ``length`` read at run time) with ``int(array)``, which NumPy 2 refuses
+    for an array of one dimension; the compiled kernels take such bounds.
+    Under the interpreter, read the one element instead (once a process)."""
+    from triton.runtime import interpreter
+    original = interpreter._patch_lang_tensor
+    if getattr(original, 'reads_scalar_bounds', False):
+        return
+
+    def patch(tensor, scope):
+        original(tensor, scope)
+        scope.set_attr(tensor, '__index__',
+                       lambda self: int(self.handle.data.reshape(-1)[0]))
+
+    patch.reads_scalar_bounds = True
+    interpreter._patch_lang_tensor = patch
+
+
+if triton is not None and interpreting():
+    _interpreter_reads_scalar_bounds()
 
 
 def unavailable() -> Optional[str]:
@@ -146,8 +197,38 @@ def dot_precision(device_type: str) -> str:
     return 'tf32' if torch.backends.cudnn.allow_tf32 else 'ieee'
 
 
-def _band_params(params: Sequence[Tensor], band: int) -> List[Tensor]:
-    return [p.contiguous() for p in params[6 * band:6 * band + 6]]
+class BandKernelInputs(NamedTuple):
+    """What both kernels read besides the coefficients: per band its length
+    and first row ``(bands,)`` int32, and the six parameters stacked over
+    the bands (:func:`parameter_shapes` after the band), float32."""
+    lengths: Tensor
+    offsets: Tensor
+    params: Tuple[Tensor, ...]
+
+    @property
+    def hidden(self) -> int:
+        """The bands' hidden channels."""
+        return self.params[0].shape[1]
+
+
+def parameter_shapes(hidden: int) -> List[Tuple[int, ...]]:
+    """The shapes of one band's parameters, conv1, conv2, conv3 each
+    ``(weight, bias)``, for ``hidden`` channels."""
+    return [(hidden, 1, 3), (hidden, ), (hidden, hidden, 3), (hidden, ),
+            (1, hidden, 3), (1, )]
+
+
+def band_kernel_inputs(lengths: Sequence[int], params: Sequence[Tensor]
+                       ) -> BandKernelInputs:
+    """:class:`BandKernelInputs` of bands of ``lengths`` whose parameters
+    are ``params``, six a band (conv1, conv2, conv3 each weight and
+    bias)."""
+    device = params[0].device
+    offsets = [sum(lengths[:band]) for band in range(len(lengths))]
+    return BandKernelInputs(
+        torch.tensor(lengths, dtype=torch.int32, device=device),
+        torch.tensor(offsets, dtype=torch.int32, device=device),
+        tuple(torch.stack(params[kind::6]).contiguous() for kind in range(6)))
 
 
 class _Tuned(NamedTuple):
@@ -157,31 +238,31 @@ class _Tuned(NamedTuple):
     entry_ms: Tuple[Tuple[LaunchConfig, float], ...]
 
 
-#: (device name, kernel, band length, width, precision, input gradient,
+#: (device name, kernel, band lengths, width, precision, input gradient,
 #: pixels rounded up to a power of two) -> the choice
 _TUNED: Dict[tuple, _Tuned] = {}
 
 
 def tuned_configs() -> Dict[str, Dict[str, object]]:
     """The entries chosen so far in this process, by a readable key
-    (``'NVIDIA H100 | band_backward | L=72 H=32 tf32 input_grad=False |
-    <=524288 px'``): ``{'entry', 'entry_ms'}``, the chosen entry's
-    :attr:`LaunchConfig.name` and each entry's name mapped to its measured
-    milliseconds."""
-    return {f'{device} | {kernel} | L={length} H={hidden} {precision}'
+    (``'NVIDIA H100 | band_backward | L=(18, 18, 22, 29, 43, 72) H=32 tf32
+    input_grad=False | <=524288 px'``): ``{'entry', 'entry_ms'}``, the
+    chosen entry's :attr:`LaunchConfig.name` and each entry's name mapped to
+    its measured milliseconds."""
+    return {f'{device} | {kernel} | L={lengths} H={hidden} {precision}'
             f'{"" if grad is None else f" input_grad={grad}"} | <={px} px':
             dict(entry=tuned.config.name, entry_ms={
                 entry.name: ms for entry, ms in tuned.entry_ms})
-            for (device, kernel, length, hidden, precision, grad, px),
+            for (device, kernel, lengths, hidden, precision, grad, px),
             tuned in _TUNED.items()}
 
 
 def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
             launch: Callable[[LaunchConfig], None]) -> LaunchConfig:
-    """The entry of ``configs`` for this call: the first under the
-    interpreter; on a GPU the fastest of one timing of each (after a
+    """The entry of ``configs`` for this call: the only or first one under
+    the interpreter; on a GPU the fastest of one timing of each (after a
     compiling run), remembered per ``key`` and device."""
-    if interpreting():
+    if interpreting() or len(configs) == 1:
         return configs[0]
     pixels = key[-1]
     full_key = (torch.cuda.get_device_name(device), *key[:-1],
@@ -194,37 +275,79 @@ def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
     return _TUNED[full_key].config
 
 
+def capability(device: torch.device) -> Optional[int]:
+    """``90`` for an sm_90 GPU; ``None`` under the interpreter."""
+    if interpreting():
+        return None
+    major, minor = torch.cuda.get_device_capability(device)
+    return 10 * major + minor
+
+
 def launch_forward(config: LaunchConfig, coeffs: Tensor, out: Tensor,
-                   offset: int, length: int, params: Sequence[Tensor],
-                   precision: str) -> None:
-    """One launch of ``band_forward``: the network of the band in columns
-    ``offset:offset + length`` of ``coeffs`` ``(N, C)``, into the same
-    columns of ``out``; ``params`` the band's six contiguous tensors."""
-    pixels, columns = coeffs.shape
-    kernels.band_forward[(triton.cdiv(pixels, config.block), )](
-        coeffs, out, columns, offset, pixels, *params, LENGTH=length,
-        HIDDEN=params[0].shape[0], BLOCK=config.block, PRECISION=precision,
-        num_warps=config.num_warps, maxnreg=config.maxnreg)
+                   inputs: BandKernelInputs, precision: str,
+                   grad_out: Optional[Tensor] = None) -> None:
+    """One launch of ``band_forward`` over every band of ``coeffs``
+    ``(B, C, P)``: the networks' output into ``out`` (same shape); given
+    ``grad_out`` (same shape), the gradient at the last convolution's
+    pre-activation instead (``grad_out`` where the output is positive)."""
+    batch, columns, pixels = coeffs.shape
+    tiles = triton.cdiv(pixels, config.block)
+    kernels.band_forward[(batch * tiles, len(inputs.lengths))](
+        coeffs, coeffs if grad_out is None else grad_out, out, pixels,
+        columns, tiles, inputs.lengths, inputs.offsets, *inputs.params,
+        HIDDEN=inputs.hidden, BLOCK=config.block, PRECISION=precision,
+        OUTPUT_GRAD=grad_out is not None, num_warps=config.num_warps,
+        maxnreg=config.maxnreg)
 
 
-def launch_backward(config: LaunchConfig, coeffs: Tensor, grad_out: Tensor,
-                    grad_coeffs: Optional[Tensor], offset: int, length: int,
-                    params: Sequence[Tensor], precision: str) -> Tensor:
-    """One launch of ``band_backward`` for the band of
-    :func:`launch_forward`: the input gradient into those columns of
-    ``grad_coeffs`` (none if ``None``). Returns the parameter-gradient sums,
-    one row per program ``(programs, P)``; their sum over rows is the
-    gradient of the six parameters, flattened and concatenated."""
-    pixels, columns = coeffs.shape
-    partial = coeffs.new_empty(triton.cdiv(pixels, config.block),
-                               sum(p.numel() for p in params))
-    kernels.band_backward[(partial.shape[0], )](
-        coeffs, grad_out, coeffs if grad_coeffs is None else grad_coeffs,
-        partial, columns, offset, pixels, *params, LENGTH=length,
-        HIDDEN=params[0].shape[0], BLOCK=config.block, PRECISION=precision,
+def work_division(lengths: Sequence[int], tiles: int, slots: int
+                  ) -> List[Tuple[int, int, int]]:
+    """The backward kernel's programs, ``(band, first tile, step)`` each:
+    about ``slots`` programs shared among the bands in proportion to their
+    work (a tile of a band of ``L`` coefficients takes ``L + 3`` steps), at
+    least one and at most ``tiles`` a band, so that programs of every band
+    finish together."""
+    work = [length + 3 for length in lengths]
+    counts = [min(tiles, max(1, round(slots * w / sum(work))))
+              for w in work]
+    return [(band, first, count) for band, count in enumerate(counts)
+            for first in range(count)]
+
+
+def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
+                    grad_coeffs: Optional[Tensor], inputs: BandKernelInputs,
+                    precision: str, slots: int) -> List[Tensor]:
+    """One launch of ``band_backward`` for :func:`launch_forward`'s bands,
+    from ``d3`` (:func:`launch_forward` with ``grad_out``): the input
+    gradient into ``grad_coeffs`` (none if ``None``). Returns each band's
+    parameter gradient, flattened and concatenated ``(P_band,)``: the sum
+    of its programs' rows (``slots``: programs in all, about)."""
+    batch, columns, pixels = coeffs.shape
+    tiles = batch * triton.cdiv(pixels, config.block)
+    division = work_division([int(n) for n in inputs.lengths.tolist()],
+                             tiles, slots)
+    work = torch.tensor(division, dtype=torch.int32, device=coeffs.device)
+    partial = coeffs.new_empty(len(division),
+                               sum(p[0].numel() for p in inputs.params))
+    kernels.band_backward[(len(division), )](
+        coeffs, d3, coeffs if grad_coeffs is None else grad_coeffs,
+        partial, work, pixels, columns, triton.cdiv(pixels, config.block),
+        tiles, inputs.lengths, inputs.offsets, *inputs.params,
+        HIDDEN=inputs.hidden, BLOCK=config.block, PRECISION=precision,
         INPUT_GRAD=grad_coeffs is not None, num_warps=config.num_warps,
         maxnreg=config.maxnreg)
-    return partial
+    counts = [step for _, first, step in division if first == 0]
+    return [rows.sum(0) for rows in partial.split(counts)]
+
+
+def backward_slots(device: torch.device, bands: int) -> int:
+    """Programs the backward kernel's work is divided into: every SM's
+    :data:`PROGRAMS_PER_SM` on a GPU; two a band under the interpreter
+    (so that its tests see programs that run several tiles)."""
+    if interpreting():
+        return 2 * bands
+    return torch.cuda.get_device_properties(
+        device).multi_processor_count * PROGRAMS_PER_SM
 
 
 class _TritonBandNetworks(torch.autograd.Function):
@@ -234,53 +357,51 @@ class _TritonBandNetworks(torch.autograd.Function):
     def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
                 precision: str, configs: Tuple[Optional[LaunchConfig], ...],
                 *params: Tensor) -> Tensor:
-        pixels = coeffs.shape[0]
-        hidden = params[0].shape[0]
+        inputs = band_kernel_inputs(lengths, params)
         out = torch.empty_like(coeffs)
-        offset = 0
-        for band, length in enumerate(lengths):
-            launch = functools.partial(launch_forward, coeffs=coeffs, out=out,
-                                       offset=offset, length=length,
-                                       params=_band_params(params, band),
-                                       precision=precision)
-            if pixels:
-                launch(configs[0] or _choose(
-                    FORWARD_CONFIGS, ('band_forward', length, hidden,
-                                      precision, None, pixels),
-                    coeffs.device, launch))
-            offset += length
+        if coeffs.numel():
+            launch_forward(configs[0] or FORWARD_CONFIGS[0], coeffs, out,
+                           inputs, precision)
         ctx.lengths, ctx.precision = lengths, precision
-        ctx.backward_config = configs[1]
+        ctx.configs = configs
         ctx.save_for_backward(coeffs, *params)
         return out
 
     @staticmethod
     def backward(ctx, grad_out: Tensor):
+        if torch.is_grad_enabled():
+            raise RuntimeError(
+                "WGSE's 'triton' band-network backend has no second-order "
+                "gradients (create_graph=True); the 'torch' backend has "
+                "them: WGSE(backend='torch')")
         coeffs, *params = ctx.saved_tensors
-        pixels = coeffs.shape[0]
-        hidden = params[0].shape[0]
         input_grad = ctx.needs_input_grad[0]
-        grad_out = grad_out.contiguous()
+        sizes = [p.numel() for p in params[:6]]
+        if not coeffs.numel():
+            return (torch.zeros_like(coeffs) if input_grad else None, None,
+                    None, None, *[torch.zeros_like(p) for p in params])
+        inputs = band_kernel_inputs(ctx.lengths, params)
+        forward_config, backward_config = ctx.configs
+        d3 = torch.empty_like(coeffs)
+        launch_forward(forward_config or FORWARD_CONFIGS[0], coeffs, d3,
+                       inputs, ctx.precision,
+                       grad_out=grad_out.contiguous())
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
-        grads, offset = [], 0
-        for band, length in enumerate(ctx.lengths):
-            band_params = _band_params(params, band)
-            sizes = [p.numel() for p in band_params]
-            launch = functools.partial(launch_backward, coeffs=coeffs,
-                                       grad_out=grad_out,
-                                       grad_coeffs=grad_coeffs, offset=offset,
-                                       length=length, params=band_params,
-                                       precision=ctx.precision)
-            if pixels:
-                total = launch(ctx.backward_config or _choose(
-                    BACKWARD_CONFIGS, ('band_backward', length, hidden,
-                                       ctx.precision, input_grad, pixels),
-                    coeffs.device, launch)).sum(0)
-            else:
-                total = coeffs.new_zeros(sum(sizes))
+        slots = backward_slots(coeffs.device, len(ctx.lengths))
+        launch = functools.partial(launch_backward, coeffs=coeffs, d3=d3,
+                                   grad_coeffs=grad_coeffs, inputs=inputs,
+                                   precision=ctx.precision, slots=slots)
+        config = backward_config or _choose(
+            backward_configs(capability(coeffs.device), input_grad,
+                             ctx.precision),
+            ('band_backward', ctx.lengths, inputs.hidden, ctx.precision,
+             input_grad, coeffs.shape[0] * coeffs.shape[2]),
+            coeffs.device, lambda c: launch(c))
+        grads = []
+        for total, band_params in zip(launch(config),
+                                      zip(*[iter(params)] * 6)):
             grads += [g.view_as(p) for g, p in
                       zip(total.split(sizes), band_params)]
-            offset += length
         return (grad_coeffs, None, None, None, *grads)
 
 
@@ -293,22 +414,22 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
     """Run one band network per band over every pixel's coefficients.
 
     Args:
-        coeffs: ``(N, C)`` float32 coefficients of ``N`` pixels, the bands
-            side by side (``C = sum(lengths)``), on CUDA (on the CPU under
-            the interpreter).
+        coeffs: ``(B, C, P)`` float32 coefficients of ``P`` pixels, band
+            after band along ``C = sum(lengths)``, on CUDA (on the CPU
+            under the interpreter).
         lengths: ``L`` of each band.
         weights: per band, the three convolutions' ``(weight, bias)``:
             ``(H, 1, 3)``, ``(H, H, 3)``, ``(1, H, 3)`` and ``(H,)``,
             ``(H,)``, ``(1,)``, float32.
         precision: of the ``H x H`` products (:func:`dot_precision`).
         forward_config, backward_config: the launch of each kernel; by
-            default the tuned choice among :data:`FORWARD_CONFIGS` and
-            :data:`BACKWARD_CONFIGS` (their first entries under the
+            default :data:`FORWARD_CONFIGS`' entry and the tuned choice
+            among the GPU's :func:`backward_configs` (the first under the
             interpreter).
 
     Returns:
-        ``(N, C)``: each band's network output in place of its input.
-        Gradients flow to ``coeffs`` and every parameter.
+        ``(B, C, P)``: each band's network output in place of its input.
+        Gradients flow to ``coeffs`` and every parameter (first order).
     """
     reason = unavailable() or unsupported_tensor(coeffs)
     if reason:
@@ -317,18 +438,17 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
     if precision not in TOLERANCES:
         raise ValueError(f'precision must be one of {list(TOLERANCES)}, got '
                          f'{precision!r}')
-    if len(weights) != len(lengths) or sum(lengths) != coeffs.shape[1] or \
-            min(lengths, default=1) < 1:
+    if coeffs.dim() != 3 or len(weights) != len(lengths) or \
+            sum(lengths) != coeffs.shape[1] or min(lengths, default=1) < 1:
         raise ValueError(
             f'{len(weights)} band networks and bands of lengths '
             f'{list(lengths)} do not fit coefficients shaped '
-            f'{tuple(coeffs.shape)}')
+            f'{tuple(coeffs.shape)} (B, C, P)')
     hidden = weights[0][0][0].shape[0]
     reason = unsupported_network(1, 3, hidden, 1)
     if reason:
         raise ValueError(f'the Triton band network kernel: {reason}')
-    expected = [(hidden, 1, 3), (hidden, ), (hidden, hidden, 3), (hidden, ),
-                (1, hidden, 3), (1, )]
+    expected = parameter_shapes(hidden)
     params = [t for band in weights for layer in band for t in layer]
     for band in weights:
         shapes = [tuple(t.shape) for layer in band for t in layer]
@@ -342,7 +462,7 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
                          f'{coeffs.device}')
     for name, config, allowed in (
             ('forward_config', forward_config, FORWARD_CONFIGS),
-            ('backward_config', backward_config, BACKWARD_CONFIGS)):
+            ('backward_config', backward_config, backward_configs())):
         if config is not None and config not in allowed:
             raise ValueError(f'{name} must be one of {list(allowed)} (the '
                              f'entries compiled and tested), got {config!r}')

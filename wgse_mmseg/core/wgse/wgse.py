@@ -309,9 +309,9 @@ class WGSE(nn.Module):
                 f'with .double()')
         device_type = spikes.device.type
         with torch.autocast(device_type, enabled=False):
-            # (B, P, T), P = H*W: pixel-major, one time series per row.
+            # (B, T, P), P = H*W: one row of pixels per time step
             signal = spikes.to(dtype).reshape(batch, num_steps,
-                                              height * width).transpose(1, 2)
+                                              height * width)
             if self.wavelet is None:
                 coeffs, lengths = signal, [num_steps]
             else:
@@ -319,7 +319,7 @@ class WGSE(nn.Module):
                 # tensor; the matrices are constants of T either way
                 analysis, synthesis, lengths = self._matrices(
                     int(num_steps), spikes.device, dtype)
-                coeffs = torch.matmul(signal, analysis.t())  # (B, P, C)
+                coeffs = torch.matmul(analysis, signal)  # (B, C, P)
         backend, self.backend_check = resolve_backend(
             self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
@@ -327,9 +327,8 @@ class WGSE(nn.Module):
                                (height, width))
         with torch.autocast(device_type, enabled=False):
             if self.wavelet is not None:
-                enhanced = torch.matmul(enhanced, synthesis.t())  # (B, P, T)
-            out = enhanced.transpose(1, 2).reshape(batch, num_steps, height,
-                                                   width)
+                enhanced = torch.matmul(synthesis, enhanced)  # (B, T, P)
+            out = enhanced.reshape(batch, num_steps, height, width)
         if self.output_norm is not None:
             out = self.output_norm(out.reshape(batch, 1, -1)).reshape(
                 batch, num_steps, height, width)
