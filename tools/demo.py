@@ -47,33 +47,16 @@ import copy
 import json
 import os.path as osp
 import sys
-from typing import Tuple
 
-import cv2
-import numpy as np
-import torch
+from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, Choice, Path,
+                                       Text, add_frame_size_options,
+                                       check_frame_size)
+from wgse_mmseg.core.exposure import EXPOSURE
+from wgse_mmseg.core.recording_walk import add_walk_options
+from wgse_mmseg.utils.config import add_config_options
 
-import wgse_mmseg
-wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
-from mmengine.dataset import Compose  # noqa: E402
-from mmengine.registry import init_default_scope  # noqa: E402
-from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor  # noqa
-from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, SIDE,  # noqa
-                                       Choice,
-                                       Path, Text)
-from wgse_mmseg.core.exposure import (EXPOSURE, Exposed,  # noqa: E402
-                                      apply_exposure)
-from wgse_mmseg.core.io import spike_shape, to_uint8, write_png  # noqa
-from wgse_mmseg.core.recording_walk import (WalkError,  # noqa: E402
-                                            add_walk_options,
-                                            plan_recording_walk, walk_outputs,
-                                            walk_recording)
-from wgse_mmseg.apis.window_segmentor import (  # noqa: E402
-    PipelineSegmentor, pipeline_loader)
-from wgse_mmseg.core.reconstruction_baselines import tfp  # noqa: E402
-from wgse_mmseg.datasets import SpikeCityscapesDataset  # noqa: E402
-from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
-                                     load_config)
+# The model's modules (torch, OpenCV, OpenMMLab) are imported where they are
+# used, after the arguments are read: --help and argument errors come at once.
 
 
 #: what runs the model: the checkpoint in PyTorch, or an exported model
@@ -95,15 +78,12 @@ def build_parser() -> argparse.ArgumentParser:
         'video, .mp4 or .gif (default: <stem>_seg.mp4)')
     parser.add_argument(
         '--device', type=Text(empty=False),
-        default='cuda:0' if torch.cuda.is_available() else 'cpu',
-        help='device used for inference (default: cuda:0 if available)')
+        help='device used for inference (default: cuda:0 if available, '
+        'else cpu)')
     parser.add_argument(
         '--opacity', type=PROBABILITY, default=0.5,
         help='opacity of the painted segmentation map, in [0, 1]')
-    parser.add_argument('--height', type=SIDE,
-                        help='frame height of a .dat file')
-    parser.add_argument('--width', type=SIDE,
-                        help='frame width of a .dat file')
+    add_frame_size_options(parser)
     parser.add_argument(
         '--layout', type=LAYOUT,
         help='THW or HWT: how a .npy/.npz that does not record its '
@@ -127,8 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
 def parse_args(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    if (args.height is None) != (args.width is None):
-        parser.error('--height and --width go together')
+    check_frame_size(parser, args)
     if args.out_file is None:
         stem = osp.splitext(osp.basename(args.spikes))[0]
         args.out_file = f'{stem}_seg.' + (
@@ -136,13 +115,14 @@ def parse_args(argv=None):
     return args
 
 
-def build_pipeline(cfg, height=None, width=None, layout=None) -> Compose:
+def build_pipeline(cfg, height=None, width=None, layout=None):
     """The config's test pipeline without label loading.
 
     ``height``/``width`` (for ``.dat``) and ``layout`` (for ``.npy``/``.npz``
     files that do not record it), where given, are given to
-    ``LoadSpikeFromFile``.
+    ``LoadSpikeFromFile``. Returns mmengine's ``Compose`` of it.
     """
+    from mmengine.dataset import Compose
     pipeline = cfg.get('test_pipeline') or cfg.test_dataloader.dataset.pipeline
     transforms = []
     for transform in copy.deepcopy(pipeline):
@@ -163,21 +143,28 @@ def load_model(cfg, checkpoint: str, device: str):
     """The segmentor of ``cfg`` with the weights of ``checkpoint``, strictly
     (:func:`~wgse_mmseg.apis.segmentor_checkpoint.load_segmentor`), its
     ``dataset_meta`` (classes, palette) set, in eval mode on ``device``."""
+    from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor
     model, model.dataset_meta = load_segmentor(cfg, checkpoint)
     model.cfg = cfg
     return model.to(device).eval()
 
 
-def clip_image(spikes: torch.Tensor, exposure) -> Tuple[np.ndarray, Exposed]:
-    """``(T, H, W)`` spikes -> ``(H, W)`` uint8 TFP image of the whole clip
-    (spike rate / 0.6) with ``exposure`` applied, and what it did."""
+def clip_image(spikes, exposure):
+    """``(T, H, W)`` spikes (a tensor) -> the ``(H, W)`` uint8 TFP image
+    (an array) of the whole clip (spike rate / 0.6) with ``exposure``
+    applied, and what it did (``core.exposure.Exposed``)."""
+    from wgse_mmseg.core.exposure import apply_exposure
+    from wgse_mmseg.core.io import to_uint8
+    from wgse_mmseg.core.reconstruction_baselines import tfp
     exposed = apply_exposure(tfp(spikes.cpu().numpy()), exposure)
     return to_uint8(exposed.image), exposed
 
 
-def overlay(grey: np.ndarray, labels: np.ndarray, palette,
-            opacity: float) -> np.ndarray:
-    """Blend the palette colours of ``labels`` over ``grey``; RGB uint8."""
+def overlay(grey, labels, palette, opacity: float):
+    """Blend the palette colours of ``labels`` over ``grey`` (NumPy arrays);
+    RGB uint8."""
+    import cv2
+    import numpy as np
     palette = np.asarray(palette, dtype=np.uint8)
     if labels.max() >= len(palette):  # more classes than named colours
         extra = np.random.default_rng(42).integers(
@@ -198,6 +185,7 @@ def onnx_segmentor(path: str, device: str):
     labels, the palette the file records (Spike-Cityscapes' where it
     records none) and the ``(T, H, W)`` it was exported for."""
     from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
+    from wgse_mmseg.datasets import SpikeCityscapesDataset
     model = OnnxSpikeSegmentor(path, device=device)
     meta = getattr(model, 'dataset_meta', None) or {}
     palette = meta.get('palette', SpikeCityscapesDataset.METAINFO['palette'])
@@ -216,6 +204,13 @@ def onnx_segmentor(path: str, device: str):
 def walk(args, cfg) -> None:
     """``--stride``: segment a window every ``args.stride`` readouts into
     the video ``args.out_file`` (:func:`walk_recording`)."""
+    import torch
+
+    from wgse_mmseg.apis.window_segmentor import (PipelineSegmentor,
+                                                  pipeline_loader)
+    from wgse_mmseg.core.io import spike_shape
+    from wgse_mmseg.core.recording_walk import (plan_recording_walk,
+                                                walk_outputs, walk_recording)
     walk_outputs(args.out_file)  # a wrong extension fails before loading
     pipeline = build_pipeline(cfg, args.height, args.width, args.layout)
     length = pipeline_loader(pipeline).num_steps
@@ -263,6 +258,15 @@ def walk(args, cfg) -> None:
 
 def main(argv=None):
     args = parse_args(argv)
+    import wgse_mmseg
+    wgse_mmseg.register_all_modules()  # before mmseg is imported
+    import torch
+    from mmengine.registry import init_default_scope
+
+    from wgse_mmseg.core.io import write_png
+    from wgse_mmseg.utils.config import load_config
+    if args.device is None:
+        args.device = 'cuda:0' if torch.cuda.is_available() else 'cpu'
     cfg = load_config(args.config, args.cfg_options)
     init_default_scope(cfg.get('default_scope', 'mmseg'))
     if args.stride is not None:

@@ -10,8 +10,6 @@ import os.path as osp
 import sys
 
 from wgse_mmseg.core.arguments import Path
-from wgse_mmseg.core.io import SpikeFileError
-from wgse_mmseg.utils.checkpoint import read_checkpoint
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
 
@@ -28,6 +26,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main():
     args = build_parser().parse_args()
+    # torch and OpenMMLab once the arguments are read (--help answers at once)
+    from wgse_mmseg.core.io import SpikeFileError
+    from wgse_mmseg.utils.checkpoint import read_checkpoint
     try:
         cfg = config_from_args(args)
         if args.out is not None:

@@ -12,12 +12,9 @@ import os.path as osp
 import sys
 
 from wgse_mmseg.core.arguments import Path
-from wgse_mmseg.core.io import SpikeFileError
 from wgse_mmseg.core.output_folder import OutputFolderError, add_wait_option
-from wgse_mmseg.utils.checkpoint import CheckpointError
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
-from wgse_mmseg.utils.cross_checks import ModelFitError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,6 +41,10 @@ def _amp_device_missing() -> bool:
 
 def main():
     args = build_parser().parse_args()
+    # torch and OpenMMLab once the arguments are read (--help answers at once)
+    from wgse_mmseg.core.io import SpikeFileError
+    from wgse_mmseg.utils.checkpoint import CheckpointError
+    from wgse_mmseg.utils.cross_checks import ModelFitError
     if args.amp and _amp_device_missing():
         sys.exit(f'{osp.basename(__file__)}: error: --amp: mixed-precision '
                  f'training needs a GPU (CUDA; or an NPU, MLU or MUSA '

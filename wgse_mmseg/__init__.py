@@ -13,7 +13,9 @@ Two layers:
   registries.
 
 Importing a module changes nothing in the process (``import wgse_mmseg``
-imports core only, as ``import mmseg`` registers nothing). The MMSeg layer
+imports none of its subpackages, nor torch, OpenMMLab, Triton, ONNX or
+OpenCV: each subpackage is imported where it is first used, as
+``wgse_mmseg.core``; as ``import mmseg`` registers nothing). The MMSeg layer
 needs compatibility patches (:mod:`wgse_mmseg.compat`: under mmcv-lite a
 stand-in ``mmcv.ops`` that MMSeg imports at module level; torch's
 weights-only allowlist for mmengine checkpoints; MMSeg's own deprecation
@@ -28,14 +30,14 @@ the OpenMMLab stack it says what to install.
 """
 import importlib
 
-from . import core
 from .version import __version__
 
 #: the packages that register with MMSeg
 _MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
                 'wgse_mmseg.evaluation', 'wgse_mmseg.models')
-_LAZY = ('apis', 'benchmarks', 'compat', 'data_generation', 'datasets',
-         'engine', 'evaluation', 'models', 'utils')
+#: the subpackages, imported where first used (a tool's ``--help`` needs none)
+_LAZY = ('apis', 'benchmarks', 'compat', 'core', 'data_generation',
+         'datasets', 'engine', 'evaluation', 'models', 'utils')
 
 
 def register_all_modules() -> None:

@@ -15,14 +15,8 @@ import argparse
 import json
 import sys
 
-import wgse_mmseg
-wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.benchmarks.machine import run_isolated  # noqa: E402
-from wgse_mmseg.benchmarks.segmentation import (  # noqa: E402
-    benchmark_config, format_results)
-from wgse_mmseg.benchmarks.timing import time_calls  # noqa: E402
+from wgse_mmseg.benchmarks.timing import time_calls
 from wgse_mmseg.core.arguments import SIDE, Integer, Path, Text
-from wgse_mmseg.core.io import atomic_output
 from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
 from wgse_mmseg.utils.config import add_config_options
 
@@ -56,6 +50,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main():
     args = build_parser().parse_args()
+    # the stack once the arguments are read (--help answers at once)
+    import wgse_mmseg
+    wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
+    from wgse_mmseg.benchmarks.machine import run_isolated
+    from wgse_mmseg.benchmarks.segmentation import (benchmark_config,
+                                                    format_results)
+    from wgse_mmseg.core.io import atomic_output
     results, failures = [], []
     for config in args.configs:
         print(f'benchmarking {config} ...', flush=True)

@@ -19,19 +19,10 @@ import argparse
 import json
 import sys
 
-import wgse_mmseg
-wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.apis.experiments import load_grid, select  # noqa: E402
-from wgse_mmseg.apis.experiments.grid import (  # noqa: E402
-    enhancer_options)
-from wgse_mmseg.benchmarks.deployment import (  # noqa: E402
-    format_deployment, measure_deployment)
-from wgse_mmseg.benchmarks.machine import run_isolated  # noqa: E402
-from wgse_mmseg.benchmarks.timing import time_calls  # noqa: E402
-from wgse_mmseg.apis.onnx_export import SHAPE_ENTRY  # noqa: E402
-from wgse_mmseg.core.arguments import Integer, Path, Text  # noqa: E402
-from wgse_mmseg.core.io import atomic_output  # noqa: E402
-from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS  # noqa
+from wgse_mmseg.apis.onnx_settings import SHAPE_ENTRY
+from wgse_mmseg.benchmarks.timing import time_calls
+from wgse_mmseg.core.arguments import Integer, Path, Text
+from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
 
 #: the declarations of a measurement's repeats and warm-up calls
 TIMING = time_calls.declaration.arguments
@@ -66,6 +57,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    # the stack once the arguments are read (--help answers at once)
+    import wgse_mmseg
+    wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
+    from wgse_mmseg.apis.experiments import load_grid, select
+    from wgse_mmseg.apis.experiments.grid import enhancer_options
+    from wgse_mmseg.benchmarks.deployment import (format_deployment,
+                                                  measure_deployment)
+    from wgse_mmseg.benchmarks.machine import run_isolated
+    from wgse_mmseg.core.io import atomic_output
     grid, entries = load_grid(args.grid)
     results, failures = [], []
     for entry in select(entries, args.only):

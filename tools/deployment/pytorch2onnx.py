@@ -25,18 +25,12 @@ import argparse
 import os.path as osp
 import sys
 
-import wgse_mmseg
-wgse_mmseg.register_all_modules()  # noqa: E402 (before mmseg is imported)
-from mmengine.registry import init_default_scope  # noqa: E402
-from wgse_mmseg.apis.onnx_export import (  # noqa: E402
-    LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET, OPSETS, SHAPE_ENTRY,
-    SpikeSegmentorGraph, compare_with_onnx, export_onnx, random_spikes)
-from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor  # noqa
-from wgse_mmseg.core.arguments import SEED, Path  # noqa: E402
-from wgse_mmseg.core.output_folder import (  # noqa: E402
-    add_wait_option, own_folder)
-from wgse_mmseg.utils.config import (add_config_options,  # noqa: E402
-                                     load_config)
+from wgse_mmseg.apis.onnx_settings import (LOGITS_TOLERANCE,
+                                           MIN_ARGMAX_AGREEMENT, OPSET, OPSETS,
+                                           SHAPE_ENTRY)
+from wgse_mmseg.core.arguments import SEED, Path
+from wgse_mmseg.core.output_folder import add_wait_option, own_folder
+from wgse_mmseg.utils.config import add_config_options
 
 #: streams of the check against the torch model
 VERIFY_BATCH = 2
@@ -68,6 +62,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    # torch, ONNX and OpenMMLab once the arguments are read (--help at once)
+    import wgse_mmseg
+    wgse_mmseg.register_all_modules()  # before mmseg is imported
+    from mmengine.registry import init_default_scope
+
+    from wgse_mmseg.apis.onnx_export import (SpikeSegmentorGraph,
+                                             compare_with_onnx, export_onnx,
+                                             random_spikes)
+    from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor
+    from wgse_mmseg.utils.config import load_config
     num_steps, height, width = args.shape
     out = args.out or osp.splitext(osp.basename(args.config))[0] + '.onnx'
     cfg = load_config(args.config, args.cfg_options)

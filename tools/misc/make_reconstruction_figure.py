@@ -16,21 +16,17 @@ import argparse
 import os.path as osp
 import sys
 
-import cv2
 import numpy as np
 
-import wgse_mmseg
-wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, SIDE, Choice,
-                                       Integer, Number, Path, SequenceOf,
-                                       Text)
+from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, Choice, Integer,
+                                       Number, Path, SequenceOf, Text,
+                                       add_frame_size_options,
+                                       check_frame_size)
+from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
 from wgse_mmseg.core.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
-from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
-                                spike_shape, to_uint8, write_png)
-from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
-                                              reconstruction_method)
 
-_FONT = cv2.FONT_HERSHEY_SIMPLEX
+# OpenCV, torch and the MMSeg layer are imported where they are used, after
+# the arguments are read: --help and argument errors come at once.
 _GAP = 4
 
 
@@ -54,8 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help='columns spread over the stream (no --frames)')
     parser.add_argument('--checkpoint', type=Path(),
                         help='wgse model (default: shipped)')
-    parser.add_argument('--height', type=SIDE, help='frame height of a .dat')
-    parser.add_argument('--width', type=SIDE, help='frame width of a .dat')
+    add_frame_size_options(parser)
     parser.add_argument(
         '--layout', type=LAYOUT,
         help=LAYOUT_HELP)
@@ -69,15 +64,16 @@ def build_parser() -> argparse.ArgumentParser:
 def parse_args(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    if (args.height is None) != (args.width is None):
-        parser.error('--height and --width go together')
+    check_frame_size(parser, args)
     return args
 
 
 def labelled(tile: np.ndarray, text: str) -> np.ndarray:
     """``tile`` (8-bit grey) with ``text`` on a dark band above it."""
+    import cv2
     band = np.zeros((22, tile.shape[1]), np.uint8)
-    cv2.putText(band, text, (4, 16), _FONT, 0.5, 255, 1, cv2.LINE_AA)
+    cv2.putText(band, text, (4, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.5, 255, 1,
+                cv2.LINE_AA)
     return np.vstack([band, tile])
 
 
@@ -95,6 +91,15 @@ def grid(rows) -> np.ndarray:
 
 def main(argv=None):
     args = parse_args(argv)
+    import cv2
+
+    import wgse_mmseg
+    wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
+    from wgse_mmseg.core.io import (SpikeFileError, centered_window,
+                                    load_spikes, spike_shape, to_uint8,
+                                    write_png)
+    from wgse_mmseg.models.reconstruction import (load_reconstructor,
+                                                  reconstruction_method)
     try:
         total, _, _ = spike_shape(args.spikes, args.height, args.width,
                                   layout=args.layout)

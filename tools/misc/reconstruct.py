@@ -52,21 +52,16 @@ import argparse
 import os.path as osp
 import sys
 
-import torch
-
-import wgse_mmseg
-wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, SIDE,
-                                       Choice, Integer, Path, SequenceOf,
-                                       Text)
+from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, Choice,
+                                       Integer, Path, SequenceOf, Text,
+                                       add_frame_size_options,
+                                       check_frame_size)
+from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
 from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
-from wgse_mmseg.core.quality import no_reference_scores
-from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
-                                spike_shape, to_uint8, write_png)
-from wgse_mmseg.core.recording_walk import (add_walk_options, walk_outputs,
-                                            walk_recording)
-from wgse_mmseg.models.reconstruction import (METHODS, load_reconstructor,
-                                              reconstruction_method)
+from wgse_mmseg.core.recording_walk import add_walk_options
+
+# torch, OpenCV and the MMSeg layer are imported where they are used, after
+# the arguments are read: --help and argument errors come at once.
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -83,10 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         '--checkpoint', type=Path(),
         help='model checkpoint for --method wgse (default: shipped weights)')
-    parser.add_argument('--height', type=SIDE,
-                        help='frame height of a .dat file')
-    parser.add_argument('--width', type=SIDE,
-                        help='frame width of a .dat file')
+    add_frame_size_options(parser)
     parser.add_argument(
         '--layout', type=LAYOUT,
         help=LAYOUT_HELP)
@@ -109,8 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
 def parse_args(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    if (args.height is None) != (args.width is None):
-        parser.error('--height and --width go together')
+    check_frame_size(parser, args)
     if args.checkpoint and args.method != 'wgse':
         parser.error('--checkpoint is for --method wgse')
     if args.stride is not None and args.frames:
@@ -121,7 +112,13 @@ def parse_args(argv=None):
 
 def walk(args) -> None:
     """``--stride``: reconstruct a window every ``args.stride`` readouts into
-    the video ``args.out`` (:func:`walk_recording`)."""
+    the video ``args.out`` (``core.recording_walk.walk_recording``)."""
+    import torch
+
+    from wgse_mmseg.core.io import to_uint8
+    from wgse_mmseg.core.recording_walk import walk_outputs, walk_recording
+    from wgse_mmseg.models.reconstruction import (load_reconstructor,
+                                                  reconstruction_method)
     walk_outputs(args.out)  # a wrong extension fails before loading
     if args.method == 'wgse':
         model = load_reconstructor(args.checkpoint, args.device)
@@ -148,6 +145,14 @@ def walk(args) -> None:
 
 def main(argv=None):
     args = parse_args(argv)
+    import wgse_mmseg
+    wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
+    from wgse_mmseg.core.io import (SpikeFileError, centered_window,
+                                    load_spikes, spike_shape, to_uint8,
+                                    write_png)
+    from wgse_mmseg.core.quality import no_reference_scores
+    from wgse_mmseg.models.reconstruction import (load_reconstructor,
+                                                  reconstruction_method)
     if args.stride is not None:
         try:
             return walk(args)

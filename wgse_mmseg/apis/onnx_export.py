@@ -34,30 +34,16 @@ import torch
 from mmengine.model import revert_sync_batchnorm
 from torch import nn
 
-from ..core.arguments import NUM_STEPS, SIDE, Integer, declare
+from ..core.arguments import NUM_STEPS, SIDE, declare
 from ..core.io import atomic_path
-from ..core.limits import MAX_NUM_STEPS
 from ..core.wgse import WGSE
 from .onnx_segmentor import INPUT, OUTPUT, OnnxSpikeSegmentor, \
     check_dataset_meta
+from .onnx_settings import (LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET,
+                            OPSETS)
 
 __all__ = ['export_onnx']
 
-#: the largest ``|logits_onnx - logits_torch|`` accepted, relative to
-#: ``max(1, max |logits_torch|)``: float32 rounding through a different
-#: order of operations (measured: below 1e-5 for every shipped config)
-LOGITS_TOLERANCE = 1e-4
-#: the least share of pixels whose class (argmax over the logits) the ONNX
-#: graph must give as the torch model does
-MIN_ARGMAX_AGREEMENT = 0.999
-#: the ONNX opsets the export offers (the dynamo exporter's range that
-#: ONNX Runtime 1.32 runs); :data:`OPSET` is the default
-OPSETS = Integer(18, 23)
-OPSET = 18
-#: each of ``T``, ``H`` and ``W`` of an export, on a command line (a side
-#: above :data:`~wgse_mmseg.core.limits.MAX_NUM_STEPS` would not fit a
-#: runtime's memory anyway)
-SHAPE_ENTRY = Integer(1, MAX_NUM_STEPS)
 #: spike probability of the random streams of :func:`compare_with_onnx`
 SPIKE_PROBABILITY = 0.3
 

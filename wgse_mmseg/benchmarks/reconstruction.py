@@ -48,7 +48,9 @@ from .. import register_all_modules
 # as the tools make it, before the layer's packages are imported
 register_all_modules()
 from ..core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, SIDE, Choice,
-                              Integer, Path, SequenceOf, Text, declare)
+                              Integer, Path, SequenceOf, Text,
+                              add_frame_size_options, check_frame_size,
+                              declare)
 from ..core.exposure import EXPOSURE, apply_exposure
 from ..core.io import (SpikeFileError, centered_window, load_spikes,
                        spike_shape, to_uint8)
@@ -335,10 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
         help='a recording\'s images are scored at this exposure: auto '
         '(default: a dark one brightened, its 99.5th percentile to white), '
         'none, or a gain')
-    parser.add_argument('--height', type=SIDE,
-                        help='frame height of a .dat recording')
-    parser.add_argument('--width', type=SIDE,
-                        help='frame width of a .dat recording')
+    add_frame_size_options(parser)
     return parser
 
 
@@ -347,8 +346,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     methods = list(dict.fromkeys(args.methods))  # in order, once each
     if osp.isfile(args.data_root):
-        if (args.height is None) != (args.width is None):
-            parser.error('--height and --width go together')
+        check_frame_size(parser, args)
         try:
             total, _, _ = spike_shape(args.data_root, args.height,
                                       args.width, args.layout)

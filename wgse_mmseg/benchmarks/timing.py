@@ -2,12 +2,14 @@
 and their summary (median and median absolute deviation)."""
 import statistics
 import time
-from typing import Any, Callable, Dict, List, NamedTuple, Sequence, Union
-
-import torch
+from typing import (TYPE_CHECKING, Any, Callable, Dict, List, NamedTuple,
+                    Sequence, Union)
 
 from ..core.arguments import Integer, declare
 from ..core.limits import MAX_REPEAT
+
+if TYPE_CHECKING:  # torch where a call is timed (a tool's --help needs none)
+    import torch
 
 __all__ = ['time_calls']
 
@@ -19,13 +21,14 @@ class Timings(NamedTuple):
     result: Any  # the last call's return value
 
 
-def _synchronize(device: torch.device) -> None:
+def _synchronize(device: 'torch.device') -> None:
+    import torch
     if device.type == 'cuda':
         torch.cuda.synchronize(device)
 
 
 @declare(repeat=Integer(1, MAX_REPEAT), warmup=Integer(0, MAX_REPEAT))
-def time_calls(fn: Callable[[], Any], device: Union[str, torch.device],
+def time_calls(fn: Callable[[], Any], device: Union[str, 'torch.device'],
                repeat: int, warmup: int) -> Timings:
     """Seconds taken by each of ``repeat`` calls of ``fn`` after ``warmup``
     untimed ones; on CUDA the device is synchronised before and after each
@@ -34,6 +37,7 @@ def time_calls(fn: Callable[[], Any], device: Union[str, torch.device],
     The CPU time is the steadier figure on a machine shared with other
     work; on an idle one, with one thread, the two agree.
     """
+    import torch
     device = torch.device(device)
     result = None
     for _ in range(warmup):

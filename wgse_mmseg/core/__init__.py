@@ -25,18 +25,50 @@ OpenMMLab, a notebook), and importing it changes nothing outside it.
 
 The MMSeg layer (``wgse_mmseg.datasets``, ``.models``, ``.evaluation``)
 registers these with MMSeg's registries.
+
+Importing it imports none of these: each name below, and each submodule,
+is imported where it is first used, so that a command line's argument
+parser (:mod:`.arguments`, :mod:`.limits`, :mod:`.output_folder`) loads
+without torch, OpenCV or Triton.
 """
-from .constants import READOUT_HZ, REDS_THRESHOLD, REDS_WHITE_RATE
-from .exposure import apply_exposure, exposure_gain
-from .io import SpikeFileError, load_spikes, save_spikes, spike_shape
-from .representations import (TFI, TFP, SpatialMeanFilter,
-                              TemporalMeanFilter)
-from .simulation import simulate_spikes
-from .wavelets import wavedec, waverec
-from .wgse import WGSE, BandNetwork
+import importlib
+
+#: public name -> the submodule that defines it
+_NAMES = {
+    'READOUT_HZ': 'constants', 'REDS_THRESHOLD': 'constants',
+    'REDS_WHITE_RATE': 'constants', 'apply_exposure': 'exposure',
+    'exposure_gain': 'exposure', 'SpikeFileError': 'io',
+    'load_spikes': 'io', 'save_spikes': 'io', 'spike_shape': 'io',
+    'TFI': 'representations', 'TFP': 'representations',
+    'SpatialMeanFilter': 'representations',
+    'TemporalMeanFilter': 'representations',
+    'simulate_spikes': 'simulation', 'wavedec': 'wavelets',
+    'waverec': 'wavelets', 'WGSE': 'wgse', 'BandNetwork': 'wgse',
+}
 
 __all__ = [
     'SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape', 'TFI',
     'TFP', 'SpatialMeanFilter', 'TemporalMeanFilter', 'simulate_spikes',
     'wavedec', 'waverec', 'WGSE', 'apply_exposure'
 ]
+
+
+def __getattr__(name):
+    if name in _NAMES:
+        module = importlib.import_module(f'{__name__}.{_NAMES[name]}')
+    elif name.startswith('__'):
+        raise AttributeError(name)
+    else:  # a submodule not imported yet
+        try:
+            return importlib.import_module(f'{__name__}.{name}')
+        except ModuleNotFoundError as err:
+            if err.name != f'{__name__}.{name}':
+                raise
+            raise AttributeError(
+                f'module {__name__!r} has no attribute {name!r}') from None
+    value = globals()[name] = getattr(module, name)
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_NAMES))

@@ -446,3 +446,21 @@ LAYOUT = Choice(('THW', 'HWT'))
 LAYOUT_HELP = ('THW or HWT: how a .npy/.npz that does not record its layout '
                'stores its frames, (T, H, W) or (H, W, T) (default: what the '
                'file records; an error where it records none)')
+
+
+def add_frame_size_options(parser: argparse.ArgumentParser) -> None:
+    """A tool's ``--height`` and ``--width``: the frame size of a ``.dat``
+    recording (which records none; :mod:`.io`). They go together:
+    :func:`check_frame_size` refuses one without the other."""
+    parser.add_argument('--height', type=SIDE,
+                        help='frame height of a .dat recording (with --width)')
+    parser.add_argument('--width', type=SIDE,
+                        help='frame width of a .dat recording (with --height)')
+
+
+def check_frame_size(parser: argparse.ArgumentParser,
+                     args: argparse.Namespace) -> None:
+    """Exit through ``parser.error`` where ``args`` has one of ``--height``
+    and ``--width`` (:func:`add_frame_size_options`) without the other."""
+    if (args.height is None) != (args.width is None):
+        parser.error('--height and --width go together')

@@ -18,3 +18,10 @@ REDS_WHITE_RATE = 0.6
 #: gives the REDS scale in the simulator: white fires ``REDS_WHITE_RATE``
 #: spikes per step.
 REDS_THRESHOLD = 1 / REDS_WHITE_RATE
+
+#: The image reconstructions by name (the tools' ``--method``): the trained
+#: WGSE model, then the classical ones, each a function of
+#: :mod:`.reconstruction_baselines` of that name (REDS scale);
+#: ``wgse_mmseg.models.reconstruction.reconstruction_method`` makes each.
+RECONSTRUCTION_METHODS = ('wgse', 'tfp', 'tfi', 'tfi_spatial_mean',
+                          'tfi_temporal_mean')

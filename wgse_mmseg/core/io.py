@@ -67,7 +67,6 @@ import zipfile
 from typing import (BinaryIO, Callable, Dict, Iterator, List, NamedTuple,
                     Optional, Sequence, Tuple)
 
-import cv2
 import numpy as np
 
 from .arguments import LAYOUT, Integer, Path, declare
@@ -177,6 +176,7 @@ def write_png(path: str, image: np.ndarray) -> WrittenFile:
     """Write an 8-bit ``(H, W)`` (grey, labels) or ``(H, W, 3)`` (BGR, OpenCV's
     order) image as a PNG; the file appears complete or not at all.
     Returns what was written (:class:`WrittenFile`)."""
+    import cv2  # where used: the spike readers need no OpenCV
     ok, encoded = cv2.imencode('.png', image)
     if not ok:
         raise OSError(f'{path}: PNG encoding failed')

@@ -61,11 +61,10 @@ import os.path as osp
 import shutil
 import sys
 import time
-from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
+from typing import (TYPE_CHECKING, Any, Callable, Dict, List, NamedTuple,
+                    Optional, Sequence)
 
-import cv2
 import numpy as np
-import torch
 from tqdm import tqdm
 
 from .arguments import (LAYOUT, NUM_STEPS, SIDE, Flag, Integer, Number, Path,
@@ -76,6 +75,9 @@ from .limits import MAX_BATCH_SIZE, load_json_file
 from .markers import file_digest
 from .output_folder import (OwnedFolder, add_wait_option, discard,
                             open_append, own_folder)
+
+if TYPE_CHECKING:  # torch and OpenCV where a walk runs, not for --help
+    import torch
 
 __all__ = ['WalkError', 'WalkReport', 'walk_recording']
 
@@ -360,6 +362,7 @@ def _png_image(frame: np.ndarray) -> np.ndarray:
 def _frames(outputs: WalkOutputs, count: int):
     """The ``count`` saved frames (grey or colour), BGR, all of one
     size."""
+    import cv2
     size = None
     for index in range(count):
         path = osp.join(outputs.partial, _frame_name(index))
@@ -386,6 +389,7 @@ def _write_video(outputs: WalkOutputs, count: int, fps: float) -> None:
             first.save(tmp, format='GIF', save_all=True,
                        append_images=images, duration=1000 / fps, loop=0)
             return
+        import cv2
         writer = None
         try:
             for frame in _frames(outputs, count):
@@ -434,7 +438,7 @@ def _finish(outputs: WalkOutputs, count: int, fps: float,
          height=SIDE.or_none(), width=SIDE.or_none(),
          layout=LAYOUT.or_none(), progress=Flag(), wait=Flag())
 def walk_recording(path: str, video: str,
-                   model: Callable[[torch.Tensor], Sequence[Any]],
+                   model: Callable[['torch.Tensor'], Sequence[Any]],
                    render: Callable[[np.ndarray, Any], np.ndarray],
                    length: int, stride: int, batch_size: int = 8,
                    fps: float = 10.0, settings: Optional[dict] = None,
@@ -494,6 +498,7 @@ def _walk(path: str, outputs: WalkOutputs, model, render, plan: WalkPlan,
     ``resumed``, each frame written to the state folder and logged in
     ``progress.csv`` (``reading``: ``height``, ``width``, ``layout`` of
     the recording)."""
+    import torch
     todo = plan.centres[resumed:]
     bar = tqdm(total=len(plan.centres), initial=resumed, unit='window',
                desc=osp.basename(path), file=sys.stderr,

@@ -27,9 +27,9 @@ from ..core.checks import check_finite
 from ..core.arguments import (NUM_STEPS, Integer, check_parameter_count,
                               declare)
 from ..core.io import atomic_output
+from ..core import reconstruction_baselines
+from ..core.constants import RECONSTRUCTION_METHODS
 from ..core.limits import MAX_CHANNELS, MAX_NUM_BLOCKS
-from ..core.reconstruction_baselines import (tfi, tfi_spatial_mean,
-                                             tfi_temporal_mean, tfp)
 from ..utils.checkpoint import CheckpointError, read_checkpoint
 from ..utils.config_data import ConfigDataError, read_config_data
 from ..utils.safe_build import build_from_file_config, check_file_config
@@ -43,11 +43,11 @@ DEFAULT_WEIGHTS = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),
 
 #: The classical reconstructions by name
 #: (:mod:`wgse_mmseg.core.reconstruction_baselines`, REDS scale).
-CLASSICAL_METHODS = {'tfp': tfp, 'tfi': tfi,
-                     'tfi_spatial_mean': tfi_spatial_mean,
-                     'tfi_temporal_mean': tfi_temporal_mean}
-#: Names accepted by :func:`reconstruction_method`.
-METHODS = ('wgse',) + tuple(CLASSICAL_METHODS)
+CLASSICAL_METHODS = {name: getattr(reconstruction_baselines, name)
+                     for name in RECONSTRUCTION_METHODS if name != 'wgse'}
+#: Names accepted by :func:`reconstruction_method` (the one list:
+#: :data:`~wgse_mmseg.core.constants.RECONSTRUCTION_METHODS`).
+METHODS = RECONSTRUCTION_METHODS
 
 
 def _conv3x3(in_channels: int, out_channels: int) -> nn.Conv2d:

@@ -6,22 +6,26 @@ The dataset base configs set ``num_steps`` (T), ``data_root`` and
 child config sets) to every field that carries them
 (:func:`~wgse_mmseg.utils.spike_settings.apply_spike_settings`, which lists
 them), and merges the other keys as mmengine does.
+
+The tools' arguments (:func:`add_runner_arguments`, :func:`add_config_options`)
+are built without importing mmengine or torch, so that a tool answers
+``--help`` at once; mmengine is imported where a config is read.
 """
 import argparse
+import copy
 import os
 import os.path as osp
-from typing import Dict, Optional
-
-from mmengine.config import Config, DictAction
-from mmengine.registry import RUNNERS
-from mmengine.runner import Runner
+from typing import TYPE_CHECKING, Dict, Optional
 
 from .._openmmlab import prepare_mmseg_layer
 from ..core.arguments import Choice, Integer, Path
 from ..core.limits import MAX_WORKERS, excerpt
-from .distributed import prepare_launcher
 from .spike_settings import (SPIKE_SETTINGS, SpikeSettingsError,
                              apply_spike_settings, check_setting)
+
+if TYPE_CHECKING:
+    from mmengine.config import Config
+    from mmengine.runner import Runner
 
 __all__ = []
 
@@ -31,7 +35,7 @@ SPIKE_SETTING_KINDS = {setting.name: setting.kind
                        for setting in SPIKE_SETTINGS}
 
 
-def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
+def load_config(path: str, cfg_options: Optional[Dict] = None) -> 'Config':
     """``Config.fromfile(path)`` with ``cfg_options`` applied.
 
     ``num_steps``, ``data_root`` and ``crop_size`` in ``cfg_options`` go to
@@ -46,6 +50,7 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
     if not osp.isfile(path):
         raise FileNotFoundError(f'{path}: no such config file')
     prepare_mmseg_layer('load_config')
+    from mmengine.config import Config
     options = dict(cfg_options or {})
     settings = {setting.name: options.pop(setting.name)
                 for setting in SPIKE_SETTINGS if setting.name in options}
@@ -57,27 +62,28 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> Config:
     return cfg
 
 
-class ConfigOptions(DictAction):
+class ConfigOptions(argparse.Action):
     """mmengine's ``DictAction`` (``key=value`` words, values read as
-    Python literals), refusing a word it cannot read and checking the spike
-    settings against :data:`SPIKE_SETTING_KINDS` as the command line is
-    parsed, so argparse exits with ``argument --cfg-options: num_steps must
-    be ...``."""
+    Python literals by its parser, imported when a word is read), refusing a
+    word it cannot read and checking the spike settings against
+    :data:`SPIKE_SETTING_KINDS` as the command line is parsed, so argparse
+    exits with ``argument --cfg-options: num_steps must be ...``."""
 
     def __call__(self, parser, namespace, values, option_string=None):
+        from mmengine.config import DictAction
+        options = copy.copy(getattr(namespace, self.dest, None) or {})
         for word in values or ():
             key, equals, value = word.partition('=')
             if not key or not equals:
                 raise argparse.ArgumentError(
                     self, f'must be key=value words, got {excerpt(word)}')
             try:  # mmengine asserts balanced brackets, recurses on nesting
-                self._parse_iterable(value)
+                options[key] = DictAction._parse_iterable(value)
             except (AssertionError, RecursionError):
                 raise argparse.ArgumentError(
                     self, f'{key}: unbalanced or too deeply nested brackets '
                     f'in {excerpt(value)}') from None
-        super().__call__(parser, namespace, values, option_string)
-        options = getattr(namespace, self.dest)
+        setattr(namespace, self.dest, options)
         for key in SPIKE_SETTING_KINDS.keys() & options.keys():
             try:
                 check_setting(key, options[key], text=True)
@@ -106,7 +112,7 @@ def add_runner_arguments(parser: argparse.ArgumentParser) -> None:
                         type=Integer(0, MAX_WORKERS - 1), default=0)
 
 
-def config_from_args(args: argparse.Namespace) -> Config:
+def config_from_args(args: argparse.Namespace) -> 'Config':
     """The config of ``args.config`` set up for an mmengine ``Runner``.
 
     Applies ``--cfg-options``, the launcher and the work dir (default
@@ -114,6 +120,7 @@ def config_from_args(args: argparse.Namespace) -> Config:
     distributed runs on a machine without CUDA use gloo
     (:func:`~wgse_mmseg.utils.distributed.prepare_launcher`).
     """
+    from .distributed import prepare_launcher
     os.environ.setdefault('LOCAL_RANK', str(args.local_rank))
     cfg = load_config(args.config, args.cfg_options)
     cfg.launcher = args.launcher
@@ -126,10 +133,12 @@ def config_from_args(args: argparse.Namespace) -> Config:
     return cfg
 
 
-def build_runner(cfg: Config) -> Runner:
+def build_runner(cfg: 'Config') -> 'Runner':
     """The runner of ``cfg``, as MMSeg's tools build it: the config's
     ``runner_type`` (the shipped configs': ``SpikeRunner``) where it names
     one, else mmengine's ``Runner``."""
+    from mmengine.registry import RUNNERS
+    from mmengine.runner import Runner
     if 'runner_type' in cfg:
         return RUNNERS.build(cfg)
     return Runner.from_cfg(cfg)
