@@ -15,8 +15,8 @@ from wgse_mmseg.core.wgse import first_use_check, triton_band_networks
 
 pytest.importorskip('pytorch_wavelets')
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-SECTIONS = {'correctness', 'first_use', 'wgse', 'segmentation', 'latency',
-            'paper', 'autotune', 'targets'}
+SECTIONS = {'correctness', 'first_use', 'wgse', 'profile', 'segmentation',
+            'latency', 'paper', 'autotune', 'targets'}
 
 
 @pytest.fixture(scope='module')
@@ -61,11 +61,16 @@ def test_smoke_run_writes_every_section(tmp_path, targets):
             assert row['note'] == gpu_report.REDUCED_PRECISION_NOTE
             assert row['max_rel_error'] < 1e-2  # float32 on the CPU
 
+    # the profile is a GPU's: on the CPU the section says so
+    assert 'needs a GPU' in sections['profile']['note']
+    assert not sections['profile']['rows']
+
     # the first-use check, as 'auto' would run it, at every precision
     checks = {r['precision']: r for r in sections['first_use']['rows']}
     assert set(checks) == set(gpu_report.PRECISIONS)
     assert checks['bf16']['passed'] is checks['tf32']['passed'] is None
     assert 'interpreter' in checks['tf32']['note']
+    assert checks['fp16']['passed'] is None
     row = checks['ieee']
     assert row['passed'] is True and row['auto_runs'] == 'triton'
     assert row['device'] == 'cpu' and row['backend'] == 'triton'
@@ -96,7 +101,11 @@ def test_smoke_run_writes_every_section(tmp_path, targets):
         ['raw', 'WGSE']
     assert sections['paper']['shape'] == list(gpu_report.SMOKE.paper_shape)
     assert len(sections['targets']['rows']) == len(targets)
-    assert all(t['value'] is not None for t in sections['targets']['rows'])
+    # every figure but the GPU's own: the profiled bf16 pass and AMP
+    measured = {key: t['value'] is not None for key, t in zip(
+        targets, sections['targets']['rows'])}
+    assert measured == {key: key not in ('wgse_bf16_ms', 'step_ratio_amp')
+                        for key in targets}
 
     markdown = (tmp_path / 'gpu.md').read_text()
     assert markdown.startswith('# WGSE on cpu')
@@ -128,7 +137,7 @@ def test_a_backend_that_raises_is_a_row_and_the_others_run(monkeypatch):
         ('triton', 'ieee')]
     assert failed[0]['error'] == 'FirstUseCheckFailed: planted'
     assert [r['ok'] for r in rows if r['backend'] == 'torch'] == [
-        True, None, None]
+        True, None, None, None]
 
 
 class _RecordsPrecision(torch.autograd.Function):
@@ -152,7 +161,8 @@ class _RecordsPrecision(torch.autograd.Function):
 
 
 @pytest.mark.parametrize('precision, tf32, autocast', [
-    ('ieee', False, False), ('tf32', True, False), ('bf16', False, True)])
+    ('ieee', False, False), ('tf32', True, False), ('bf16', False, True),
+    ('fp16', False, True)])
 def test_a_precision_holds_for_both_passes(precision, tf32, autocast):
     """The second GPU run measured the torch backend at 'ieee' with TF32
     errors: its backward ran after the precision's block, under torch's
@@ -169,9 +179,12 @@ def test_a_precision_holds_for_both_passes(precision, tf32, autocast):
 
     _RecordsPrecision.seen.clear()
     default = torch.backends.cudnn.allow_tf32
-    gpu_report._output_and_grads(Model(), torch.ones(3), precision)
+    out, grad = gpu_report._output_and_grads(Model(), torch.ones(3),
+                                             precision)
     assert _RecordsPrecision.seen == [('forward', tf32, autocast),
                                       ('backward', tf32, False)]
+    # the loss's weights, -1 to 1; fp16's loss scale divided out again
+    assert torch.equal(grad, torch.tensor([-1.0, 0.0, 1.0]))
     assert torch.backends.cudnn.allow_tf32 is default
 
 
@@ -196,22 +209,39 @@ def test_targets_by_hand(targets):
         wgse=dict(rows=[_row('reference', 1.0, 40000),
                         _row('torch', 0.1, 5000),
                         _row('triton', 0.012, 4096)]),
+        profile=dict(rows=[dict(status='ok', precision='bf16',
+                                span_ms=9.5)]),
+        first_use=dict(rows=[dict(seconds=12.0), dict(seconds=31.5),
+                             dict(passed=None, note='not run')]),
         segmentation=dict(rows=[
             dict(model='PSPNet R50-D8', enhancer='raw', status='ok'),
             dict(model='PSPNet R50-D8', enhancer='WGSE', status='ok',
-                 step_vs_raw=1.5, added_latency_ms=3.5)]),
-        paper=dict(rows=[dict(enhancer='WGSE', status='ok',
-                              memory=dict(peak_mb=20000))]))
-    found = {t['what']: t for t in gpu_report._targets(sections, targets)}
-    time, memory, ratio, latency, paper = (
-        found[gpu_report.FIGURES[key][0]] for key in targets)
-    assert time['value'] == pytest.approx(12)  # Triton's row, in ms
-    assert time['met'] and time['moonshot_met']  # <= 40, <= 15
-    assert memory['value'] == 4 and memory['met'] is False  # 4 GiB > 3
-    assert ratio['met'] and not ratio['moonshot_met']  # 1.5: <= 1.6, > 1.2
-    assert latency['met'] is False  # 3.5 ms > 3
-    assert paper['value'] == pytest.approx(20000 * 2**20 / 1e9)  # 20.97 GB
-    assert paper['met'] and paper['moonshot_met'] is None
+                 step_vs_raw=1.25, added_latency_ms=3.5),
+            dict(model='SegFormer-B0', enhancer='WGSE', status='ok',
+                 step_vs_raw=1.6),
+            dict(model='PSPNet R50-D8', enhancer='WGSE, AMP', status='ok',
+                 step_vs_raw=1.1)]),
+        paper=dict(rows=[dict(enhancer='raw', status='ok',
+                              memory=dict(peak_mb=18000)),
+                         dict(enhancer='WGSE', status='ok',
+                              memory=dict(peak_mb=20000),
+                              memory_vs_raw=20000 / 18000)]))
+    found = {key: t for key, t in zip(
+        targets, gpu_report._targets(sections, targets))}
+    assert found['wgse_ms']['value'] == pytest.approx(12)  # Triton's, ms
+    assert found['wgse_ms']['met'] and not found['wgse_ms']['moonshot_met']
+    assert found['wgse_bf16_ms']['value'] == 9.5
+    assert found['wgse_gib']['value'] == 4 and \
+        found['wgse_gib']['met'] is False  # 4 GiB > 1.5
+    assert found['step_ratio']['met'] and \
+        not found['step_ratio']['moonshot_met']  # 1.25: <= 1.3, > 1.15
+    assert found['step_ratio_amp']['moonshot_met']  # 1.1 <= 1.15
+    assert found['segformer_step_ratio']['met'] is False  # 1.6 > 1.5
+    assert found['added_latency_ms']['met'] is False  # 3.5 ms > 3
+    assert found['paper_gb']['value'] == pytest.approx(20000 * 2**20 / 1e9)
+    assert found['paper_memory_ratio']['met']  # 1.11 <= 1.2
+    assert found['first_use_s']['value'] == 31.5
+    assert found['first_use_s']['met'] is False
 
 
 def test_targets_not_measured_when_their_jobs_failed(targets):

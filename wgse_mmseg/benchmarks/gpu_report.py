@@ -8,15 +8,19 @@ Sections:
 
 * ``correctness``: WGSE with the ``'triton'`` and ``'torch'`` backends on
   the device against the same weights in float64 (``'torch'`` backend), at
-  full float32 (``'ieee'``: TF32 off), TF32 and bf16 autocast: the largest
+  full float32 (``'ieee'``: TF32 off), TF32, bf16 autocast and fp16
+  autocast under AMP's loss scale (:data:`LOSS_SCALE`): the largest
   error of the output and of each parameter gradient relative to the
   largest magnitude of that tensor (or a hundredth of the largest of all);
   full float32 against
-  :data:`~wgse_mmseg.core.wgse.triton_band_networks.TOLERANCES`, TF32 and
-  bf16 measured, not judged (:data:`REDUCED_PRECISION_NOTE`).
+  :data:`~wgse_mmseg.core.wgse.triton_band_networks.TOLERANCES`, the
+  others measured, not judged (:data:`REDUCED_PRECISION_NOTE`).
 * ``wgse``: forward+backward of the reference design and of every backend
   that runs on the device (:mod:`.wgse`'s worker, a fresh process
   each): median time and peak memory, and both over the reference's.
+* ``profile``: one WGSE pass under the profiler at TF32 and bf16, kernel
+  by kernel, with the gaps between kernels and the band kernels' TFLOP/s
+  against the device's peak (:mod:`.wgse_profile`; a GPU's only).
 * ``segmentation`` and ``latency``: PSPNet and SegFormer-B0 training steps,
   raw spikes and WGSE
   (:func:`wgse_mmseg.benchmarks.segmentation.measure_train_step`:
@@ -61,6 +65,7 @@ from ..core.wavelets import band_lengths
 from ..core.wgse import (WGSE, band_network_backends, first_use_check,
                          triton_band_networks)
 from . import wgse as wgse_benchmark
+from . import wgse_profile
 from .machine import machine_record, run_isolated
 from .markdown import markdown_table
 
@@ -99,8 +104,13 @@ SMOKE = Plan('cpu', correctness_shape=(1, 12, 3, 5),
              wgse_shape=(1, 12, 3, 4), wgse_repeat=1,
              train_shape=(2, 12, 32, 32), paper_shape=(2, 12, 32, 48),
              repeat=1, warmup=1, isolate=False, check_pixels=1)
-#: Precisions of the correctness section (TF32 off, TF32, bf16 autocast).
-PRECISIONS = ('ieee', 'tf32', 'bf16')
+#: Precisions of the correctness section (TF32 off, TF32, bf16 autocast,
+#: fp16 autocast with the loss scaled as AMP scales it).
+PRECISIONS = ('ieee', 'tf32', 'bf16', 'fp16')
+#: The loss scale of the fp16 rows: ``torch.amp.GradScaler``'s initial
+#: scale, the largest it uses before it first meets an overflow.
+LOSS_SCALE = 2.0 ** 16
+_AUTOCAST = {'bf16': torch.bfloat16, 'fp16': torch.float16}
 #: model -> (raw-spike config, WGSE config), relative to the repository
 MODELS = {
     'PSPNet R50-D8': ('configs/pspnet_raw.py', 'configs/pspnet_wgse.py'),
@@ -110,11 +120,19 @@ MODELS = {
 #: The figures a report can hold targets for: key -> (what, unit).
 FIGURES = {
     'wgse_ms': ('WGSE forward+backward time', 'ms'),
+    'wgse_bf16_ms': ('WGSE forward+backward under bf16 autocast (the '
+                     'profiled pass)', 'ms'),
     'wgse_gib': ('WGSE forward+backward peak memory', 'GiB'),
     'step_ratio': ('PSPNet + WGSE step / raw step', 'x'),
+    'step_ratio_amp': ('PSPNet + WGSE step / raw step, AMP (fp16)', 'x'),
+    'segformer_step_ratio': ('SegFormer-B0 + WGSE step / raw step', 'x'),
     'added_latency_ms': ('PSPNet latency added by WGSE (batch 1)', 'ms'),
     'paper_gb': ("PSPNet + WGSE step at the paper's shape, peak memory",
                  'GB'),
+    'paper_memory_ratio': ("PSPNet + WGSE / raw step's peak memory at the "
+                           "paper's shape", 'x'),
+    'first_use_s': ("the first-use check's longest wait (compiles and "
+                    'checks)', 's'),
 }
 #: Targets: figure key -> (at most, a moonshot or None).
 Targets = Dict[str, Tuple[float, Optional[float]]]
@@ -135,14 +153,16 @@ def environment(device: str) -> Dict[str, Any]:
 @contextmanager
 def _precision(name: str, device_type: str) -> Iterator[None]:
     """TF32 off (``'ieee'``) or on (``'tf32'``, for cuDNN and matmul), or
-    bf16 autocast (``'bf16'``, TF32 off) within the block."""
+    bf16 or fp16 autocast (``'bf16'``, ``'fp16'``; TF32 off) within the
+    block."""
     saved = (torch.backends.cudnn.allow_tf32,
              torch.backends.cuda.matmul.allow_tf32)
     torch.backends.cudnn.allow_tf32 = torch.backends.cuda.matmul.allow_tf32 \
         = name == 'tf32'
     try:
-        with torch.autocast(device_type, dtype=torch.bfloat16,
-                            enabled=name == 'bf16'):
+        with torch.autocast(device_type,
+                            dtype=_AUTOCAST.get(name, torch.bfloat16),
+                            enabled=name in _AUTOCAST):
             yield
     finally:
         (torch.backends.cudnn.allow_tf32,
@@ -155,27 +175,32 @@ def _output_and_grads(model: WGSE, spikes: torch.Tensor,
     ``sum(out * w)`` for a fixed ``w``, under ``precision`` if given: its
     TF32 setting for the forward and the backward pass (the ``'torch'``
     backend recomputes its forward in the backward), its autocast for the
-    forward alone, as in training."""
+    forward alone, as in training; at ``'fp16'`` the loss is multiplied by
+    :data:`LOSS_SCALE` and the gradients divided by it, as AMP's
+    ``GradScaler`` does."""
     model.zero_grad(set_to_none=True)
     with _precision(precision, spikes.device.type) \
             if precision else nullcontext():
         out = model(spikes)
         weights = torch.linspace(-1, 1, out.numel(), dtype=out.dtype,
                                  device=out.device).view_as(out)
+        scale = LOSS_SCALE if precision == 'fp16' else 1.0
         with torch.autocast(spikes.device.type, enabled=False):
-            (out * weights).sum().backward()
-    return [out.detach()] + [p.grad for p in model.parameters()]
+            ((out * weights).sum() * scale).backward()
+    return [out.detach()] + [p.grad / scale for p in model.parameters()]
 
 
 def _not_interpreted(precision: str) -> Optional[str]:
     """Why the Triton kernel is not run at ``precision`` in triton's CPU
-    interpreter, or ``None`` (not interpreting, or ``'ieee'`` and
-    ``'fp16'``)."""
+    interpreter, or ``None`` (not interpreting, or ``'ieee'``)."""
     if not triton_band_networks.interpreting():
         return None
     if precision == 'bf16':
         return ("not run: triton 3.6's interpreter multiplies bf16 tl.dot "
                 'operands as raw 16-bit integers')
+    if precision == 'fp16':
+        return ('not run: its gradient products take bf16 operands, which '
+                "triton 3.6's interpreter multiplies as raw 16-bit integers")
     if precision == 'tf32':
         return ("not run: triton's interpreter ignores tl.dot's "
                 "input_precision, so its tf32 is the 'ieee' row's arithmetic")
@@ -184,7 +209,7 @@ def _not_interpreted(precision: str) -> Optional[str]:
 
 #: Why the correctness section judges only full float32 against a tolerance
 REDUCED_PRECISION_NOTE = (
-    'measured, not judged: on random data, TF32 or bf16 rounding moves '
+    'measured, not judged: on random data, TF32, bf16 or fp16 rounding moves '
     'some pre-activations across zero, and the gradients behind them by up '
     'to about a fifth of their largest magnitude, in any implementation '
     "(compare the 'torch' row: cuDNN); the first-use check holds every "
@@ -248,13 +273,16 @@ def check_first_use(steps: int, device: str,
     interpreter: :func:`_not_interpreted`), as ``backend='auto'`` runs it:
     ``{'rows': [{'precision', 'passed', 'max_error', 'tolerance',
     'failure', 'seconds', 'auto_runs'}]}``.
-    ``check_pixels`` shrinks the problem (the smoke run's interpreter)."""
+    ``check_pixels`` shrinks the problem and runs the first launch entry
+    alone (the smoke run's interpreter; the tests run every entry)."""
     backend = copy.copy(band_network_backends.BACKENDS['triton'])
     reason = backend.cannot_run(WGSE().band_networks)
     if reason:
         return dict(rows=[], note=f'not run: {reason}')
     if check_pixels is not None:
         backend.check_pixels = check_pixels
+        first = backend.check_launches()[:1]
+        backend.check_launches = lambda: first
     model = WGSE().to(device)
     lengths = band_lengths(steps, model.wavelet, model.level, model.mode)
     coeffs = torch.zeros(1, 1, sum(lengths), device=device)
@@ -274,11 +302,14 @@ def check_first_use(steps: int, device: str,
 
 
 def segmentation_step(config: str, shape: Shape, repeat: int, warmup: int,
-                      device: str, latency: bool = True) -> Dict[str, Any]:
+                      device: str, latency: bool = True,
+                      amp: bool = False) -> Dict[str, Any]:
     """A config's training step on a ``(B, T, H, W)`` batch (and, if
     ``latency``, its batch-1 inference), as
-    :mod:`wgse_mmseg.benchmarks.segmentation` measures them. Sets the
-    MMSeg layer up (explicitly, as the tools do) and imports it."""
+    :mod:`wgse_mmseg.benchmarks.segmentation` measures them; with ``amp``
+    under mmengine's ``AmpOptimWrapper`` (fp16 autocast, dynamic loss
+    scale: what ``tools/train.py --amp`` runs). Sets the MMSeg layer up
+    (explicitly, as the tools do) and imports it."""
     from .. import register_all_modules
     register_all_modules()
     from . import segmentation
@@ -290,7 +321,10 @@ def segmentation_step(config: str, shape: Shape, repeat: int, warmup: int,
     if latency:
         result['latency_ms'] = segmentation.measure_latency(
             model, steps, (height, width), repeat, warmup)
-    train = segmentation.measure_train_step(model, cfg.optim_wrapper, steps,
+    optim_wrapper = dict(cfg.optim_wrapper)
+    if amp:
+        optim_wrapper.update(type='AmpOptimWrapper', loss_scale='dynamic')
+    train = segmentation.measure_train_step(model, optim_wrapper, steps,
                                             (height, width), batch, repeat,
                                             warmup)
     enhancer = getattr(model.data_preprocessor, 'enhancer', None)
@@ -369,16 +403,32 @@ def _wgse_section(plan: Plan, clock: _Clock) -> Dict[str, Any]:
                 rows=rows)
 
 
+def _profile_section(plan: Plan, clock: _Clock) -> Dict[str, Any]:
+    """One WGSE pass at the ``wgse`` section's shape under the profiler, at
+    TF32 and bf16 (:mod:`.wgse_profile`); a GPU's only."""
+    if not plan.device.startswith('cuda'):
+        return dict(status='ok', rows=[],
+                    note=f'not run: profiling needs a GPU ({plan.device})')
+    rows = [dict(clock.attempt(
+        f'profile of one WGSE pass, {precision}, '
+        f'{_shape_text(plan.wgse_shape)}', wgse_profile.profile_pass,
+        plan.wgse_shape, plan.device, precision), precision=precision)
+        for precision in ('tf32', 'bf16')]
+    return dict(status=_status(rows), shape=list(plan.wgse_shape),
+                rows=rows)
+
+
 def _model_rows(plan: Plan, clock: _Clock, shape: Shape, latency: bool,
-                models: Dict[str, Tuple[str, str]],
-                root: str) -> List[Dict[str, Any]]:
+                models: Dict[str, Tuple[str, str]], root: str,
+                amp: bool = False) -> List[Dict[str, Any]]:
     rows = []
     for model, configs in models.items():
         for enhancer, config in zip(('raw', 'WGSE'), configs):
+            enhancer += ', AMP' if amp else ''
             row = clock.attempt(
                 f'{model} {enhancer} step, {_shape_text(shape)}',
                 segmentation_step, os.path.join(root, config), shape,
-                plan.repeat, plan.warmup, plan.device, latency,
+                plan.repeat, plan.warmup, plan.device, latency, amp,
                 isolate=plan.isolate)
             rows.append(dict(row, model=model, enhancer=enhancer,
                              config=config))
@@ -394,6 +444,14 @@ def _model_rows(plan: Plan, clock: _Clock, shape: Shape, latency: bool,
     return rows
 
 
+def _pspnet(models: Dict[str, Tuple[str, str]]
+            ) -> Dict[str, Tuple[str, str]]:
+    """PSPNet of ``models`` (the paper's shape and AMP run it alone), or
+    the first model."""
+    return {name: configs for name, configs in models.items()
+            if name == 'PSPNet R50-D8'} or dict(list(models.items())[:1])
+
+
 def _figures(sections: Dict[str, Dict]) -> Dict[str, Optional[float]]:
     """Each of :data:`FIGURES` in this report, ``None`` where it was not
     measured."""
@@ -401,18 +459,32 @@ def _figures(sections: Dict[str, Dict]) -> Dict[str, Optional[float]]:
             if r['status'] == 'ok'}
     # what 'auto' runs on the device: Triton on CUDA, else the fastest
     row = wgse.get('triton') or wgse.get('compiled') or wgse.get('torch')
-    pspnet = [r for r in sections['segmentation']['rows']
-              if r['model'] == 'PSPNet R50-D8' and r['enhancer'] == 'WGSE']
-    paper = [r for r in sections['paper']['rows']
-             if r['enhancer'] == 'WGSE' and r['status'] == 'ok']
+
+    def step(model: str, enhancer: str) -> Dict[str, Any]:
+        return next((r for r in sections['segmentation']['rows']
+                     if r['model'] == model and r['enhancer'] == enhancer),
+                    {})
+
+    pspnet = step('PSPNet R50-D8', 'WGSE')
+    paper = [r for r in sections['paper']['rows'] if r['status'] == 'ok']
+    paper_wgse = [r for r in paper if r['enhancer'] == 'WGSE']
+    bf16 = [r for r in sections.get('profile', {}).get('rows', [])
+            if r['status'] == 'ok' and r['precision'] == 'bf16']
+    waits = [r['seconds'] for r in sections.get('first_use', {}).get(
+        'rows', []) if r.get('seconds') is not None]
     return dict(
         wgse_ms=None if row is None else 1e3 * row['median_s'],
+        wgse_bf16_ms=bf16[0]['span_ms'] if bf16 else None,
         wgse_gib=None if row is None else row['peak_mib'] / 1024,
-        step_ratio=pspnet[0].get('step_vs_raw') if pspnet else None,
-        added_latency_ms=(pspnet[0].get('added_latency_ms') if pspnet
-                          else None),
-        paper_gb=(paper[0]['memory']['peak_mb'] * 2**20 / 1e9 if paper
-                  else None))
+        step_ratio=pspnet.get('step_vs_raw'),
+        step_ratio_amp=step('PSPNet R50-D8', 'WGSE, AMP').get('step_vs_raw'),
+        segformer_step_ratio=step('SegFormer-B0', 'WGSE').get('step_vs_raw'),
+        added_latency_ms=pspnet.get('added_latency_ms'),
+        paper_gb=(paper_wgse[0]['memory']['peak_mb'] * 2**20 / 1e9
+                  if paper_wgse else None),
+        paper_memory_ratio=paper_wgse[0].get('memory_vs_raw')
+        if paper_wgse else None,
+        first_use_s=max(waits) if waits else None)
 
 
 def _targets(sections: Dict[str, Dict],
@@ -466,7 +538,11 @@ def run_report(plan: Plan, root: str, targets: Targets,
             r['precision'] for r in first_use['rows'] if r['passed'] is False)
     sections['first_use'] = first_use
     sections['wgse'] = _wgse_section(plan, clock)
+    sections['profile'] = _profile_section(plan, clock)
     rows = _model_rows(plan, clock, plan.train_shape, True, models, root)
+    if plan.device.startswith('cuda'):  # AMP: fp16 autocast, CUDA only
+        rows += _model_rows(plan, clock, plan.train_shape, False,
+                            _pspnet(models), root, amp=True)
     sections['segmentation'] = dict(status=_status(rows),
                                     shape=list(plan.train_shape), rows=rows)
     sections['latency'] = dict(
@@ -474,12 +550,9 @@ def run_report(plan: Plan, root: str, targets: Targets,
         shape=[1] + list(plan.train_shape[1:]), rows=[
             {k: r.get(k) for k in ('model', 'enhancer', 'status',
                                    'latency_ms', 'added_latency_ms')}
-            for r in rows])
-    paper_models = {name: configs for name, configs in models.items()
-                    if name == 'PSPNet R50-D8'} or dict(
-                        list(models.items())[:1])
-    rows = _model_rows(plan, clock, plan.paper_shape, False, paper_models,
-                       root)
+            for r in rows if 'AMP' not in r['enhancer']])
+    rows = _model_rows(plan, clock, plan.paper_shape, False,
+                       _pspnet(models), root)
     sections['paper'] = dict(status=_status(rows),
                              shape=list(plan.paper_shape), rows=rows)
     tuned = {}
@@ -647,6 +720,24 @@ def format_report(report: Dict[str, Any], command: str) -> str:
                   _num(r.get('memory_vs_reference'), 3), _row_status(r)]
                  for r in section['rows']]), '']
 
+    section = sections['profile']
+    out += ['## One WGSE pass, kernel by kernel', '',
+            'Device kernels of one forward+backward at the shape above '
+            '(torch.profiler, after a warm-up pass): time, share of the span '
+            'from the first kernel to the last, the gaps no kernel covers, '
+            "and the band kernels' H x H products in TFLOP/s against the "
+            "device's dense peak (wgse_mmseg/benchmarks/wgse_profile.py).",
+            '']
+    if section.get('note'):
+        out += [section['note'], '']
+    for row in section.get('rows', []):
+        if row['status'] == 'ok':
+            out += [f"{row['precision']} ({row['backend']}): span "
+                    f"{row['span_ms']:.2f} ms", '',
+                    *wgse_profile.table_lines(row), '']
+        else:
+            out += [f"{row['precision']}: {_row_status(row)}", '']
+
     section = sections['segmentation']
     out += ['## Training steps', '',
             f"Batch {section['shape'][0]}, T={section['shape'][1]}, "
@@ -672,9 +763,9 @@ def format_report(report: Dict[str, Any], command: str) -> str:
             'step as above.', '', _model_table(section['rows'], False), '']
 
     out += _autotune_lines(sections['autotune'])
-    out += ['', '## Against the targets (one H100, docs/gpu.md)', '',
+    out += ['', '## Against the targets (issue 43: an H100 or H200)', '',
             markdown_table(
-                ['target', 'this run', 'at most', 'moonshot', 'met'],
+                ['target', 'this run', 'at most', 'aim', 'met'],
                 [[t['what'], '-' if t['value'] is None else
                   f"{t['value']:.2f} {t['unit']}",
                   f"{t['target']} {t['unit']}",
@@ -682,7 +773,7 @@ def format_report(report: Dict[str, Any], command: str) -> str:
                   f"{t['moonshot']} {t['unit']}",
                   'not measured' if t['met'] is None else
                   ('yes' if t['met'] else 'no') +
-                  (' (moonshot too)' if t['moonshot_met'] else '')]
+                  (' (aim too)' if t['moonshot_met'] else '')]
                  for t in sections['targets']['rows']]),
             '', f"The report took {report['seconds']:.0f} s.", '']
     return '\n'.join(out)

@@ -36,7 +36,7 @@ parameter-gradient sums in registers across its tiles: one row of a
 caller adds the rows of each band (no atomics: the same bits every run).
 Writing ``d3`` (a pass over memory the size of the coefficients) is what
 lets the second kernel carry two ``(BLOCK, H)`` tiles between steps instead
-of six, so that it runs 64-pixel tiles without spilling.
+of six, so that it runs 32-pixel tiles without spilling.
 
 Parameters are float32, each kind stacked over the bands, contiguous:
 ``conv1`` ``(bands, H, 1, 3)``, ``conv2`` ``(bands, H, H, 3)``, ``conv3``
@@ -56,6 +56,43 @@ def _dot(a, b, PRECISION: tl.constexpr):
         return tl.dot(a.to(tl.bfloat16), b.to(tl.bfloat16))
     else:
         return tl.dot(a, b, input_precision=PRECISION)
+
+
+@triton.jit
+def _grad_dot(a, b, PRECISION: tl.constexpr):
+    """A product with a gradient operand: as :func:`_dot`, but bf16 where
+    the products are fp16. Under AMP's fp16 the loss is scaled (up to 2^16
+    by ``GradScaler``) so that small gradients survive; fp16 operands of
+    the scaled gradients would overflow (65504) where the float32
+    convolutions they replace do not, bf16 has float32's range."""
+    if PRECISION == 'fp16':
+        return tl.dot(a.to(tl.bfloat16), b.to(tl.bfloat16))
+    else:
+        return _dot(a, b, PRECISION)
+
+
+@triton.jit
+def _activation_dot(a, b, PRECISION: tl.constexpr):
+    """``a @ b`` for a gradient ``a`` and an activation ``b`` that carries
+    more significant bits than bf16 (8) or TF32 (11) hold (``h2``, in
+    conv3's weight gradient, even on the first-use check's exact problem):
+    ``b`` split into a high part of the operands' precision and the rest,
+    two products on tensor cores, about twice the significant bits of
+    ``b``. TF32 keeps ``b``'s top 11 bits by truncation (the rest is then
+    exact in float32); bf16 and fp16 take bf16 parts (``a`` rounded to
+    bf16, as the other gradient products take it)."""
+    if PRECISION == 'ieee':
+        return tl.dot(a, b, input_precision='ieee')
+    elif PRECISION == 'tf32':
+        high = (b.to(tl.uint32, bitcast=True) & 0xFFFFE000).to(
+            tl.float32, bitcast=True)
+        return (tl.dot(a, high, input_precision='tf32') +
+                tl.dot(a, b - high, input_precision='tf32'))
+    else:
+        high = b.to(tl.bfloat16)
+        low = (b - high.to(tl.float32)).to(tl.bfloat16)
+        a = a.to(tl.bfloat16)
+        return tl.dot(a, high) + tl.dot(a, low)
 
 
 @triton.jit
@@ -264,8 +301,9 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
             h2_1 = tl.where((s >= 1) & (s <= length), tl.maximum(h2_1, 0.0),
                             0.0)
             # dW3[k] += h2[u]^T d3[u + 1 - k], u = s - 1; db3
-            g_3 += _dot(_rows(r, d3_0, d3_1, d3_2, tl.zeros_like(d3_2)), h2_1,
-                        PRECISION)
+            g_3 += _activation_dot(
+                _rows(r, d3_0, d3_1, d3_2, tl.zeros_like(d3_2)), h2_1,
+                PRECISION)
             g_b3 += d3_0
             # d2[s - 1]
             d2 = tl.where(h2_1 > 0, d3_0[:, None] * w3_0 +
@@ -273,16 +311,17 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
             g_b2 += tl.sum(d2, axis=0)
             # dW2[:, :, k]^T += d2[u]^T h1[u - 1 + k]
             d2t = tl.trans(d2)
-            g_w2t_0 += _dot(d2t, h1_2, PRECISION)
-            g_w2t_1 += _dot(d2t, h1_1, PRECISION)
-            g_w2t_2 += _dot(d2t, h1_0, PRECISION)
+            g_w2t_0 += _grad_dot(d2t, h1_2, PRECISION)
+            g_w2t_1 += _grad_dot(d2t, h1_1, PRECISION)
+            g_w2t_2 += _grad_dot(d2t, h1_0, PRECISION)
             # d1[s - 2]: d2[u] reaches dh1[u - 1 + k] through tap k
-            d1 = tl.where(h1_2 > 0, e_2 + _dot(d2, w2t_0, PRECISION), 0.0)
-            e_2 = e_1 + _dot(d2, w2t_1, PRECISION)
-            e_1 = _dot(d2, w2t_2, PRECISION)
+            d1 = tl.where(h1_2 > 0, e_2 + _grad_dot(d2, w2t_0, PRECISION),
+                          0.0)
+            e_2 = e_1 + _grad_dot(d2, w2t_1, PRECISION)
+            e_1 = _grad_dot(d2, w2t_2, PRECISION)
             # dW1[k] += x[v - 1 + k] d1[v], v = s - 2; db1
-            g_1 += _dot(_rows(r, x_3, x_2, x_1, tl.zeros_like(x_1) + 1.0), d1,
-                        PRECISION)
+            g_1 += _grad_dot(_rows(r, x_3, x_2, x_1,
+                                   tl.zeros_like(x_1) + 1.0), d1, PRECISION)
             if INPUT_GRAD:
                 # gx[s - 3]: x[t] reaches h1[t + 1 - k] through conv1's
                 # tap k and h2[t] through the residual

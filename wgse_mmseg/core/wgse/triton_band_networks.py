@@ -75,17 +75,15 @@ FORWARD_CONFIGS = (LaunchConfig(64, 4), )
 #: The backward kernel's entries (:func:`backward_configs`), the first of a
 #: list running untuned. Each compiles without spilling to at least two
 #: programs an SM at TF32, fp16 and bf16 on sm_80, sm_89 and sm_90 (the
-#: resources tool's table, docs/wgse_speed.md, "Compiled for GPUs"). 32
-#: pixels, 48 KB of shared memory at TF32: two programs share sm_89's 100 KB.
-#: On sm_90 at TF32 the 64-pixel tile fits too (255 registers, 73 KB of
-#: shared memory) and takes a third fewer instructions a coefficient; it
-#: spills at fp16 and bf16 and on the older GPUs. The input gradient
-#: (WGSE's coefficients need none in training: they come from the data)
-#: carries three more vectors and runs 16 pixels.
-BACKWARD_CONFIGS = dict(
-    default=(LaunchConfig(32, 4), ),
-    sm_90_tf32=(LaunchConfig(64, 4), LaunchConfig(32, 4)),
-    input_grad=(LaunchConfig(16, 4), ))
+#: resources tool's table, docs/wgse_speed.md, "Compiled for GPUs"): 32
+#: pixels (48 KB of shared memory at TF32: two programs share sm_89's
+#: 100 KB), 16 where that spills: bf16 on sm_90 (16 bytes a thread) and
+#: wherever the input gradient is computed (WGSE's coefficients need none
+#: in training: they come from the data; it carries three more vectors).
+#: 64 pixels spill 16 bytes even on sm_90 at TF32.
+BACKWARD_CONFIGS = dict(default=(LaunchConfig(32, 4), ),
+                        sm_90_bf16=(LaunchConfig(16, 4), ),
+                        input_grad=(LaunchConfig(16, 4), ))
 #: Programs of the backward kernel per SM the work is divided for: what
 #: every entry above fits at once.
 PROGRAMS_PER_SM = 2
@@ -107,16 +105,17 @@ def backward_configs(capability: Optional[int] = None,
                      ) -> Tuple[LaunchConfig, ...]:
     """The backward entries (:data:`BACKWARD_CONFIGS`) for a GPU of
     ``capability`` (``90`` for sm_90), computing the input gradient or not,
-    at a :func:`dot_precision`; a ``None`` admits every value, and the
-    entries of all that it admits are returned, the first for the newest
-    GPUs first."""
+    at a :func:`dot_precision`; ``None`` admits every value, and the entries
+    of all that it admits are returned."""
     if input_grad:
         return BACKWARD_CONFIGS['input_grad']
-    found = []
-    if (capability is None or capability >= 90) and \
-            precision in (None, 'tf32'):
-        found += BACKWARD_CONFIGS['sm_90_tf32']
-    found += BACKWARD_CONFIGS['default']
+    sm_90_bf16 = (capability is None or capability >= 90) and \
+        precision in (None, 'bf16')
+    only_sm_90_bf16 = sm_90_bf16 and capability is not None and \
+        precision is not None
+    found = [] if only_sm_90_bf16 else list(BACKWARD_CONFIGS['default'])
+    if sm_90_bf16:
+        found += BACKWARD_CONFIGS['sm_90_bf16']
     if input_grad is None:
         found += BACKWARD_CONFIGS['input_grad']
     return tuple(dict.fromkeys(found))
