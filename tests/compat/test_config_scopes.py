@@ -23,8 +23,8 @@ BODY = ("model = dict(data_preprocessor=dict(\n"
 
 def _config(folder, bases) -> str:
     path = folder / 'bisenetv2_spikes.py'
-    path.write_text(f"_base_ = {['mmseg::_base_/models/bisenetv2.py', *bases]!r}\n"
-                    + BODY)
+    bases = ['mmseg::_base_/models/bisenetv2.py', *bases]
+    path.write_text(f'_base_ = {bases!r}\n' + BODY)
     return str(path)
 
 
