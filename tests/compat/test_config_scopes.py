@@ -99,3 +99,34 @@ def test_a_config_elsewhere_trains_with_the_package_tool(
     assert result.returncode == 0, log[-4000:]
     assert (work_dir / 'epoch_1.pth').is_file(), log[-4000:]
     assert 'BiSeNetV2' in log
+
+
+@pytest.mark.long(30)
+def test_mim_trains_a_config_elsewhere(tmp_path, tiny_spike_dataset,
+                                       tiny_run_options):
+    """``mim train wgse_mmseg`` (each stack's mim, the README's install)
+    trains the BiSeNetV2 config of another folder one iteration."""
+    bin_dir = osp.dirname(sys.executable)
+    env = dict(os.environ,
+               PATH=bin_dir + os.pathsep + os.environ.get('PATH', ''))
+    env.pop('PYTHONPATH', None)  # the user's own shell
+    found = subprocess.run(
+        [sys.executable, '-c', 'from mim.utils import get_installed_path; '
+         "print(get_installed_path('wgse_mmseg'))"], cwd=tmp_path, env=env,
+        capture_output=True, text=True).stdout.strip()
+    if found not in (osp.join(ROOT, 'wgse_mmseg'), ROOT):
+        pytest.skip(f'mim finds wgse_mmseg at {found!r}, not in this '
+                    f'checkout (tests/tools/test_mim_end_to_end.py says so)')
+    config = _config(tmp_path, [f'wgse_mmseg::{base}' for base in BASES])
+    work_dir = tmp_path / 'work'
+    options = tiny_run_options(tiny_spike_dataset, 'train_cfg.max_epochs=1',
+                               'train_cfg.val_interval=2',
+                               'default_hooks.checkpoint.interval=1',
+                               batch_size=4)
+    result = subprocess.run(
+        [osp.join(bin_dir, 'mim'), 'train', 'wgse_mmseg', config, '--gpus',
+         '0', '--launcher', 'none', '--work-dir', str(work_dir), *options],
+        cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
+    log = result.stdout + result.stderr
+    assert result.returncode == 0, log[-4000:]
+    assert (work_dir / 'epoch_1.pth').is_file(), log[-4000:]
