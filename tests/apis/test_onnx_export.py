@@ -31,6 +31,7 @@ from mmseg.structures import SegDataSample
 from wgse_mmseg.utils.config import load_config
 
 wgse_mmseg.register_all_modules()  # before mmseg builds anything
+from wgse_mmseg.apis import onnx_export  # noqa: E402
 from wgse_mmseg.apis.onnx_export import (  # noqa: E402
     LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, SpikeSegmentorGraph,
     compare_with_onnx, export_onnx, random_spikes)
@@ -300,7 +301,7 @@ def test_the_tool_refuses_a_failed_check(tmp_path, capsys, monkeypatch,
         return SimpleNamespace(model_proto=proto)
     monkeypatch.setattr(torch.onnx, 'export', exporter)
     tool = load_tool('tools/deployment/pytorch2onnx.py')
-    real = tool.compare_with_onnx
+    real = onnx_export.compare_with_onnx  # the tool's main() imports it
     compared = []
 
     def skewed(graph, path, spikes):
@@ -308,7 +309,7 @@ def test_the_tool_refuses_a_failed_check(tmp_path, capsys, monkeypatch,
         compared.append(found['ok'])
         found.update(max_abs_diff=1.0, ok=False)
         return found
-    monkeypatch.setattr(tool, 'compare_with_onnx', skewed)
+    monkeypatch.setattr(onnx_export, 'compare_with_onnx', skewed)
     out = tmp_path / 'm.onnx'
     out.write_bytes(b'an earlier export')
     code = tool.main([osp.join(ROOT, 'configs', 'segformer_b0_raw.py'),

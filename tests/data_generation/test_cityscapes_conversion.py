@@ -22,6 +22,7 @@ from wgse_mmseg.data_generation.cityscapes_conversion import (
 from wgse_mmseg.core.io import load_spikes
 from wgse_mmseg.core.seeding import derive_seed
 from wgse_mmseg.data_generation.shards import WHOLE, Shard
+from wgse_mmseg.core import simulation  # the converter calls it there
 from wgse_mmseg.core.simulation import simulate_spikes
 
 REPO_ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -109,7 +110,7 @@ def calls(monkeypatch, single_thread):
         return simulate_spikes(frames, num_steps, threshold=threshold,
                                effects=effects, seed=seed)
 
-    monkeypatch.setattr(conversion, 'simulate_spikes', recording)
+    monkeypatch.setattr(simulation, 'simulate_spikes', recording)
     return recorded
 
 
@@ -252,14 +253,14 @@ def test_convert_layout_labels_spikes(tmp_path, cityscapes, calls):
 def test_resume_after_interruption(tmp_path, cityscapes, calls, monkeypatch):
     root, _ = cityscapes
     out = str(tmp_path / 'out')
-    recording = conversion.simulate_spikes
+    recording = simulation.simulate_spikes
 
     def interrupted(*args, **kwargs):
         if len(calls) == 1:
             raise KeyboardInterrupt
         return recording(*args, **kwargs)
 
-    monkeypatch.setattr(conversion, 'simulate_spikes', interrupted)
+    monkeypatch.setattr(simulation, 'simulate_spikes', interrupted)
     with pytest.raises(KeyboardInterrupt):
         convert_cityscapes(root, out, SETTINGS, progress=False)
     first = 'aachen_000000_000123'
@@ -271,7 +272,7 @@ def test_resume_after_interruption(tmp_path, cityscapes, calls, monkeypatch):
     os.makedirs(osp.dirname(stale))
     open(stale, 'wb').close()
 
-    monkeypatch.setattr(conversion, 'simulate_spikes', recording)
+    monkeypatch.setattr(simulation, 'simulate_spikes', recording)
     del calls[:]
     counts = convert_cityscapes(root, out, SETTINGS, progress=False)
     assert counts == dict(sequence=0, static=2, skipped=1)

@@ -156,3 +156,16 @@ def test_only_the_listed_fields_carry_t(tmp_path):
 def test_bad_command_line_values_are_named(options, message):
     with pytest.raises(SpikeSettingsError, match=message):
         load_config(osp.join(ROOT, 'configs', 'pspnet_raw.py'), options)
+
+
+@pytest.mark.parametrize('name, error, message', [
+    ('missing.py', FileNotFoundError, 'no such config file'),
+    ('clip.npy', ValueError, r'not a config file \(expected one of \.py, '
+     r'\.json, \.yaml, \.yml\)')])
+def test_a_file_that_is_no_config_is_named(tmp_path, name, error, message):
+    """Before mmengine reads it (whose OSError named neither the file nor
+    what it expected)."""
+    (tmp_path / 'clip.npy').write_bytes(b'\x93NUMPY')
+    path = str(tmp_path / name)
+    with pytest.raises(error, match=f'{path}: {message}'):
+        load_config(path)

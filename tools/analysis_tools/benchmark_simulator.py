@@ -25,14 +25,9 @@ count, so the ratio compares algorithms, not core counts).
 """
 import argparse
 
-import numpy as np
-import torch
-
 from wgse_mmseg.core.arguments import (NUM_STEPS, SIDE, Integer, SequenceOf,
                                        Text)
 from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
-from wgse_mmseg.benchmarks.simulator import header, load_rows, simulator_rows
-from wgse_mmseg.data_generation.synthetic import render_street_scene
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -55,6 +50,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main():
     args = build_parser().parse_args()
+    # torch and the simulator once the arguments are read (--help at once)
+    import numpy as np
+    import torch
+
+    from wgse_mmseg.benchmarks.simulator import (header, load_rows,
+                                                 simulator_rows)
+    from wgse_mmseg.data_generation.synthetic import render_street_scene
     if args.threads:
         torch.set_num_threads(args.threads)
     frames, _ = render_street_scene(np.random.default_rng(0), args.height,

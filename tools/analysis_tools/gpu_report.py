@@ -35,8 +35,8 @@ TARGETS = {
 
 
 def build_parser() -> argparse.ArgumentParser:
-    # imported here: importing the package imports triton, which must come
-    # after main() has chosen the interpreter for --smoke
+    # imported here, after main() has chosen Triton's interpreter for
+    # --smoke (the package's kernels import triton where they are loaded)
     from wgse_mmseg.core.arguments import Path
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--smoke', action='store_true',

@@ -112,7 +112,8 @@ def parse_args(argv=None):
 
 def walk(args) -> None:
     """``--stride``: reconstruct a window every ``args.stride`` readouts into
-    the video ``args.out`` (``core.recording_walk.walk_recording``)."""
+    the video ``args.out``
+    (:func:`~wgse_mmseg.core.recording_walk.walk_recording`)."""
     import torch
 
     from wgse_mmseg.core.io import to_uint8

@@ -33,6 +33,10 @@ never by version lists; what the checks find on the two pinned stacks:
        distribution is missing)
      - left alone: ``mmsegmentation`` is installed
      - ``mmseg`` to ``onedl-mmsegmentation``
+   * - ``wgse_mmseg::`` bases read from the package's configs
+       (:func:`resolve_package_scope`: always, see its module)
+     - added
+     - added
    * - warnings quieted (:data:`QUIETED_WARNINGS`, where raised)
      - MMSeg's ``build_loss``/``build_pixel_sampler`` deprecations; mmcv's
        missing ``MultiScaleDeformableAttention`` under mmcv-lite
@@ -47,8 +51,8 @@ importing a module of the package applies nothing.
 ``WGSE_MMSEG_NO_COMPAT=1`` in the environment turns every patch off (then
 MMSeg 1.2.2 needs full mmcv, resuming a checkpoint needs
 ``torch.serialization.add_safe_globals`` done by the user, the fork's
-mmengine may unpickle a checkpoint in full, and ``mmseg::`` bases do not
-resolve on the fork).
+mmengine may unpickle a checkpoint in full, ``mmseg::`` bases do not
+resolve on the fork, and ``wgse_mmseg::`` bases on neither stack).
 """
 import os
 
@@ -56,7 +60,8 @@ import warnings
 
 from .checkpoint_safety import (allow_mmengine_checkpoints,
                                 guard_mmengine_checkpoint_loader)
-from .config_scopes import map_scopes_to_installed_distributions
+from .config_scopes import (map_scopes_to_installed_distributions,
+                            resolve_package_scope)
 from .mmcv_ops_fallback import install_mmcv_ops_fallback
 
 __all__ = []
@@ -92,5 +97,6 @@ def apply_compat() -> bool:
         allow_mmengine_checkpoints()
         guard_mmengine_checkpoint_loader()
         map_scopes_to_installed_distributions()
+        resolve_package_scope()
         _applied = True
     return True

@@ -66,9 +66,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import cv2
 import numpy as np
-import torch
 from tqdm import tqdm
 
 from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
@@ -81,7 +79,6 @@ from ..core.limits import MAX_SAMPLES, MAX_WORKERS, excerpt, parse_json
 from ..core.markers import invalidate, is_complete, write_marker
 from ..core.output_folder import OwnedFolder, own_folder
 from ..core.seeding import derive_seed
-from ..core.simulation import parse_effects, read_scene_file, simulate_spikes
 from .shards import SHARD, WHOLE, Shard
 
 __all__ = ['ConversionSettings', 'convert_cityscapes']
@@ -284,6 +281,7 @@ def resize_nearest(label: np.ndarray, height: int, width: int) -> np.ndarray:
 
 
 def _read(path: str, flags: int) -> np.ndarray:
+    import cv2
     image = cv2.imread(path, flags)
     if image is None:
         raise OSError(f'{path}: cannot be read as an image')
@@ -293,6 +291,7 @@ def _read(path: str, flags: int) -> np.ndarray:
 def _train_id_label(sample: CityscapesSample, height: int,
                     width: int, image_shape: Tuple[int, int]) -> np.ndarray:
     """The sample's ``(height, width)`` ``uint8`` train-id label."""
+    import cv2
     label = _read(sample.label, cv2.IMREAD_UNCHANGED)
     if label.ndim != 2 or label.dtype != np.uint8:
         raise ValueError(
@@ -317,6 +316,7 @@ def _rgb_frames(sample: CityscapesSample, height: int,
                 width: int) -> Tuple[np.ndarray, Tuple[int, int]]:
     """``(N, height, width, 3)`` ``uint8`` RGB frames and the source size:
     the sequence, or the annotated frame alone."""
+    import cv2
     frames, size = [], None
     for path in sample.sequence or (sample.image, ):
         image = _read(path, cv2.IMREAD_COLOR)
@@ -411,6 +411,7 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
     ``'static'``. A link at a sample's file is replaced, a linked folder
     refused (:class:`~wgse_mmseg.core.output_folder.OwnedFolder`).
     """
+    from ..core.simulation import simulate_spikes  # torch, where it runs
     owned = OwnedFolder(out_dir)
     paths = {name: owned.file(path)
              for name, path in output_paths(out_dir, sample).items()}
@@ -443,6 +444,8 @@ def _remove_stale_temporaries(out_dir: str,
 
 def _init_worker() -> None:
     """One thread per worker process: the pool provides the parallelism."""
+    import cv2
+    import torch
     torch.set_num_threads(1)
     cv2.setNumThreads(1)
 
@@ -513,6 +516,7 @@ def load_scene(value: Optional[str]) -> Dict[str, Optional[dict]]:
     effect's defaults; empty for ``value=None``), each effect checked by the
     simulator's parser so that a typo fails before any conversion.
     """
+    from ..core.simulation import parse_effects, read_scene_file
     if value is None:
         return {}
     if osp.isfile(value):

@@ -13,7 +13,6 @@ same arguments give the same files.
 import os.path as osp
 from typing import Tuple
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -25,7 +24,6 @@ from ..core.io import save_spikes, write_png
 from ..core.markers import invalidate, is_complete, write_marker
 from ..core.output_folder import own_folder
 from ..core.seeding import derive_generator, derive_seed
-from ..core.simulation import simulate_spikes
 
 __all__ = ['make_synthetic_dataset']
 
@@ -44,6 +42,7 @@ def _box(image, label, y0, y1, x0, x1, value, class_id):
 def _background(rng: np.random.Generator, height: int,
                 width: int) -> Tuple[np.ndarray, np.ndarray, int]:
     """Static part of a scene: intensity, label and the horizon row."""
+    import cv2  # where drawn: the command line's --help needs none
     image = np.empty((height, width), np.float64)
     label = np.empty((height, width), np.uint8)
     horizon = int(height * rng.uniform(0.45, 0.6))
@@ -90,6 +89,7 @@ def render_street_scene(rng: np.random.Generator, height: int, width: int,
         ``(frames, label)``: ``(N, H, W)`` float intensities in [0, 1] and the
         ``(H, W)`` ``uint8`` train-id label of the middle instant.
     """
+    import cv2
     background, background_label, curb = _background(rng, height, width)
     movers = []
     for _ in range(rng.integers(1, 4)):
@@ -157,6 +157,7 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
     at a sample's file is replaced, a linked folder refused. Returns the
     number of samples written now.
     """
+    from ..core.simulation import simulate_spikes  # torch, where it runs
     written = 0
     recipe = dict(height=height, width=width, num_steps=num_steps,
                   num_frames=num_frames, threshold=threshold, seed=seed)

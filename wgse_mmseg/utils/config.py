@@ -29,6 +29,8 @@ if TYPE_CHECKING:
 
 __all__ = []
 
+#: the file types mmengine reads a config from
+CONFIG_EXTENSIONS = ('.py', '.json', '.yaml', '.yml')
 #: ``--cfg-options`` key -> the declaration of its value (from
 #: :data:`~wgse_mmseg.utils.spike_settings.SPIKE_SETTINGS`)
 SPIKE_SETTING_KINDS = {setting.name: setting.kind
@@ -49,6 +51,9 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> 'Config':
     """
     if not osp.isfile(path):
         raise FileNotFoundError(f'{path}: no such config file')
+    if osp.splitext(path)[1] not in CONFIG_EXTENSIONS:
+        raise ValueError(f'{path}: not a config file (expected one of '
+                         f'{", ".join(CONFIG_EXTENSIONS)})')
     prepare_mmseg_layer('load_config')
     from mmengine.config import Config
     options = dict(cfg_options or {})
