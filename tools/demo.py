@@ -53,6 +53,7 @@ from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, Choice, Path,
                                        check_frame_size)
 from wgse_mmseg.core.exposure import EXPOSURE
 from wgse_mmseg.core.recording_walk import add_walk_options
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 from wgse_mmseg.utils.config import add_config_options
 
 # The model's modules (torch, OpenCV, OpenMMLab) are imported where they are
@@ -112,6 +113,7 @@ def parse_args(argv=None):
         stem = osp.splitext(osp.basename(args.spikes))[0]
         args.out_file = f'{stem}_seg.' + (
             'png' if args.stride is None else 'mp4')
+    check_tool_outputs(args, 'out_file')
     return args
 
 
@@ -256,6 +258,7 @@ def walk(args, cfg) -> None:
     print(report.summary('segmented', args.save_frames))
 
 
+@keeps_inputs
 def main(argv=None):
     args = parse_args(argv)
     import wgse_mmseg

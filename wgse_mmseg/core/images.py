@@ -22,6 +22,8 @@ from typing import Iterator, Tuple
 import cv2
 import numpy as np
 
+from .output_folder import note_input
+
 __all__ = []
 
 #: pixels per block of rows a conversion or a measure works on at once
@@ -128,6 +130,7 @@ def read_grey_image(path: str) -> np.ndarray:
         ValueError: naming ``path``, for an image of another kind (module
             docstring).
     """
+    note_input(path)
     # full depth, grey or colour as stored, EXIF orientation applied
     image = cv2.imread(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if image is None:

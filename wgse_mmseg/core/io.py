@@ -62,6 +62,7 @@ import os
 import os.path as osp
 import re
 import secrets
+import stat
 import struct
 import zipfile
 from typing import (BinaryIO, Callable, Dict, Iterator, List, NamedTuple,
@@ -72,6 +73,7 @@ import numpy as np
 from .arguments import LAYOUT, Integer, Path, declare
 from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
+from .output_folder import check_output, note_input
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape']
 
@@ -98,14 +100,18 @@ def atomic_path(path: str) -> Iterator[str]:
     kernel: no process-wide setting is read or changed), exclusively, never
     through a link. A process killed mid-write leaves one that the next run
     for that target can find and remove, without touching the temporaries
-    of other processes writing beside it.
+    of other processes writing beside it. A ``path`` that is an input of
+    this process (:func:`~wgse_mmseg.core.output_folder.check_output`) is
+    refused before anything is written, and again before the rename.
     """
+    check_output(path)
     directory = osp.dirname(osp.abspath(path))
     os.makedirs(directory, exist_ok=True)
     tmp = _create_temporary(directory, osp.basename(path),
                             osp.splitext(path)[1])
     try:
         yield tmp
+        check_output(path)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -756,10 +762,19 @@ def _format(path: str) -> SpikeFormat:
 
 
 def _existing(path: str) -> SpikeFormat:
-    """:func:`_format` of ``path``, an existing spike file."""
+    """:func:`_format` of ``path``, an existing regular spike file (a
+    FIFO or device would block or never end), noted as an input
+    (:func:`~wgse_mmseg.core.output_folder.note_input`)."""
     fmt = _format(path)
-    if not osp.exists(path):
-        raise SpikeFileError(f'{path}: no such spike file')
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise SpikeFileError(f'{path}: no such spike file') from None
+    if not stat.S_ISREG(mode):
+        raise SpikeFileError(f'{path}: not a regular file (a FIFO, device '
+                             f'or folder); a spike file is read from a '
+                             f'file on disk')
+    note_input(path)
     return fmt
 
 

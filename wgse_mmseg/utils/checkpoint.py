@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from ..core.limits import excerpt
+from ..core.output_folder import note_input
 
 __all__ = []
 
@@ -29,6 +30,7 @@ def read_checkpoint(path: str) -> dict:
     """
     if not osp.isfile(path):
         raise FileNotFoundError(f'{path}: no such checkpoint')
+    note_input(path)
     try:
         state = torch.load(path, map_location='cpu', weights_only=True)
     except Exception as err:  # torch raises many types for bad bytes

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Dict, Optional
 from .._openmmlab import prepare_mmseg_layer
 from ..core.arguments import Choice, Integer, Path
 from ..core.limits import MAX_WORKERS, excerpt
+from ..core.output_folder import note_input
 from .spike_settings import (SPIKE_SETTINGS, SpikeSettingsError,
                              apply_spike_settings, check_setting)
 
@@ -49,6 +50,7 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> 'Config':
     """
     if not osp.isfile(path):
         raise FileNotFoundError(f'{path}: no such config file')
+    note_input(path)
     prepare_mmseg_layer('load_config')
     from mmengine.config import Config
     options = dict(cfg_options or {})
