@@ -26,6 +26,7 @@ def files(tmp_path_factory):
     (tmp / 'text.spk').write_text('hello')
     (tmp / 'notes.pth').write_text('not a checkpoint')
     (tmp / 'empty.npy').write_bytes(b'')
+    (tmp / 'mydata').mkdir()  # what a value that lost its space would name
     return tmp
 
 
@@ -156,6 +157,13 @@ CASES = [
                   'crop_size=16,32', 'num_steps=9'],
      'segformer_b0_wgse.py: crop_size=(16, 32) is below the smallest input '
      'the model takes, 29x29'),
+    ('train.py', [CONFIG, '--work-dir', '{t}/work', '--cfg-options',
+                  'data_root={t}/my data', 'num_steps=9'],  # kept, refused
+     "{t}/my data/spike/train (img_path under data_root='{t}/my data')"),
+    ('misc/make_reconstruction_figure.py', ['{t}/ok.npy', '--out',
+                                            '{t}/f.png', '--methods', 'tfp',
+                                            '--scale', '0.01'],
+     '--scale 0.01: makes the 8x12 frames of {t}/ok.npy tiles of 0 pixels'),
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
                              '--stride', '10', '--frames', '25'],
      '--frames and --stride'),
