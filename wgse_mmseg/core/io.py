@@ -102,7 +102,10 @@ def atomic_path(path: str) -> Iterator[str]:
     for that target can find and remove, without touching the temporaries
     of other processes writing beside it. A ``path`` that is an input of
     this process (:func:`~wgse_mmseg.core.output_folder.check_output`) is
-    refused before anything is written, and again before the rename.
+    refused before anything is written, and again before the rename. An
+    ``OSError`` that names no file (``No space left on device``,
+    ``Read-only file system`` while writing) is raised again naming
+    ``path``.
     """
     check_output(path)
     directory = osp.dirname(osp.abspath(path))
@@ -113,9 +116,13 @@ def atomic_path(path: str) -> Iterator[str]:
         yield tmp
         check_output(path)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.remove(tmp)
+        if isinstance(err, OSError) and err.filename is None:
+            # a write's own error (disk full, read-only) names no file
+            raise OSError(err.errno, f'{path}: cannot be written: '
+                          f'{err.strerror or err}') from err
         raise
 
 

@@ -22,9 +22,8 @@ from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from .._openmmlab import prepare_mmseg_layer
-from ..core.limits import cut
 from ..core.output_folder import OutputFolderError, own_folder
-from ..utils.checkpoint import CheckpointError
+from ..utils.checkpoint import CheckpointError, load_error
 from ..utils.cross_checks import check_training_fits
 from ..utils.spike_settings import apply_spike_settings
 
@@ -126,7 +125,7 @@ class SpikeRunner(Runner):
             raise CheckpointError(
                 f'{filename}: refused: it holds objects that weights-only '
                 f'loading does not allow, and a checkpoint is never unpickled '
-                f'in full ({cut(str(err))})') from err
+                f'in full ({load_error(err)})') from err
         meta = checkpoint.get('meta')
         if isinstance(meta, dict) and 'config' in meta:
             raise CheckpointError(

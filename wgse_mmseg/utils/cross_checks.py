@@ -96,6 +96,39 @@ def smallest_input_side(runs: Callable[[int], bool],
     return high
 
 
+def check_input_fits(model: nn.Module, num_steps: int, height: int,
+                     width: int, source: str) -> None:
+    """Refuse, before inference, a ``(num_steps, height, width)`` input
+    (after the test pipeline) smaller than the smallest input ``model``
+    takes, as :func:`check_training_fits` refuses a crop: a dry forward
+    at the size the data preprocessor pads it to (its ``size_divisor``),
+    capped at :data:`PROBE_SIDE`; where it fails, the smallest side that
+    works is searched.
+
+    Raises:
+        ModelFitError: naming ``source``, its size and the smallest side.
+    """
+    model = getattr(model, 'module', model)
+    divisor = getattr(model.data_preprocessor, 'size_divisor', None) or 1
+    padded = [-(-side // divisor) * divisor for side in (height, width)]
+    probe = tuple(min(side, PROBE_SIDE) for side in padded)
+    failure = _dry_forward(model, num_steps, 1, *probe, training=False)
+    if failure is None:
+        return
+    side = smallest_input_side(lambda s: _dry_forward(
+        model, num_steps, 1, s, s, training=False) is None, min(probe))
+    if side is None:
+        raise ModelFitError(
+            f'{source}: the model runs on no input up to {MAX_IMAGE_SIDE}x'
+            f'{MAX_IMAGE_SIDE} (num_steps={num_steps}): '
+            f'{type(failure).__name__}: {cut(str(failure), 300)}')
+    raise ModelFitError(
+        f'{source}: frames of {height}x{width} are below the smallest input '
+        f"the model takes, {side}x{side} (its backbone's strides and "
+        f'kernels); give a larger recording, or a test pipeline that '
+        f'resizes it')
+
+
 def _crop(cfg, model: nn.Module) -> Optional[Tuple[int, int]]:
     size = getattr(model.data_preprocessor, 'size', None) or cfg.get(
         'crop_size')
