@@ -27,7 +27,9 @@ quotes at most :data:`EXCERPT_CHARS` characters of an offending value:
     that no crafted file or metadata can exhaust the parser's recursion.
 """
 import json
+import os
 import re
+import stat
 from typing import Any
 
 #: ``T``: spike frames per window (``num_steps``) a model, transform,
@@ -110,9 +112,16 @@ def read_text_file(path: str, what: str,
 
     Raises:
         ValueError: naming ``path`` and ``what`` it should be, for a file
-            over the limit or not UTF-8. ``OSError`` passes through.
+            over the limit, not UTF-8, or no regular file (a FIFO would
+            block the read). ``OSError`` passes through.
     """
-    with open(path, 'rb') as f:
+    # O_NONBLOCK: opening a FIFO without a writer would wait for one
+    fd = os.open(path, os.O_RDONLY | getattr(os, 'O_NONBLOCK', 0))
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise ValueError(f'{path}: a {what} is read from a regular file, '
+                         f'not a FIFO, device or folder')
+    with open(fd, 'rb') as f:
         data = f.read(limit + 1)
     if len(data) > limit:
         raise ValueError(

@@ -32,8 +32,9 @@ No input replaced
     every file the package reads as input (a spike file, an image, a
     config, a checkpoint, an ONNX model) is noted (:func:`note_input`) by
     its device and inode, so hard links and symbolic links are the same
-    file; every output the package writes (:func:`~wgse_mmseg.core.io.
-    atomic_path`) and every path it removes (:func:`discard`) is checked
+    file; every output the package writes
+    (:func:`~wgse_mmseg.core.io.atomic_path`) and every path it removes
+    (:func:`discard`) is checked
     against them (:func:`check_output`): an output over an input is an
     :class:`OutputFolderError` naming both, and nothing is written. Tools
     also check their output arguments against their other arguments

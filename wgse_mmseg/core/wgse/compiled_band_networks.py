@@ -21,8 +21,9 @@ band, which run side by side on torch's threads
 the parameter gradients of fixed groups of chunks are summed apart and the
 groups added in order, so results depend neither on timing nor on the
 thread count. A backward pass with ``create_graph=True`` (second-order
-gradients) runs :func:`~wgse_mmseg.core.wgse.torch_band_networks.
-differentiable_backward` instead.
+gradients) runs
+:func:`~wgse_mmseg.core.wgse.torch_band_networks.differentiable_backward`
+instead.
 """
 from itertools import accumulate
 from typing import List, Optional, Sequence, Tuple
