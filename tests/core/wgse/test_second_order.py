@@ -155,3 +155,30 @@ def test_no_thread_count_changes_a_result(backend, many_chunks):
     for other in results[1:]:
         for got, want in zip(other, results[0]):
             assert torch.equal(got, want)
+
+
+@pytest.mark.parametrize('dim', [1, 2])
+def test_the_torch_backends_device_path_gives_second_order(dim):
+    """Off the CPU the ``'torch'`` backend runs the ``nn.Conv`` modules in
+    recomputed chunks (``torch.utils.checkpoint``): run here on the CPU,
+    in chunks of a few pixels, its gradient penalty equals the modules'
+    with every activation kept."""
+    from wgse_mmseg.core.wavelets import band_lengths
+    torch.manual_seed(0)
+    model = WGSE(backend='reference', dim=dim).double()
+    lengths = list(band_lengths(9, model.wavelet, model.level, model.mode))
+    coeffs = torch.randn(2, 30, sum(lengths), dtype=torch.float64)
+    results = []
+    for recompute in (True, False):
+        model.zero_grad()
+        out = band_network_backends._module_bands(
+            model.band_networks, coeffs, lengths, (5, 6),
+            recompute=recompute, chunk_bytes=20000)
+        weights = torch.cos(torch.arange(out.numel(), dtype=out.dtype))
+        grads = torch.autograd.grad((out * weights.view_as(out)).sum(),
+                                    list(model.parameters()),
+                                    create_graph=True)
+        sum((g ** 2).sum() for g in grads).backward()
+        results.append([p.grad.clone() for p in model.parameters()])
+    for got, want in zip(*results):
+        assert torch.allclose(got, want, rtol=1e-9, atol=1e-12)
