@@ -27,7 +27,6 @@ of another kind, a FIFO or a folder is refused, each naming the file.
 :func:`fit_within` scales an image down to a bound, never to 0 pixels.
 """
 import os
-import stat
 import struct
 from typing import Iterator, Tuple
 
@@ -35,7 +34,7 @@ import cv2
 import numpy as np
 
 from .limits import MAX_IMAGE_SIDE
-from .output_folder import note_input
+from .output_folder import check_input_file
 
 __all__ = []
 
@@ -270,20 +269,13 @@ def read_image(path: str, flags: int = cv2.IMREAD_UNCHANGED
     (a FIFO would block the reader), of a kind :func:`image_size` reads,
     at most :data:`~wgse_mmseg.core.limits.MAX_IMAGE_SIDE` pixels a side
     by its header, not truncated; noted as an input
-    (:func:`~wgse_mmseg.core.output_folder.note_input`).
+    (:func:`~wgse_mmseg.core.output_folder.check_input_file`).
 
     Raises:
         FileNotFoundError: nothing at ``path``.
         ImageFileError: naming ``path`` and what is wrong with it.
     """
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        raise FileNotFoundError(f'{path}: no such image file') from None
-    if not stat.S_ISREG(mode):
-        raise ImageFileError(f'{path}: not a regular file (a FIFO, device '
-                             f'or folder); an image is read from a file')
-    note_input(path)
+    check_input_file(path, 'image file', ImageFileError, FileNotFoundError)
     kind, width, height = image_size(path)
     if not (1 <= width <= MAX_IMAGE_SIDE and 1 <= height <= MAX_IMAGE_SIDE):
         raise ImageFileError(

@@ -62,7 +62,6 @@ import os
 import os.path as osp
 import re
 import secrets
-import stat
 import struct
 import zipfile
 from typing import (BinaryIO, Callable, Dict, Iterator, List, NamedTuple,
@@ -73,7 +72,7 @@ import numpy as np
 from .arguments import LAYOUT, Integer, Path, declare
 from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
-from .output_folder import check_output, note_input
+from .output_folder import check_input_file, check_output
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape']
 
@@ -771,17 +770,9 @@ def _format(path: str) -> SpikeFormat:
 def _existing(path: str) -> SpikeFormat:
     """:func:`_format` of ``path``, an existing regular spike file (a
     FIFO or device would block or never end), noted as an input
-    (:func:`~wgse_mmseg.core.output_folder.note_input`)."""
+    (:func:`~wgse_mmseg.core.output_folder.check_input_file`)."""
     fmt = _format(path)
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        raise SpikeFileError(f'{path}: no such spike file') from None
-    if not stat.S_ISREG(mode):
-        raise SpikeFileError(f'{path}: not a regular file (a FIFO, device '
-                             f'or folder); a spike file is read from a '
-                             f'file on disk')
-    note_input(path)
+    check_input_file(path, 'spike file', SpikeFileError)
     return fmt
 
 

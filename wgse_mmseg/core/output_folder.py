@@ -174,6 +174,26 @@ def note_input(path) -> None:
         _INPUTS.setdefault(identity, os.fspath(path))
 
 
+def check_input_file(path: str, what: str, error: type = ValueError,
+                     missing: Optional[type] = None) -> None:
+    """Check that ``path``, about to be read as a ``what``, is a regular
+    file (a FIFO or device would block or never end, a folder is none)
+    and note it as an input (:func:`note_input`).
+
+    Raises:
+        ``missing`` (default ``error``): nothing at ``path``.
+        ``error``: naming ``path``, for anything but a regular file.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise (missing or error)(f'{path}: no such {what}') from None
+    if not stat.S_ISREG(mode):
+        raise error(f'{path}: not a regular file (a FIFO, device or '
+                    f'folder); a {what} is read from a file on disk')
+    note_input(path)
+
+
 def check_output(path, inputs: Iterable = ()) -> None:
     """Refuse to write (or remove) ``path`` where it is an input: a file
     the running tool read (:func:`note_input`) or one of ``inputs``, compared

@@ -96,6 +96,27 @@ def smallest_input_side(runs: Callable[[int], bool],
     return high
 
 
+def _smallest_side(model: nn.Module, num_steps: int,
+                   probe: Tuple[int, int], source: str) -> Optional[int]:
+    """``None`` where ``model`` runs a ``probe``-sized input; else the
+    smallest side it takes (:func:`smallest_input_side`).
+
+    Raises:
+        ModelFitError: naming ``source``, where it runs on no input.
+    """
+    failure = _dry_forward(model, num_steps, 1, *probe, training=False)
+    if failure is None:
+        return None
+    side = smallest_input_side(lambda s: _dry_forward(
+        model, num_steps, 1, s, s, training=False) is None, min(probe))
+    if side is None:
+        raise ModelFitError(
+            f'{source}: the model runs on no input up to {MAX_IMAGE_SIDE}x'
+            f'{MAX_IMAGE_SIDE} (num_steps={num_steps}): '
+            f'{type(failure).__name__}: {cut(str(failure), 300)}')
+    return side
+
+
 def check_input_fits(model: nn.Module, num_steps: int, height: int,
                      width: int, source: str) -> None:
     """Refuse, before inference, a ``(num_steps, height, width)`` input
@@ -112,16 +133,9 @@ def check_input_fits(model: nn.Module, num_steps: int, height: int,
     divisor = getattr(model.data_preprocessor, 'size_divisor', None) or 1
     padded = [-(-side // divisor) * divisor for side in (height, width)]
     probe = tuple(min(side, PROBE_SIDE) for side in padded)
-    failure = _dry_forward(model, num_steps, 1, *probe, training=False)
-    if failure is None:
+    side = _smallest_side(model, num_steps, probe, source)
+    if side is None or min(padded) >= side:
         return
-    side = smallest_input_side(lambda s: _dry_forward(
-        model, num_steps, 1, s, s, training=False) is None, min(probe))
-    if side is None:
-        raise ModelFitError(
-            f'{source}: the model runs on no input up to {MAX_IMAGE_SIDE}x'
-            f'{MAX_IMAGE_SIDE} (num_steps={num_steps}): '
-            f'{type(failure).__name__}: {cut(str(failure), 300)}')
     raise ModelFitError(
         f'{source}: frames of {height}x{width} are below the smallest input '
         f"the model takes, {side}x{side} (its backbone's strides and "
@@ -152,21 +166,13 @@ def check_training_fits(cfg, model: nn.Module) -> None:
         return
     name = getattr(cfg, 'filename', None) or 'the config'
     probe = tuple(min(side, PROBE_SIDE) for side in crop)
-    failure = _dry_forward(model, num_steps, 1, *probe, training=False)
-    if failure is not None:
-        side = smallest_input_side(lambda s: _dry_forward(
-            model, num_steps, 1, s, s, training=False) is None, min(probe))
-        if side is None:
-            raise ModelFitError(
-                f'{name}: the model runs on no input up to '
-                f'{MAX_IMAGE_SIDE}x{MAX_IMAGE_SIDE} (num_steps={num_steps}):'
-                f' {type(failure).__name__}: {cut(str(failure), 300)}')
-        if min(crop) < side:
-            raise ModelFitError(
-                f'{name}: crop_size={crop} is below the smallest input the '
-                f"model takes, {side}x{side} (its backbone's strides and "
-                f'kernels); set --cfg-options crop_size={max(crop[0], side)},'
-                f'{max(crop[1], side)} or larger')
+    side = _smallest_side(model, num_steps, probe, name)
+    if side is not None and min(crop) < side:
+        raise ModelFitError(
+            f'{name}: crop_size={crop} is below the smallest input the '
+            f"model takes, {side}x{side} (its backbone's strides and "
+            f'kernels); set --cfg-options crop_size={max(crop[0], side)},'
+            f'{max(crop[1], side)} or larger')
     batch = cfg.get('train_dataloader', {}).get('batch_size')
     if batch == 1:
         failure = _dry_forward(model, num_steps, 1, *probe, training=True)
