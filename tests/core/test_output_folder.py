@@ -394,3 +394,21 @@ def test_a_waiting_writer_says_whom_it_waits_for_and_again_later(
     assert len(lines) >= 2, lines
     assert all(f'process {first.pid} on host' in line for line in lines)
     assert 'waited' not in lines[0] and 'waited' in lines[-1]
+
+
+def test_unshare_keeps_other_names_content_before_an_in_place_write(
+        tmp_path):
+    user = tmp_path / 'user.txt'
+    user.write_text('mine')
+    os.link(user, tmp_path / 'hard')
+    (tmp_path / 'soft').symlink_to(user)
+    (tmp_path / 'own').write_text('old')
+    for name in ('hard', 'soft', 'own', 'missing'):
+        output_folder.unshare(str(tmp_path / name))
+        with open(tmp_path / name, 'w') as f:  # as a library writes
+            f.write('new')
+    assert user.read_text() == 'mine'
+    assert os.stat(user).st_nlink == 1
+    for name in ('hard', 'soft', 'own', 'missing'):
+        assert (tmp_path / name).read_text() == 'new'
+        assert not (tmp_path / name).is_symlink()

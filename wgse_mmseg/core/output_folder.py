@@ -237,6 +237,21 @@ def check_tool_outputs(args, *outputs: str) -> None:
             check_output(path, inputs)
 
 
+def unshare(path: str) -> None:
+    """Before a library writes ``path`` in place (``open(path, 'w')``,
+    which truncates what it finds and follows links): remove what lies
+    there when it is a link or a file with other names (hard links), never
+    its target, so the write makes a new file and the other names keep
+    their content. A regular file of one name is left to be rewritten."""
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if stat.S_ISLNK(info.st_mode) or (stat.S_ISREG(info.st_mode) and
+                                      info.st_nlink > 1):
+        discard(path)
+
+
 def discard(path: str) -> None:
     """Remove what lies at ``path`` without following a link: a file, a
     link (never its target), a FIFO or a folder with its content; nothing
