@@ -241,3 +241,16 @@ def test_other_files_are_refused_naming_them(tmp_path):
 def test_fit_within_never_makes_a_side_of_zero(shape, bound, want):
     image = np.zeros(shape, np.float32)
     assert fit_within(image, bound).shape == want
+
+
+def test_a_path_that_is_not_utf8_is_named_as_such(tmp_path):
+    """OpenCV's reader crashed the process on such a path; it is refused
+    first, the path shown escaped."""
+    import os
+    path = os.path.join(os.fsencode(str(tmp_path)), b'frame\xff.png')
+    cv2.imwrite(str(tmp_path / 'ok.png'), np.zeros((4, 4), np.uint8))
+    os.replace(str(tmp_path / 'ok.png'), path)
+    with pytest.raises(ValueError, match=r"frame\\udcff\.png': the path "
+                       'holds bytes that are not UTF-8, which OpenCV cannot '
+                       'open'):
+        read_image(os.fsdecode(path))

@@ -19,7 +19,7 @@ from typing import NamedTuple, Optional, Tuple
 import numpy as np
 import torch
 
-from ..core.limits import parse_json
+from ..core.limits import check_utf8_path, parse_json
 from ..core.output_folder import note_input
 from ..utils.checkpoint import check_dataset_meta
 
@@ -148,13 +148,7 @@ class OnnxSpikeSegmentor:
                                  f'got {threads!r}')
             options.intra_op_num_threads = threads
         note_input(onnx_path)
-        try:
-            onnx_path.encode('utf-8')
-        except UnicodeEncodeError:
-            raise ValueError(
-                f'{ascii(onnx_path)}: the path holds bytes that are not '
-                f'UTF-8, which ONNX Runtime cannot open; rename the file or '
-                f'a folder on its way') from None
+        check_utf8_path(onnx_path, 'ONNX Runtime')
         try:
             self.session = onnxruntime.InferenceSession(
                 onnx_path, options, providers=providers)

@@ -33,7 +33,7 @@ from typing import Iterator, Tuple
 import cv2
 import numpy as np
 
-from .limits import MAX_IMAGE_SIDE
+from .limits import MAX_IMAGE_SIDE, check_utf8_path
 from .output_folder import check_input_file
 
 __all__ = []
@@ -273,8 +273,10 @@ def read_image(path: str, flags: int = cv2.IMREAD_UNCHANGED
 
     Raises:
         FileNotFoundError: nothing at ``path``.
+        ValueError: a path that is not UTF-8 (OpenCV cannot open it).
         ImageFileError: naming ``path`` and what is wrong with it.
     """
+    check_utf8_path(path, 'OpenCV')
     check_input_file(path, 'image file', ImageFileError, FileNotFoundError)
     kind, width, height = image_size(path)
     if not (1 <= width <= MAX_IMAGE_SIDE and 1 <= height <= MAX_IMAGE_SIDE):

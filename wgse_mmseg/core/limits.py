@@ -99,6 +99,24 @@ def cut(text: str, limit: int = EXCERPT_CHARS) -> str:
     return f'{text[:limit]}... ({len(text)} characters)'
 
 
+def check_utf8_path(path, library: str) -> None:
+    """Refuse ``path`` where it holds bytes that are not UTF-8 (a name in
+    another system's encoding, which Python carries as surrogates):
+    ``library`` (OpenCV, ONNX Runtime) takes paths as UTF-8 and cannot
+    open it (OpenCV's reader crashes the process on it).
+
+    Raises:
+        ValueError: naming the path (escaped) as not UTF-8.
+    """
+    try:
+        os.fspath(path).encode('utf-8')
+    except UnicodeEncodeError:
+        raise ValueError(
+            f'{ascii(os.fspath(path))}: the path holds bytes that are not '
+            f'UTF-8, which {library} cannot open; rename the file or the '
+            f'folder on its way') from None
+
+
 def excerpt(value: Any, limit: int = EXCERPT_CHARS) -> str:
     """``repr(value)`` for an error message, :func:`cut` to ``limit``."""
     return cut(repr(value), limit)
