@@ -167,7 +167,7 @@ def test_the_torch_backends_device_path_gives_second_order(dim):
     torch.manual_seed(0)
     model = WGSE(backend='reference', dim=dim).double()
     lengths = list(band_lengths(9, model.wavelet, model.level, model.mode))
-    coeffs = torch.randn(2, 30, sum(lengths), dtype=torch.float64)
+    coeffs = torch.randn(2, sum(lengths), 30, dtype=torch.float64)
     results = []
     for recompute in (True, False):
         model.zero_grad()
