@@ -2,6 +2,8 @@
 parameter or the file and what was expected, never an exception from deep
 inside numpy, torch, OpenCV or mmengine (readers' random bytes and
 truncations: tests/core/test_io.py; converters and tools: their tests)."""
+import re
+
 import numpy as np
 import pytest
 import torch
@@ -218,3 +220,140 @@ def test_simulated_image_dataset_arguments(kwargs, name):
     _raises(f'SimulatedSpikeImageDataset: {name} must be', lambda:
             DATASETS.build(dict(type='SimulatedSpikeImageDataset',
                                 pipeline=[], **kwargs)))
+
+
+# ---------------- input the package accepted never fails inside a library
+def test_a_batch_of_mixed_t_is_refused_naming_the_sample():
+    first, second = _batch(torch.zeros(9, 4, 4)), _batch(torch.zeros(7, 4,
+                                                                     4))
+    second['data_samples'][0].set_metainfo(dict(img_path='other.spk'))
+    batch = dict(inputs=first['inputs'] + second['inputs'],
+                 data_samples=first['data_samples'] +
+                 second['data_samples'])
+    preprocessor = _preprocessor(num_steps=None, size=(4, 4))
+    _raises(r'other.spk: spike stream shaped \(7, 4, 4\) in a batch whose '
+            r'first, clip.spk, is \(9, 4, 4\)',
+            lambda: preprocessor(batch, True))
+
+
+def test_a_crop_weighed_by_labels_without_labels_is_refused():
+    crop = TRANSFORMS.build(dict(type='SpikeRandomCrop', crop_size=4,
+                                 cat_max_ratio=0.75))
+    results = dict(img=np.zeros((8, 8, 9), np.uint8), img_path='clip.spk',
+                   seg_fields=[])
+    _raises('SpikeRandomCrop: cat_max_ratio=0.75 .* clip.spk has none',
+            lambda: crop(results))
+    TRANSFORMS.build(dict(type='SpikeRandomCrop', crop_size=4))(results)
+
+
+def test_output_norm_refuses_a_one_value_training_batch():
+    model = WGSE(output_norm=True, wavelet=None).train()
+    _raises('output_norm=True.* at least 2 values',
+            lambda: model(torch.zeros(1, 1, 1, 1)))
+    assert model(torch.zeros(1, 1, 1, 2)).shape == (1, 1, 1, 2)
+    model.eval()(torch.zeros(1, 1, 1, 1))  # running statistics: fine
+
+
+@pytest.mark.parametrize('text, match', [
+    ('a = {[1]: 2}', "dict key '\\[1\\]' is a list"),
+    ('a = {([1], 2): 2}', 'is a tuple, which cannot be a key'),
+    ('a = dict(b={{}: 1})', 'is a dict, which cannot be a key'),
+    ('a = ' + '[' * 40 + ']' * 40, 'nested deeper than 32 levels'),
+    ('a = ' + '(' * 5000 + ')' * 5000, 'ckpt.pth'),
+    ('a = "' + 'x' * (2 ** 20) + '"', 'characters; at most'),
+])
+def test_config_text_from_a_checkpoint_that_is_no_config(text, match):
+    from wgse_mmseg.utils.config_data import ConfigDataError, read_config_data
+    _raises(match, lambda: read_config_data(text, "ckpt.pth: meta['cfg']"),
+            ConfigDataError)
+
+
+def test_a_refused_checkpoint_never_advises_turning_safety_off(tmp_path):
+    import pickle
+    from wgse_mmseg.utils.checkpoint import CheckpointError, read_checkpoint
+
+    class Code:
+        def __reduce__(self):
+            return (print, ('ran',))
+
+    path = tmp_path / 'evil.pth'
+    path.write_bytes(pickle.dumps({'state_dict': Code()}, protocol=2))
+    with pytest.raises(CheckpointError) as info:
+        read_checkpoint(str(path))
+    message = str(info.value)
+    assert str(path) in message and 'weights_only' not in message
+    assert 'trusted' not in message and 'safe_globals' not in message
+
+
+@pytest.mark.parametrize('code, strerror', [
+    (28, 'No space left on device'), (30, 'Read-only file system')])
+def test_a_write_that_fails_names_its_file(tmp_path, code, strerror):
+    from wgse_mmseg.core.io import atomic_output
+    target = tmp_path / 'out.bin'
+    with pytest.raises(OSError) as info:
+        with atomic_output(str(target)) as f:
+            f.write(b'partial')
+            raise OSError(code, strerror)
+    assert info.value.errno == code
+    assert f'{target}: cannot be written: {strerror}' in str(info.value)
+    assert list(tmp_path.iterdir()) == []  # nothing half-written
+
+
+def test_onnx_errors_name_the_model(tmp_path):
+    import os
+    from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
+    odd = os.path.join(os.fsencode(str(tmp_path)), b'model\xff.onnx')
+    with open(odd, 'wb') as f:
+        f.write(b'not read')
+    _raises('model.*: the path holds bytes that are not UTF-8',
+            lambda: OnnxSpikeSegmentor(os.fsdecode(odd)))
+
+    class Session:
+        def run(self, outputs, feed):
+            raise RuntimeError('[ONNXRuntimeError] : 2 : INVALID_ARGUMENT : '
+                               'Non-zero status code returned while running '
+                               'Reshape node')
+
+    model = OnnxSpikeSegmentor.__new__(OnnxSpikeSegmentor)
+    model.session, model.path = Session(), 'foreign.onnx'
+    _raises(r'foreign.onnx: the model failed inside its graph on input '
+            r'\(1, 9, 4, 4\) \(RuntimeError: \[ONNXRuntimeError\]',
+            lambda: model._graph(np.zeros((1, 9, 4, 4), np.float32)))
+
+
+def test_an_input_below_the_models_smallest_is_refused_before_inference():
+    import os.path as osp
+    from mmengine.registry import init_default_scope
+    from wgse_mmseg.utils.config import load_config
+    from wgse_mmseg.utils.cross_checks import ModelFitError, check_input_fits
+    root = osp.dirname(osp.dirname(osp.abspath(__file__)))
+    cfg = load_config(osp.join(root, 'configs', 'segformer_b0_wgse.py'),
+                      dict(num_steps=9))
+    init_default_scope('mmseg')
+    model = MODELS.build(cfg.model).eval()
+    with pytest.raises(ModelFitError, match=r'rec.npy: frames of 8x12 are '
+                       r'below the smallest input the model takes, '
+                       r'(\d+)x\1') as info:
+        check_input_fits(model, 9, 8, 12, 'rec.npy')
+    side = int(re.search(r'takes, (\d+)x', str(info.value)).group(1))
+    check_input_fits(model, 9, side, side, 'rec.npy')  # the smallest runs
+    with pytest.raises(ModelFitError):  # and one less does not
+        check_input_fits(model, 9, side - 1, side, 'rec.npy')
+
+
+def test_an_export_shape_below_the_models_smallest_names_the_shape(
+        tmp_path):
+    import os.path as osp
+    from mmengine.registry import init_default_scope
+    from wgse_mmseg.apis.onnx_export import SpikeSegmentorGraph, export_onnx
+    from wgse_mmseg.utils.config import load_config
+    root = osp.dirname(osp.dirname(osp.abspath(__file__)))
+    cfg = load_config(osp.join(root, 'configs', 'segformer_b0_wgse.py'),
+                      dict(num_steps=9))
+    init_default_scope('mmseg')
+    graph = SpikeSegmentorGraph(MODELS.build(cfg.model))
+    out = tmp_path / 'm.onnx'
+    _raises(f'{out} \\(the export shape\\): frames of 8x12 are below the '
+            f'smallest input the model takes',
+            lambda: export_onnx(graph, str(out), 9, 8, 12))
+    assert not out.exists()

@@ -52,6 +52,7 @@ from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, Choice, Path,
                                        Text, add_frame_size_options,
                                        check_frame_size)
 from wgse_mmseg.core.exposure import EXPOSURE
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 from wgse_mmseg.core.recording_walk import add_walk_options
 from wgse_mmseg.utils.config import add_config_options
 
@@ -112,6 +113,7 @@ def parse_args(argv=None):
         stem = osp.splitext(osp.basename(args.spikes))[0]
         args.out_file = f'{stem}_seg.' + (
             'png' if args.stride is None else 'mp4')
+    check_tool_outputs(args, 'out_file')
     return args
 
 
@@ -257,6 +259,7 @@ def walk(args, cfg) -> None:
     print(report.summary('segmented', args.save_frames))
 
 
+@keeps_inputs
 def main(argv=None):
     args = parse_args(argv)
     import wgse_mmseg
@@ -266,6 +269,7 @@ def main(argv=None):
 
     from wgse_mmseg.core.io import write_png
     from wgse_mmseg.utils.config import load_config
+    from wgse_mmseg.utils.cross_checks import check_input_fits
     if args.device is None:
         args.device = 'cuda:0' if torch.cuda.is_available() else 'cpu'
     cfg = load_config(args.config, args.cfg_options)
@@ -281,6 +285,7 @@ def main(argv=None):
             dict(img_path=args.spikes))
         if args.backend == 'pytorch':
             model = load_model(cfg, args.checkpoint, args.device)
+            check_input_fits(model, *data['inputs'].shape, args.spikes)
         else:
             segment, palette, _ = onnx_segmentor(args.checkpoint,
                                                  args.device)

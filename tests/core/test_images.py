@@ -160,3 +160,97 @@ def test_the_simulator_reads_frames_of_every_kind_on_one_scale():
     assert np.array_equal(frames_to_intensity(binary).numpy(), binary)
     with pytest.raises(ValueError, match='frames must be a bool, uint8'):
         frames_to_intensity(frames.astype(np.int32))
+
+
+# ------------------------------------------- image files bounded before decode
+from wgse_mmseg.core.images import (ImageFileError, fit_within,  # noqa: E402
+                                    image_size, read_image)
+from wgse_mmseg.core.limits import MAX_IMAGE_SIDE  # noqa: E402
+
+#: every kind image_size reads, as OpenCV writes it
+KINDS = {'.png': 'png', '.jpg': 'jpeg', '.bmp': 'bmp', '.tiff': 'tiff',
+         '.webp': 'webp', '.pgm': 'pnm'}
+
+
+@settings(max_examples=40, deadline=None)
+@given(height=st.integers(1, 300), width=st.integers(1, 300),
+       ext=st.sampled_from(sorted(KINDS)), colour=st.booleans())
+def test_the_header_gives_the_size_opencv_decodes(tmp_path_factory, height,
+                                                  width, ext, colour):
+    if ext == '.pgm' and colour:
+        ext = '.ppm'
+    path = str(tmp_path_factory.mktemp('size') / f'i{ext}')
+    shape = (height, width, 3) if colour else (height, width)
+    cv2.imwrite(path, np.random.default_rng(0).integers(0, 256, shape,
+                                                        np.uint8))
+    kind, got_width, got_height = image_size(path)
+    assert kind == KINDS.get(ext, 'pnm')
+    assert (got_height, got_width) == read_image(path).shape[:2] == shape[:2]
+
+
+def _png_header(width, height):
+    """A PNG's signature and IHDR chunk declaring ``width`` x ``height``
+    (8-bit grey), nothing after: what a decoder reads first."""
+    import struct
+    import zlib
+    body = b'IHDR' + struct.pack('>IIBBBBB', width, height, 8, 0, 0, 0, 0)
+    return (b'\x89PNG\r\n\x1a\n' + struct.pack('>I', 13) + body +
+            struct.pack('>I', zlib.crc32(body)))
+
+
+@pytest.mark.parametrize('width, height', [(60000, 60000), (17000, 17000),
+                                           (MAX_IMAGE_SIDE + 1, 1), (0, 5)])
+def test_a_header_beyond_the_limits_is_refused_before_decoding(
+        tmp_path, width, height):
+    path = tmp_path / 'big.png'
+    path.write_bytes(_png_header(width, height) + b'\0' * 64)
+    with pytest.raises(ImageFileError, match=f'big.png: its header declares '
+                       f'a {width}x{height} image'):
+        read_image(str(path))
+    with pytest.raises(ValueError, match='big.png'):
+        read_grey_image(str(path))
+
+
+@pytest.mark.parametrize('ext', ['.png', '.jpg'])
+def test_a_truncated_image_is_refused(tmp_path, ext):
+    path = tmp_path / f'cut{ext}'
+    image = np.random.default_rng(1).integers(0, 256, (64, 64), np.uint8)
+    cv2.imwrite(str(path), image)
+    whole = path.read_bytes()
+    path.write_bytes(whole[:len(whole) * 2 // 3])
+    with pytest.raises(ImageFileError, match=f'cut{ext}: a truncated'):
+        read_image(str(path))
+
+
+def test_other_files_are_refused_naming_them(tmp_path):
+    import os
+    (tmp_path / 'notes.png').write_text('not an image')
+    with pytest.raises(ImageFileError, match='notes.png: not an image file'):
+        read_image(str(tmp_path / 'notes.png'))
+    os.mkfifo(tmp_path / 'pipe.png')
+    with pytest.raises(ImageFileError, match='pipe.png: not a regular file'):
+        read_image(str(tmp_path / 'pipe.png'))
+    with pytest.raises(FileNotFoundError, match='gone.png'):
+        read_image(str(tmp_path / 'gone.png'))
+
+
+@pytest.mark.parametrize('shape, bound, want', [
+    ((1, 100000), 64, (1, 64)), ((100000, 1), 64, (64, 1)),
+    ((30, 40), 64, (30, 40)), ((640, 480), 64, (64, 48)),
+    ((3, 1000, 3), 10, (1, 10, 3))])
+def test_fit_within_never_makes_a_side_of_zero(shape, bound, want):
+    image = np.zeros(shape, np.float32)
+    assert fit_within(image, bound).shape == want
+
+
+def test_a_path_that_is_not_utf8_is_named_as_such(tmp_path):
+    """OpenCV's reader crashed the process on such a path; it is refused
+    first, the path shown escaped."""
+    import os
+    path = os.path.join(os.fsencode(str(tmp_path)), b'frame\xff.png')
+    cv2.imwrite(str(tmp_path / 'ok.png'), np.zeros((4, 4), np.uint8))
+    os.replace(str(tmp_path / 'ok.png'), path)
+    with pytest.raises(ValueError, match=r"frame\\udcff\.png': the path "
+                       'holds bytes that are not UTF-8, which OpenCV cannot '
+                       'open'):
+        read_image(os.fsdecode(path))

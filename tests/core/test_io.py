@@ -1117,3 +1117,23 @@ def test_frame_major_fortran_hwt_npz_inflates_up_to_the_window(tmp_path,
     assert window.shape == (9, 64, 64) and not window.any()
     assert 39 * 64 * 64 <= inflated[0] <= 39 * 64 * 64 + 1024
 
+
+
+@pytest.mark.parametrize('name', ['rec.npy', 'rec.spk', 'rec.dat'])
+def test_a_fifo_named_like_a_recording_is_refused_not_read(tmp_path, name):
+    """A reader that opened it would wait for a writer forever."""
+    import os
+    os.mkfifo(tmp_path / name)
+    with pytest.raises(SpikeFileError, match=f'{name}: not a regular file'):
+        spike_shape(str(tmp_path / name), 4, 8)
+    with pytest.raises(SpikeFileError, match=f'{name}: not a regular file'):
+        load_spikes(str(tmp_path / name), 4, 8)
+
+
+def test_a_fifo_as_a_side_file_is_refused_not_read(tmp_path):
+    import os
+    (tmp_path / 'rec.dat').write_bytes(bytes(8))
+    os.mkfifo(tmp_path / 'rec.dat.json')
+    with pytest.raises(ValueError, match='rec.dat.json: a .* is read from a '
+                       'regular file'):
+        load_spikes(str(tmp_path / 'rec.dat'))

@@ -248,3 +248,167 @@ def test_a_damaged_writer_record_still_refuses_clearly(tmp_path, record):
                            match='a process that has not yet recorded'):
             with own_folder(str(tmp_path)):
                 pass
+
+
+@pytest.fixture
+def guarded():
+    """A tool's run (:func:`output_folder.keeps_inputs`) for the test."""
+    output_folder._GUARDS[0] += 1
+    yield
+    output_folder._GUARDS[0] -= 1
+    output_folder._INPUTS.clear()
+
+
+@pytest.mark.parametrize('name', ['same', 'hard link', 'symbolic link'])
+def test_an_output_that_is_an_input_is_refused_naming_both(tmp_path, name,
+                                                           guarded):
+    from wgse_mmseg.core.io import write_bytes
+    source = tmp_path / 'input.bin'
+    source.write_bytes(b'user data')
+    output_folder.note_input(str(source))
+    out = tmp_path / 'out.bin'
+    if name == 'same':
+        out = source
+    elif name == 'hard link':
+        os.link(source, out)
+    else:
+        out.symlink_to(source)
+    with pytest.raises(OutputFolderError) as info:
+        write_bytes(str(out), b'output')
+    assert str(out) in str(info.value) and str(source) in str(info.value)
+    assert source.read_bytes() == b'user data'
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        {'input.bin', out.name})  # no temporary left
+    with pytest.raises(OutputFolderError):
+        discard(str(out) if name != 'symbolic link' else str(source))
+    assert source.read_bytes() == b'user data'
+
+
+def test_outputs_are_checked_against_the_given_inputs_and_nothing_else(
+        tmp_path):
+    source, other = tmp_path / 'a', tmp_path / 'b'
+    source.write_bytes(b'a')
+    other.write_bytes(b'b')
+    os.link(source, tmp_path / 'a2')
+    output_folder.check_output(str(other), [str(source)])
+    output_folder.check_output(str(tmp_path / 'missing'), [str(source)])
+    with pytest.raises(OutputFolderError, match='a2.*the input .*/a '):
+        output_folder.check_output(str(tmp_path / 'a2'), [str(source)])
+    # outside a tool's run nothing read is remembered: a library caller
+    # may read a file and save it back
+    output_folder.note_input(str(source))
+    output_folder.check_output(str(source))
+
+
+def test_a_tools_output_arguments_against_its_other_arguments(tmp_path):
+    import argparse
+    source = tmp_path / 'rec.npy'
+    source.write_bytes(b'x')
+    os.link(source, tmp_path / 'alias.png')
+    args = argparse.Namespace(spikes=str(source), out=str(tmp_path / 'n.png'),
+                              many=[str(tmp_path / 'x'), str(source)],
+                              count=3, device='cpu')
+    output_folder.check_tool_outputs(args, 'out')
+    args.out = str(tmp_path / 'alias.png')
+    with pytest.raises(OutputFolderError, match='alias.png.*rec.npy'):
+        output_folder.check_tool_outputs(args, 'out')
+    args.out = None  # an unset output
+    output_folder.check_tool_outputs(args, 'out')
+    with pytest.raises(OutputFolderError):  # an input folder as the output
+        output_folder.check_tool_outputs(
+            argparse.Namespace(root=str(tmp_path), out_dir=str(tmp_path)),
+            'out_dir')
+
+
+def test_keeps_inputs_scopes_the_notes_and_ends_a_refusal_in_one_line(
+        tmp_path):
+    from wgse_mmseg.core.io import write_bytes
+    source = tmp_path / 'in'
+    source.write_bytes(b'keep')
+
+    @output_folder.keeps_inputs
+    def main():
+        output_folder.note_input(str(source))
+        write_bytes(str(source), b'lost')
+
+    with pytest.raises(SystemExit) as info:
+        main()
+    assert 'error:' in str(info.value.code) and str(source) in str(
+        info.value.code)
+    assert source.read_bytes() == b'keep'
+    assert not output_folder._INPUTS and not output_folder._GUARDS[0]
+    write_bytes(str(source), b'mine')  # outside a run: the caller's choice
+    assert source.read_bytes() == b'mine'
+
+
+def test_a_lock_file_hard_linked_to_a_user_file_is_not_written(tmp_path):
+    folder = tmp_path / 'out'
+    folder.mkdir()
+    user = tmp_path / 'thesis.txt'
+    user.write_text('years of work')
+    os.link(user, folder / '.lock')
+    with pytest.raises(OutputFolderError, match='2 names'):
+        with own_folder(str(folder)):
+            pass
+    assert user.read_text() == 'years of work'
+
+
+@pytest.mark.parametrize('content', [b'my notes', b'{"a": 1}', b'\xff\xfe'])
+def test_a_user_file_where_the_lock_belongs_is_not_overwritten(tmp_path,
+                                                               content):
+    folder = tmp_path / 'out'
+    folder.mkdir()
+    (folder / '.lock').write_bytes(content)
+    with pytest.raises(OutputFolderError, match='did not make'):
+        with own_folder(str(folder)):
+            pass
+    assert (folder / '.lock').read_bytes() == content
+
+
+def test_a_lock_left_by_a_killed_writer_is_taken(tmp_path):
+    folder = tmp_path / 'out'
+    folder.mkdir()
+    (folder / '.lock').write_bytes(output_folder._writer_record())
+    with own_folder(str(folder)):
+        pass
+    assert not (folder / '.lock').exists()
+
+
+def test_a_waiting_writer_says_whom_it_waits_for_and_again_later(
+        tmp_path, monkeypatch, capsys):
+    folder, log = tmp_path / 'out', tmp_path / 'log'
+    first = _holder(folder, log, 'first')
+    _wait_for(first, 'held')
+    monkeypatch.setattr(output_folder, 'WAIT_REPORT_S', 0.3)
+    timer = threading.Timer(1.0, first.stdin.close)
+    timer.start()
+    try:
+        with own_folder(str(folder), wait=True):
+            pass
+    finally:
+        timer.cancel()
+        first.stdin.close()
+        first.wait(60)
+    lines = [line for line in capsys.readouterr().err.splitlines()
+             if 'waiting for' in line]
+    assert len(lines) >= 2, lines
+    assert all(f'process {first.pid} on host' in line for line in lines)
+    assert 'waited' not in lines[0] and 'waited' in lines[-1]
+
+
+def test_unshare_keeps_other_names_content_before_an_in_place_write(
+        tmp_path):
+    user = tmp_path / 'user.txt'
+    user.write_text('mine')
+    os.link(user, tmp_path / 'hard')
+    (tmp_path / 'soft').symlink_to(user)
+    (tmp_path / 'own').write_text('old')
+    for name in ('hard', 'soft', 'own', 'missing'):
+        output_folder.unshare(str(tmp_path / name))
+        with open(tmp_path / name, 'w') as f:  # as a library writes
+            f.write('new')
+    assert user.read_text() == 'mine'
+    assert os.stat(user).st_nlink == 1
+    for name in ('hard', 'soft', 'own', 'missing'):
+        assert (tmp_path / name).read_text() == 'new'
+        assert not (tmp_path / name).is_symlink()

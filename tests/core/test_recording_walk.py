@@ -517,3 +517,10 @@ def test_links_at_the_state_folder_and_outputs_are_not_followed(tmp_path):
     with pytest.raises(WalkError, match=r'walk\.csv: a folder'):
         walk_recording(path, str(out / 'walk.mp4'), RateModel(), rate_frame,
                        LENGTH, 40, progress=False)
+
+
+def test_a_video_path_that_is_not_utf8_is_refused_before_the_walk():
+    import os
+    from wgse_mmseg.core.recording_walk import walk_outputs
+    with pytest.raises(ValueError, match='not UTF-8, which OpenCV cannot'):
+        walk_outputs(os.fsdecode(b'/tmp/walk\xff.mp4'))

@@ -152,3 +152,22 @@ def test_the_train_tool_refuses_amp_without_a_gpu(load_tool, monkeypatch):
         load_tool('tools/train.py').main()
     assert str(stop.value.code).startswith(
         'train.py: error: --amp: mixed-precision training needs a GPU')
+
+
+def test_a_training_writes_no_file_of_the_users_through_a_link(tmp_path):
+    """``last_checkpoint`` (written in place by mmengine) and the save's
+    temporary, put in the work dir as a hard link and a symbolic link to
+    the user's files: the training writes its own files, the user's keep
+    their content."""
+    work = tmp_path / 'work'
+    work.mkdir()
+    notes, thesis = tmp_path / 'notes.txt', tmp_path / 'thesis.txt'
+    notes.write_text('notes')
+    thesis.write_text('thesis')
+    os.link(notes, work / 'last_checkpoint')
+    (work / '.tmp-iter_1.pth').symlink_to(thesis)
+    _training_runner(work, **{'default_hooks.checkpoint.interval': 1}).train()
+    assert notes.read_text() == 'notes' and thesis.read_text() == 'thesis'
+    assert (work / 'last_checkpoint').read_text().endswith('iter_1.pth')
+    assert (work / 'iter_1.pth').is_file()
+    assert not (work / '.tmp-iter_1.pth').exists()

@@ -412,6 +412,30 @@ def test_ssim_against_window_by_window_reference():
     assert np.isclose(ssim(x, x), 1.0)
 
 
+@pytest.mark.parametrize('size, sigma', [(1, 1.5), (3, 1e-300), (5, 40.0)])
+def test_ssim_at_the_edges_of_its_window_against_the_reference(size, sigma):
+    """The smallest window, a sigma so small that only the centre weighs,
+    and a nearly flat window: finite and equal to the window-by-window
+    definition."""
+    rng = np.random.default_rng(2)
+    x = rng.random((9, 10))
+    y = np.clip(x + 0.3 * rng.standard_normal(x.shape), 0, 1)
+    value = ssim(x, y, size=size, sigma=sigma)
+    assert np.isfinite(value)
+    assert np.isclose(value, _ssim_reference(x, y, size, sigma), rtol=1e-9)
+
+
+@pytest.mark.parametrize('name, value', [
+    ('sigma', 0), ('sigma', -1.0), ('sigma', float('nan')),
+    ('sigma', float('inf')), ('size', 0), ('size', -3), ('size', 4),
+    ('size', 2.5), ('size', True)])
+def test_ssim_refuses_a_window_it_cannot_weigh_naming_it(name, value):
+    x = np.zeros((12, 12))
+    for function in (lambda **kw: ssim(x, x, **kw), gaussian_window):
+        with pytest.raises(ValueError, match=f'{name}'):
+            function(**{name: value})
+
+
 def test_ssim_closed_form_for_flat_images():
     # Flat images: no variance, so SSIM = (2ab + C1) / (a^2 + b^2 + C1).
     a, b, c1 = 0.2, 0.7, 0.01 ** 2

@@ -2,6 +2,7 @@
 argument or the file and what was expected (``SystemExit`` with a message),
 never a traceback."""
 import io
+import os
 import os.path as osp
 import runpy
 import sys
@@ -25,6 +26,7 @@ def files(tmp_path_factory):
     (tmp / 'text.spk').write_text('hello')
     (tmp / 'notes.pth').write_text('not a checkpoint')
     (tmp / 'empty.npy').write_bytes(b'')
+    (tmp / 'mydata').mkdir()  # what a value that lost its space would name
     return tmp
 
 
@@ -65,7 +67,7 @@ CASES = [
                              '{t}/missing.pth'],
      '{t}/missing.pth: no such checkpoint'),
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/ok.npy', '--method',
-                             'tfp'], '--out {t}/ok.npy: cannot write'),
+                             'tfp'], '{t}/ok.npy: this output is the input'),
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--exposure',
                              'dim'],
      "argument --exposure: must be one of ['auto', 'none'], or a finite"),
@@ -155,6 +157,13 @@ CASES = [
                   'crop_size=16,32', 'num_steps=9'],
      'segformer_b0_wgse.py: crop_size=(16, 32) is below the smallest input '
      'the model takes, 29x29'),
+    ('train.py', [CONFIG, '--work-dir', '{t}/work', '--cfg-options',
+                  'data_root={t}/my data', 'num_steps=9'],  # kept, refused
+     "{t}/my data/spike/train (img_path under data_root='{t}/my data')"),
+    ('misc/make_reconstruction_figure.py', ['{t}/ok.npy', '--out',
+                                            '{t}/f.png', '--methods', 'tfp',
+                                            '--scale', '0.01'],
+     '--scale 0.01: makes the 8x12 frames of {t}/ok.npy tiles of 0 pixels'),
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
                              '--stride', '10', '--frames', '25'],
      '--frames and --stride'),
@@ -171,3 +180,45 @@ def test_bad_input_gives_a_one_line_error(tool, args, expected, files,
     args = [a.format(t=files) for a in args]
     message = _run(tool, args, monkeypatch)
     assert expected.format(t=files) in message, message
+
+
+#: (tool, its arguments with OUT where an output goes, the input OUT is)
+OUTPUT_OVER_INPUT = [
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--out-file', 'OUT'],
+     'ok.npy'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--out-file', 'OUT'],
+     'notes.pth'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--stride', '5',
+                 '--out-file', 'OUT'], 'ok.npy'),
+    ('deployment/pytorch2onnx.py', [CONFIG, '{t}/notes.pth', '--shape', '41',
+                                    '8', '12', '--no-verify', '--out',
+                                    'OUT'], 'notes.pth'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', 'OUT', '--method', 'tfp'],
+     'ok.npy'),
+    ('misc/make_reconstruction_figure.py', ['{t}/ok.npy', '--out', 'OUT',
+                                            '--methods', 'tfp'], 'ok.npy'),
+    ('dataset_converters/spike_cityscapes.py', ['{t}/city', 'OUT'], 'city'),
+]
+
+
+@pytest.mark.parametrize('link', [False, True], ids=['same', 'hard-link'])
+@pytest.mark.parametrize('tool, args, source', OUTPUT_OVER_INPUT,
+                         ids=[f'{c[0]}-{c[2]}' for c in OUTPUT_OVER_INPUT])
+def test_no_tool_writes_its_output_over_its_input(tool, args, source, link,
+                                                  files, monkeypatch):
+    """The output named as an input, or as a hard link to it (a folder
+    cannot have one), is refused before any work, naming both; the input
+    is unchanged."""
+    (files / 'city').mkdir(exist_ok=True)
+    path = files / source
+    out = path
+    if link and path.is_file():
+        out = files / f'alias-{source}-{tool.replace("/", "-")}.mp4'
+        if not out.exists():
+            os.link(path, out)
+    before = path.read_bytes() if path.is_file() else None
+    args = [str(out) if a == 'OUT' else a.format(t=files) for a in args]
+    message = _run(tool, args, monkeypatch)
+    assert f'{out}: this output is the input' in message, message
+    assert str(path) in message
+    assert before is None or path.read_bytes() == before

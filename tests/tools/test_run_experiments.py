@@ -133,6 +133,16 @@ def test_converged_grid_has_the_comparison_and_the_ablations():
     ("dict(m='{c}')", "dict(v=dict(cfg_options=dict(a=1)))", 'enhancer .v.'),
     ("dict(m='{c}')", "dict(v=dict(enhancer=None, cfg_options={'a': [1]}))",
      'only str'),
+    ("['{c}']", 'dict(raw=None)', 'models must be a dict of names'),
+    ("dict()", 'dict(raw=None)', 'models must be a dict of names'),
+    ("dict(m='{c}')", "['TFP']", 'enhancers must be a dict of names'),
+    ("dict(m='{c}')", "dict(tfp='TFP')", r"enhancers\['tfp'\] must be"),
+    ("dict(m=3)", 'dict(raw=None)', r"models\['m'\] must be"),
+    ("dict(m=dict(config=3))", 'dict(raw=None)', 'config must be a path'),
+    ("dict(m='{c}')", "dict(v=dict(enhancer='TFP'))",
+     "enhancer 'v' must be None or dict"),
+    ("dict(m='{c}')", "dict(v=dict(enhancer=None, cfg_options={'a': \"'q'\"}))",
+     'would not survive'),
 ])
 def test_malformed_grid_entries_are_named(tmp_path, models, enhancers,
                                           match):

@@ -13,7 +13,8 @@ import argparse
 import time
 
 from wgse_mmseg.core.arguments import Text
-from wgse_mmseg.core.output_folder import add_wait_option
+from wgse_mmseg.core.output_folder import (add_wait_option,
+                                           check_tool_outputs, keeps_inputs)
 from wgse_mmseg.data_generation.cityscapes_conversion import (
     ConversionSettings, convert_cityscapes, load_scene)
 from wgse_mmseg.data_generation.shards import SHARD, WHOLE
@@ -63,8 +64,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main():
     args = build_parser().parse_args()
+    check_tool_outputs(args, 'out_dir')
     start = time.perf_counter()
     try:
         settings = ConversionSettings(

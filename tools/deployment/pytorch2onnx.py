@@ -29,7 +29,9 @@ from wgse_mmseg.apis.onnx_settings import (LOGITS_TOLERANCE,
                                            MIN_ARGMAX_AGREEMENT, OPSET, OPSETS,
                                            SHAPE_ENTRY)
 from wgse_mmseg.core.arguments import SEED, Path
-from wgse_mmseg.core.output_folder import add_wait_option, own_folder
+from wgse_mmseg.core.output_folder import (add_wait_option,
+                                           check_tool_outputs, keeps_inputs,
+                                           own_folder)
 from wgse_mmseg.utils.config import add_config_options
 
 #: streams of the check against the torch model
@@ -60,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     # torch, ONNX and OpenMMLab once the arguments are read (--help at once)
@@ -73,7 +76,9 @@ def main(argv=None) -> int:
     from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor
     from wgse_mmseg.utils.config import load_config
     num_steps, height, width = args.shape
-    out = args.out or osp.splitext(osp.basename(args.config))[0] + '.onnx'
+    out = args.out = args.out or \
+        osp.splitext(osp.basename(args.config))[0] + '.onnx'
+    check_tool_outputs(args, 'out')
     cfg = load_config(args.config, args.cfg_options)
     if cfg.get('num_steps') != num_steps:
         sys.exit(f'pytorch2onnx.py: error: --shape T={num_steps} but the '

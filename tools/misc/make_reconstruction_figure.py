@@ -24,6 +24,7 @@ from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, Choice, Integer,
                                        check_frame_size)
 from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
 from wgse_mmseg.core.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 
 # OpenCV, torch and the MMSeg layer are imported where they are used, after
 # the arguments are read: --help and argument errors come at once.
@@ -65,6 +66,7 @@ def parse_args(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     check_frame_size(parser, args)
+    check_tool_outputs(args, 'out')
     return args
 
 
@@ -89,6 +91,7 @@ def grid(rows) -> np.ndarray:
     return out
 
 
+@keeps_inputs
 def main(argv=None):
     args = parse_args(argv)
     import cv2
@@ -101,8 +104,13 @@ def main(argv=None):
     from wgse_mmseg.models.reconstruction import (load_reconstructor,
                                                   reconstruction_method)
     try:
-        total, _, _ = spike_shape(args.spikes, args.height, args.width,
-                                  layout=args.layout)
+        total, height, width = spike_shape(args.spikes, args.height,
+                                           args.width, layout=args.layout)
+        if min(round(height * args.scale), round(width * args.scale)) < 1:
+            raise ValueError(
+                f'--scale {args.scale}: makes the {height}x{width} frames '
+                f'of {args.spikes} tiles of 0 pixels; at least '
+                f'{0.5 / min(height, width):.3g} keeps one')
         functions, length = {}, 41
         for method in args.methods:
             if method == 'wgse':

@@ -58,6 +58,7 @@ from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, Choice,
                                        check_frame_size)
 from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
 from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 from wgse_mmseg.core.recording_walk import add_walk_options
 
 # torch, OpenCV and the MMSeg layer are imported where they are used, after
@@ -107,6 +108,7 @@ def parse_args(argv=None):
     if args.stride is not None and args.frames:
         parser.error('--frames and --stride: name centre frames, or walk '
                      'every STRIDE-th one')
+    check_tool_outputs(args, 'out')
     return args
 
 
@@ -144,6 +146,7 @@ def walk(args) -> None:
     print(report.summary('reconstructed', args.save_frames))
 
 
+@keeps_inputs
 def main(argv=None):
     args = parse_args(argv)
     import wgse_mmseg

@@ -37,6 +37,7 @@ from torch import nn
 from ..core.arguments import NUM_STEPS, SIDE, declare
 from ..core.io import atomic_path
 from ..core.wgse import WGSE
+from ..utils.cross_checks import check_input_fits
 from .onnx_segmentor import INPUT, OUTPUT, OnnxSpikeSegmentor, \
     check_dataset_meta
 from .onnx_settings import (LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET,
@@ -105,7 +106,10 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
     to ``path``. Returns ``path``.
 
     Raises:
-        ValueError: naming ``path``, for a model the exporter cannot trace
+        ValueError: naming ``path``, for a shape below the smallest input
+            the model takes
+            (:func:`~wgse_mmseg.utils.cross_checks.check_input_fits`), a
+            model the exporter cannot trace
             (TFI's data-dependent scans), metadata that is not classes and
             a palette, or a file its own checks refuse; nothing is left.
     """
@@ -118,6 +122,8 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
             raise ValueError(
                 f'{path}: the model has {classes} classes but its '
                 f'dataset_meta names {len(dataset_meta["classes"])}')
+    check_input_fits(graph.segmentor, num_steps, height, width,
+                     f'{path} (the export shape)')
     example = random_spikes((2, num_steps, height, width), seed=0)
     batch = torch.export.Dim('batch', min=1, max=4096)
     try:

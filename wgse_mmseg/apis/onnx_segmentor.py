@@ -19,7 +19,8 @@ from typing import NamedTuple, Optional, Tuple
 import numpy as np
 import torch
 
-from ..core.limits import parse_json
+from ..core.limits import check_utf8_path, parse_json
+from ..core.output_folder import note_input
 from ..utils.checkpoint import check_dataset_meta
 
 __all__ = ['OnnxSpikeSegmentor']
@@ -146,6 +147,8 @@ class OnnxSpikeSegmentor:
                 raise ValueError(f'threads must be an integer >= 1 or None, '
                                  f'got {threads!r}')
             options.intra_op_num_threads = threads
+        note_input(onnx_path)
+        check_utf8_path(onnx_path, 'ONNX Runtime')
         try:
             self.session = onnxruntime.InferenceSession(
                 onnx_path, options, providers=providers)
@@ -209,15 +212,25 @@ class OnnxSpikeSegmentor:
         chunks of a fixed batch (the last padded with zeros)."""
         batch = self.interface.batch
         if batch is None:
-            return self.session.run(None, {INPUT: array})[0]
+            return self._graph(array)
         chunks = []
         for first in range(0, len(array), batch):
             chunk = array[first:first + batch]
             padded = np.zeros((batch, ) + array.shape[1:], array.dtype)
             padded[:len(chunk)] = chunk
-            chunks.append(self.session.run(None, {INPUT: padded})[0]
-                          [:len(chunk)])
+            chunks.append(self._graph(padded)[:len(chunk)])
         return np.concatenate(chunks)
+
+    def _graph(self, array: np.ndarray) -> np.ndarray:
+        """One run of the graph; an error inside it (a model that passes
+        the interface checks but fails in an operator) names the file."""
+        try:
+            return self.session.run(None, {INPUT: array})[0]
+        except Exception as err:  # onnxruntime raises its own types
+            raise ValueError(
+                f'{self.path}: the model failed inside its graph on input '
+                f'{array.shape} ({type(err).__name__}: {str(err)[:300]})'
+            ) from err
 
     def __call__(self, spikes: torch.Tensor) -> torch.Tensor:
         """``(B, T, H, W)`` spikes (0 and 1, any dtype) -> ``(B, K, H, W)``

@@ -22,6 +22,7 @@ import torch
 from mmengine.dataset import Compose
 
 from ..datasets.transforms import LoadSpikeFromFile
+from ..utils.cross_checks import check_input_fits
 
 __all__ = []
 
@@ -55,6 +56,7 @@ class PipelineSegmentor:
         self.after = transforms[transforms.index(self.loader) + 1:]
         self.model = model
         self.source = source
+        self._checked = False
 
     @torch.no_grad()
     def __call__(self, spikes: torch.Tensor) -> torch.Tensor:
@@ -69,6 +71,9 @@ class PipelineSegmentor:
                                      f'dropped a window at {transform!r}')
             inputs.append(results['inputs'])
             samples.append(results['data_samples'])
+        if not self._checked and inputs:  # once: the windows share a size
+            check_input_fits(self.model, *inputs[0].shape, self.source)
+            self._checked = True
         predictions = self.model.test_step(dict(inputs=inputs,
                                                 data_samples=samples))
         return torch.stack([p.pred_sem_seg.data[0].cpu()

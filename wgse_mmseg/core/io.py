@@ -72,6 +72,7 @@ import numpy as np
 from .arguments import LAYOUT, Integer, Path, declare
 from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
+from .output_folder import check_input_file, check_output
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape']
 
@@ -98,18 +99,29 @@ def atomic_path(path: str) -> Iterator[str]:
     kernel: no process-wide setting is read or changed), exclusively, never
     through a link. A process killed mid-write leaves one that the next run
     for that target can find and remove, without touching the temporaries
-    of other processes writing beside it.
+    of other processes writing beside it. A ``path`` that is an input of
+    this process (:func:`~wgse_mmseg.core.output_folder.check_output`) is
+    refused before anything is written, and again before the rename. An
+    ``OSError`` that names no file (``No space left on device``,
+    ``Read-only file system`` while writing) is raised again naming
+    ``path``.
     """
+    check_output(path)
     directory = osp.dirname(osp.abspath(path))
     os.makedirs(directory, exist_ok=True)
     tmp = _create_temporary(directory, osp.basename(path),
                             osp.splitext(path)[1])
     try:
         yield tmp
+        check_output(path)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.remove(tmp)
+        if isinstance(err, OSError) and err.filename is None:
+            # a write's own error (disk full, read-only) names no file
+            raise OSError(err.errno, f'{path}: cannot be written: '
+                          f'{err.strerror or err}') from err
         raise
 
 
@@ -756,10 +768,11 @@ def _format(path: str) -> SpikeFormat:
 
 
 def _existing(path: str) -> SpikeFormat:
-    """:func:`_format` of ``path``, an existing spike file."""
+    """:func:`_format` of ``path``, an existing regular spike file (a
+    FIFO or device would block or never end), noted as an input
+    (:func:`~wgse_mmseg.core.output_folder.check_input_file`)."""
     fmt = _format(path)
-    if not osp.exists(path):
-        raise SpikeFileError(f'{path}: no such spike file')
+    check_input_file(path, 'spike file', SpikeFileError)
     return fmt
 
 

@@ -27,7 +27,9 @@ quotes at most :data:`EXCERPT_CHARS` characters of an offending value:
     that no crafted file or metadata can exhaust the parser's recursion.
 """
 import json
+import os
 import re
+import stat
 from typing import Any
 
 #: ``T``: spike frames per window (``num_steps``) a model, transform,
@@ -97,6 +99,24 @@ def cut(text: str, limit: int = EXCERPT_CHARS) -> str:
     return f'{text[:limit]}... ({len(text)} characters)'
 
 
+def check_utf8_path(path, library: str) -> None:
+    """Refuse ``path`` where it holds bytes that are not UTF-8 (a name in
+    another system's encoding, which Python carries as surrogates):
+    ``library`` (OpenCV, ONNX Runtime) takes paths as UTF-8 and cannot
+    open it (OpenCV's reader crashes the process on it).
+
+    Raises:
+        ValueError: naming the path (escaped) as not UTF-8.
+    """
+    try:
+        os.fspath(path).encode('utf-8')
+    except UnicodeEncodeError:
+        raise ValueError(
+            f'{ascii(os.fspath(path))}: the path holds bytes that are not '
+            f'UTF-8, which {library} cannot open; rename the file or the '
+            f'folder on its way') from None
+
+
 def excerpt(value: Any, limit: int = EXCERPT_CHARS) -> str:
     """``repr(value)`` for an error message, :func:`cut` to ``limit``."""
     return cut(repr(value), limit)
@@ -110,9 +130,16 @@ def read_text_file(path: str, what: str,
 
     Raises:
         ValueError: naming ``path`` and ``what`` it should be, for a file
-            over the limit or not UTF-8. ``OSError`` passes through.
+            over the limit, not UTF-8, or no regular file (a FIFO would
+            block the read). ``OSError`` passes through.
     """
-    with open(path, 'rb') as f:
+    # O_NONBLOCK: opening a FIFO without a writer would wait for one
+    fd = os.open(path, os.O_RDONLY | getattr(os, 'O_NONBLOCK', 0))
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise ValueError(f'{path}: a {what} is read from a regular file, '
+                         f'not a FIFO, device or folder')
+    with open(fd, 'rb') as f:
         data = f.read(limit + 1)
     if len(data) > limit:
         raise ValueError(

@@ -27,6 +27,21 @@ No link followed out of the folder
     names. A folder the package names itself (``<video>.partial``) is
     owned with ``replace=True``: a link or file at its path is replaced by
     a folder.
+No input replaced
+    While a tool runs (its ``main`` is wrapped by :func:`keeps_inputs`),
+    every file the package reads as input (a spike file, an image, a
+    config, a checkpoint, an ONNX model) is noted (:func:`note_input`) by
+    its device and inode, so hard links and symbolic links are the same
+    file; every output the package writes
+    (:func:`~wgse_mmseg.core.io.atomic_path`) and every path it removes
+    (:func:`discard`) is checked
+    against them (:func:`check_output`): an output over an input is an
+    :class:`OutputFolderError` naming both, and nothing is written. Tools
+    also check their output arguments against their other arguments
+    before any work (:func:`check_tool_outputs`). (A library caller may
+    read a file and save it back; only a tool's run is guarded.) A lock or state file the package
+    writes in place is one it made: a file with other names (a hard link)
+    or content that is not its record is refused, never truncated.
 State verified before use
     What a tool finds in its folder is checked before it is trusted (a
     frame against the size and SHA-256 its writer recorded, a sample
@@ -39,6 +54,7 @@ Needs no OpenMMLab.
 import contextlib
 import datetime
 import fcntl
+import functools
 import hashlib
 import json
 import os
@@ -48,7 +64,8 @@ import socket
 import stat
 import sys
 import time
-from typing import BinaryIO, Iterator, Optional
+from typing import (BinaryIO, Callable, Dict, Iterable, Iterator, Optional,
+                    Tuple)
 
 from .limits import cut, parse_json
 
@@ -107,10 +124,141 @@ def _describe_writer(fd: int) -> str:
             time.sleep(0.02)
 
 
+#: ``(st_dev, st_ino)`` -> the path it was read by, of every file read as
+#: an input while a tool runs (:func:`note_input`, :func:`keeps_inputs`)
+_INPUTS: Dict[Tuple[int, int], str] = {}
+#: how many :func:`keeps_inputs` runs are under way (nested: a tool's
+#: ``main`` called by another)
+_GUARDS = [0]
+
+
+def keeps_inputs(main: Callable) -> Callable:
+    """Decorate a tool's ``main``: while it runs, inputs are noted and no
+    output replaces one (:func:`check_output`); an
+    :class:`OutputFolderError` ends the tool with ``<tool>: error: <the
+    message>`` (exit status 1); afterwards the notes are forgotten."""
+    tool = osp.basename(main.__globals__.get('__file__') or main.__name__)
+
+    @functools.wraps(main)
+    def run(*args, **kwargs):
+        _GUARDS[0] += 1
+        try:
+            return main(*args, **kwargs)
+        except OutputFolderError as err:
+            sys.exit(f'{tool}: error: {err}')
+        finally:
+            _GUARDS[0] -= 1
+            if not _GUARDS[0]:
+                _INPUTS.clear()
+    return run
+
+
+def _identity(path) -> Optional[Tuple[int, int]]:
+    """``(st_dev, st_ino)`` of the file at ``path`` (links followed), or
+    ``None`` where nothing (or nothing reachable) is there."""
+    try:
+        info = os.stat(path)
+    except (OSError, ValueError):  # missing, a dangling link, a NUL byte
+        return None
+    return info.st_dev, info.st_ino
+
+
+def note_input(path) -> None:
+    """Note ``path``, a file read as an input while a tool runs
+    (:func:`keeps_inputs`; elsewhere nothing): no output of the run
+    replaces or removes it (:func:`check_output`)."""
+    if not _GUARDS[0]:
+        return
+    identity = _identity(path)
+    if identity is not None:
+        _INPUTS.setdefault(identity, os.fspath(path))
+
+
+def check_input_file(path: str, what: str, error: type = ValueError,
+                     missing: Optional[type] = None) -> None:
+    """Check that ``path``, about to be read as a ``what``, is a regular
+    file (a FIFO or device would block or never end, a folder is none)
+    and note it as an input (:func:`note_input`).
+
+    Raises:
+        ``missing`` (default ``error``): nothing at ``path``.
+        ``error``: naming ``path``, for anything but a regular file.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise (missing or error)(f'{path}: no such {what}') from None
+    if not stat.S_ISREG(mode):
+        raise error(f'{path}: not a regular file (a FIFO, device or '
+                    f'folder); a {what} is read from a file on disk')
+    note_input(path)
+
+
+def check_output(path, inputs: Iterable = ()) -> None:
+    """Refuse to write (or remove) ``path`` where it is an input: a file
+    the running tool read (:func:`note_input`) or one of ``inputs``, compared
+    by device and inode (hard links and symbolic links included).
+
+    Raises:
+        OutputFolderError: naming the output and the input it is.
+    """
+    identity = _identity(path)
+    if identity is None:
+        return
+    found = {_identity(given): os.fspath(given) for given in inputs}
+    source = found.get(identity) or _INPUTS.get(identity)
+    if source is not None:
+        same = osp.abspath(source) == osp.abspath(os.fspath(path))
+        raise OutputFolderError(
+            f'{path}: this output is the input {source}'
+            f'{"" if same else " (the same file by another name or link)"}'
+            f'; an output never replaces an input: write it elsewhere')
+
+
+def _paths_in(value) -> Iterator[str]:
+    """The strings and paths in an argument value (a list's items too)."""
+    if isinstance(value, (str, os.PathLike)):
+        yield os.fspath(value)
+    elif isinstance(value, (list, tuple)):
+        for item in value:
+            yield from _paths_in(item)
+
+
+def check_tool_outputs(args, *outputs: str) -> None:
+    """A tool's output arguments (the names of ``args``' attributes, unset
+    ones skipped) against every other argument that names an existing
+    file or folder: :func:`check_output` before any work, so an output
+    given as one of the tool's inputs is refused naming both."""
+    values = vars(args)
+    inputs = [path for name, value in values.items() if name not in outputs
+              for path in _paths_in(value) if osp.exists(path)]
+    for name in outputs:
+        for path in _paths_in(values.get(name)):
+            check_output(path, inputs)
+
+
+def unshare(path: str) -> None:
+    """Before a library writes ``path`` in place (``open(path, 'w')``,
+    which truncates what it finds and follows links): remove what lies
+    there when it is a link or a file with other names (hard links), never
+    its target, so the write makes a new file and the other names keep
+    their content. A regular file of one name is left to be rewritten."""
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if stat.S_ISLNK(info.st_mode) or (stat.S_ISREG(info.st_mode) and
+                                      info.st_nlink > 1):
+        discard(path)
+
+
 def discard(path: str) -> None:
     """Remove what lies at ``path`` without following a link: a file, a
     link (never its target), a FIFO or a folder with its content; nothing
-    when nothing is there."""
+    when nothing is there. An input of this process is refused
+    (:func:`check_output`)."""
+    if not osp.islink(path):
+        check_output(path)
     try:
         mode = os.lstat(path).st_mode
     except FileNotFoundError:
@@ -201,6 +349,57 @@ class OwnedFolder:
         return path
 
 
+#: seconds between the lines a waiting writer prints (:func:`_wait_for`)
+WAIT_REPORT_S = 60.0
+#: seconds between a waiting writer's tries of the lock
+WAIT_POLL_S = 0.2
+
+
+def _wait_for(folder: str, fd: int) -> None:
+    """Take the lock of ``fd``, held by another writer, when it is free;
+    say on stderr whom it waits for when the wait starts and every
+    :data:`WAIT_REPORT_S` seconds after (the holder may change)."""
+    started = time.monotonic()
+    reported = None
+    while True:
+        now = time.monotonic()
+        if reported is None or now - reported >= WAIT_REPORT_S:
+            waited = '' if reported is None else \
+                f' (waited {now - started:.0f} s so far)'
+            print(f'{folder}: waiting for {_describe_writer(fd)} to finish '
+                  f'writing this output{waited}', file=sys.stderr,
+                  flush=True)
+            reported = now
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return
+        except BlockingIOError:
+            time.sleep(WAIT_POLL_S)
+
+
+def _check_lock_file(lock: str, fd: int, info: os.stat_result) -> None:
+    """Refuse a lock file the package did not make before it is written:
+    one with other names (a hard link to a file elsewhere), or content
+    that is not a writer record (a file of the user's named ``.lock``).
+    Empty is a lock file whose writer has not recorded itself yet."""
+    if info.st_nlink != 1:
+        raise OutputFolderError(
+            f'{lock}: the lock file has {info.st_nlink} names (a hard link '
+            f'to another file); it is not written through, so that file is '
+            f'left as it is: remove {lock}')
+    content = os.pread(fd, min(info.st_size, 1 << 16), 0)
+    if content:
+        try:
+            record = parse_json(content.decode(), lock, 'writer record')
+            if not isinstance(record, dict) or 'pid' not in record:
+                raise ValueError('no pid')
+        except (ValueError, UnicodeDecodeError):
+            raise OutputFolderError(
+                f'{lock}: a file this package did not make is where the '
+                f'output folder\'s lock file belongs; it is not '
+                f'overwritten: move it away') from None
+
+
 def _take_lock(folder: str, lock: str, wait: bool, replace: bool) -> int:
     """The open, exclusively locked lock file ``lock`` of ``folder``,
     recording this process; made again where another process removed it
@@ -241,7 +440,7 @@ def _take_lock(folder: str, lock: str, wait: bool, replace: bool) -> int:
                         f'{folder}: another process is writing this output '
                         f'({_describe_writer(fd)}); wait for it to end (or '
                         f'pass --wait), or stop it') from None
-                fcntl.flock(fd, fcntl.LOCK_EX)
+                _wait_for(folder, fd)
             try:  # the lock counts only on the file the path still names
                 current = os.lstat(lock)
             except FileNotFoundError:
@@ -251,6 +450,7 @@ def _take_lock(folder: str, lock: str, wait: bool, replace: bool) -> int:
                     mine.st_dev, mine.st_ino):
                 os.close(fd)
                 continue
+            _check_lock_file(lock, fd, mine)
             os.ftruncate(fd, 0)
             os.pwrite(fd, _writer_record(), 0)
             return fd

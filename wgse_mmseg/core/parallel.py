@@ -20,8 +20,10 @@ def for_each_on_threads(task: Callable[[int, _State], None], count: int,
                         make_state: Callable[[], _State]) -> List[_State]:
     """Run ``task(item, state)`` for items ``0 .. count-1``.
 
-    With ``n = torch.get_num_threads() > 1`` (and more than one item) the
-    items run on ``n`` threads with one torch thread each; thread ``i``
+    Every task runs on one torch thread, so an item's arithmetic does not
+    depend on the thread count. With ``n = torch.get_num_threads() > 1``
+    (and more than one item) the
+    items run on ``n`` threads; thread ``i``
     takes items ``i, i + n, ...`` with its own ``state`` (buffers, partial
     sums), so what a state accumulates does not depend on timing. Tasks run
     without autograd (grad mode is per thread; set it off here too) and
@@ -35,8 +37,12 @@ def for_each_on_threads(task: Callable[[int, _State], None], count: int,
     threads = max(1, min(torch_threads, count))
     states = [make_state() for _ in range(threads)]
     if threads == 1:
-        for item in range(count):
-            task(item, states[0])
+        try:  # one torch thread whatever the count: the same arithmetic
+            torch.set_num_threads(1)
+            for item in range(count):
+                task(item, states[0])
+        finally:
+            torch.set_num_threads(torch_threads)
         return states
 
     def worker(first: int) -> None:

@@ -71,7 +71,7 @@ from .arguments import (LAYOUT, NUM_STEPS, SIDE, Flag, Integer, Number, Path,
                         declare)
 from .io import (atomic_output, atomic_path, load_spikes, spike_shape,
                  write_bytes, write_png)
-from .limits import MAX_BATCH_SIZE, load_json_file
+from .limits import MAX_BATCH_SIZE, check_utf8_path, load_json_file
 from .markers import file_digest
 from .output_folder import (OwnedFolder, add_wait_option, discard,
                             open_append, own_folder)
@@ -197,8 +197,10 @@ class WalkOutputs(NamedTuple):
 def walk_outputs(video: str) -> WalkOutputs:
     """``video``, its CSV ``<stem>.csv``, frames folder ``<stem>_frames``
     and state folder ``<video>.partial``; a ``video`` that is not
-    ``.mp4``/``.gif`` is a :class:`WalkError`."""
+    ``.mp4``/``.gif`` is a :class:`WalkError`, one whose path is not UTF-8
+    a ``ValueError``."""
     stem, ext = osp.splitext(os.fspath(video))
+    check_utf8_path(video, 'OpenCV')  # it writes the video and frames
     if ext.lower() not in VIDEO_EXTENSIONS:
         raise WalkError(f'{video}: a walk writes a video, '
                         f'{" or ".join(VIDEO_EXTENSIONS)} by the extension; '

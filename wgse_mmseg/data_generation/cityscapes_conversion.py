@@ -74,6 +74,7 @@ from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
                               declare_fields)
 from ..core.folder_walk import files_under
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
+from ..core.images import read_image
 from ..core.io import save_spikes, temporaries_of, write_png
 from ..core.limits import MAX_SAMPLES, MAX_WORKERS, excerpt, parse_json
 from ..core.markers import invalidate, is_complete, write_marker
@@ -281,11 +282,7 @@ def resize_nearest(label: np.ndarray, height: int, width: int) -> np.ndarray:
 
 
 def _read(path: str, flags: int) -> np.ndarray:
-    import cv2
-    image = cv2.imread(path, flags)
-    if image is None:
-        raise OSError(f'{path}: cannot be read as an image')
-    return image
+    return read_image(path, flags)
 
 
 def _train_id_label(sample: CityscapesSample, height: int,

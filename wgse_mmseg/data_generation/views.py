@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from ..core.folder_walk import files_under
-from ..core.images import read_grey_image
+from ..core.images import fit_within, read_grey_image
 from ..core.simulation import trajectory_source_maps
 
 __all__ = []
@@ -36,12 +36,7 @@ def load_images(image_dir: str, max_side: int) -> Tuple[List[str],
             f'{image_dir}: no images ({", ".join(IMAGE_EXTENSIONS)})')
     images = []
     for path in paths:
-        image = read_grey_image(path)
-        scale = max_side / max(image.shape)
-        if scale < 1:
-            image = cv2.resize(image, None, fx=scale, fy=scale,
-                               interpolation=cv2.INTER_AREA)
-        images.append(image)
+        images.append(fit_within(read_grey_image(path), max_side))
     return paths, images
 
 

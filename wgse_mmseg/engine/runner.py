@@ -22,9 +22,9 @@ from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from .._openmmlab import prepare_mmseg_layer
-from ..core.limits import cut
-from ..core.output_folder import OutputFolderError, own_folder
-from ..utils.checkpoint import CheckpointError
+from ..core.output_folder import (OutputFolderError, discard, own_folder,
+                                  unshare)
+from ..utils.checkpoint import CheckpointError, load_error
 from ..utils.cross_checks import check_training_fits
 from ..utils.spike_settings import apply_spike_settings
 
@@ -126,7 +126,7 @@ class SpikeRunner(Runner):
             raise CheckpointError(
                 f'{filename}: refused: it holds objects that weights-only '
                 f'loading does not allow, and a checkpoint is never unpickled '
-                f'in full ({cut(str(err))})') from err
+                f'in full ({load_error(err)})') from err
         meta = checkpoint.get('meta')
         if isinstance(meta, dict) and 'config' in meta:
             raise CheckpointError(
@@ -143,11 +143,16 @@ class SpikeRunner(Runner):
         saves leaves the previous checkpoints and ``last_checkpoint`` (which
         mmengine's checkpoint hook updates after this returns) as they were,
         so ``--resume`` continues from the last complete checkpoint. Only
-        the main process saves, as in mmengine."""
+        the main process saves, as in mmengine. Files mmengine writes in
+        place (the temporary, ``last_checkpoint``) are never written
+        through a link or into a file with other names
+        (:func:`~wgse_mmseg.core.output_folder.unshare`)."""
         if not osp.isdir(out_dir):  # a remote backend: as mmengine does it
             return super().save_checkpoint(out_dir, filename, *args,
                                            **kwargs)
         temporary = osp.join(osp.dirname(filename),
                              f'.tmp-{osp.basename(filename)}')
+        discard(osp.join(out_dir, temporary))  # a killed save's, or a link
+        unshare(osp.join(out_dir, 'last_checkpoint'))
         super().save_checkpoint(out_dir, temporary, *args, **kwargs)
         os.replace(osp.join(out_dir, temporary), osp.join(out_dir, filename))

@@ -90,7 +90,15 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
 
     def _check_num_steps(self, inputs: Sequence[torch.Tensor],
                          data_samples: Optional[list]) -> None:
-        if self.num_steps is None:
+        if self.num_steps is None:  # then one T for the whole batch
+            for index, spikes in enumerate(inputs):
+                if spikes.dim() != 3 or spikes.shape[0] != inputs[0].shape[0]:
+                    raise ValueError(
+                        f'{_source(data_samples, index)}: spike stream '
+                        f'shaped {tuple(spikes.shape)} in a batch whose '
+                        f'first, {_source(data_samples, 0)}, is '
+                        f'{tuple(inputs[0].shape)}; a batch holds (T, H, W) '
+                        f'windows of one T (set num_steps in the config)')
             return
         for index, spikes in enumerate(inputs):
             if spikes.dim() != 3 or spikes.shape[0] != self.num_steps:

@@ -3,18 +3,37 @@ clear error naming the file for anything that is not a checkpoint, a
 ``state_dict`` that is not a mapping of names to tensors, or a
 ``dataset_meta`` that is not class names and a palette."""
 import os.path as osp
+import re
 from typing import Dict
 
 import numpy as np
 import torch
 
-from ..core.limits import excerpt
+from ..core.limits import cut, excerpt
+from ..core.output_folder import note_input
 
 __all__ = []
 
 
 class CheckpointError(ValueError):
     """A file that cannot be read as a checkpoint; names the file."""
+
+
+def load_error(err: BaseException) -> str:
+    """What torch said when it refused or failed to load a checkpoint, for
+    a message, without its advice to load with ``weights_only=False`` or
+    to allowlist globals (which would run code from the file): for a
+    weights-only refusal, the reason alone (``Unsupported global: ...``);
+    otherwise its first 300 characters less such sentences."""
+    text = str(err)
+    found = re.search(r'WeightsUnpickler error:\s*(.*?)\s*(?:Check the '
+                      r'documentation|$)', text, re.DOTALL)
+    if found:
+        text = found.group(1)
+    sentences = re.split(r'(?<=\.)\s+', ' '.join(text.split()))
+    kept = [s for s in sentences if not re.search(
+        r'weights_only|safe_globals|trusted source|file an issue', s)]
+    return f'{type(err).__name__}: ' + cut(' '.join(kept) or 'refused', 300)
 
 
 def read_checkpoint(path: str) -> dict:
@@ -29,12 +48,13 @@ def read_checkpoint(path: str) -> dict:
     """
     if not osp.isfile(path):
         raise FileNotFoundError(f'{path}: no such checkpoint')
+    note_input(path)
     try:
         state = torch.load(path, map_location='cpu', weights_only=True)
     except Exception as err:  # torch raises many types for bad bytes
         raise CheckpointError(
             f'{path}: not a readable checkpoint (weights-only torch.load '
-            f'failed: {type(err).__name__}: {str(err)[:300]})') from err
+            f'failed: {load_error(err)})') from err
     if not isinstance(state, dict):
         raise CheckpointError(f'{path}: a checkpoint holds a dict, found '
                               f'{type(state).__name__}')

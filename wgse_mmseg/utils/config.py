@@ -12,14 +12,15 @@ are built without importing mmengine or torch, so that a tool answers
 ``--help`` at once; mmengine is imported where a config is read.
 """
 import argparse
-import copy
 import os
 import os.path as osp
-from typing import TYPE_CHECKING, Dict, Optional
+import re
+from typing import TYPE_CHECKING, Any, Dict, List, Optional
 
 from .._openmmlab import prepare_mmseg_layer
 from ..core.arguments import Choice, Integer, Path
 from ..core.limits import MAX_WORKERS, excerpt
+from ..core.output_folder import note_input
 from .spike_settings import (SPIKE_SETTINGS, SpikeSettingsError,
                              apply_spike_settings, check_setting)
 
@@ -54,6 +55,7 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> 'Config':
     if osp.splitext(path)[1] not in CONFIG_EXTENSIONS:
         raise ValueError(f'{path}: not a config file (expected one of '
                          f'{", ".join(CONFIG_EXTENSIONS)})')
+    note_input(path)
     prepare_mmseg_layer('load_config')
     from mmengine.config import Config
     options = dict(cfg_options or {})
@@ -67,33 +69,131 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> 'Config':
     return cfg
 
 
+#: brackets nested deeper than this in a ``--cfg-options`` value are refused
+MAX_OPTION_DEPTH = 32
+_CLOSING = {'[': ']', '(': ')'}
+
+
+def _top_level_commas(text: str) -> List[int]:
+    """Where ``text`` has a comma outside brackets and quoted strings (a
+    quote that starts an item opens one; elsewhere, as in ``John's``, it
+    is a character); raises ``ValueError`` for unbalanced brackets or an
+    unclosed quoted string."""
+    stack, quote, commas = [], None, []
+    starts_item = True
+    for index, char in enumerate(text):
+        if quote:
+            if quote[-1:] == '\\':  # an escaped character
+                quote = quote[0]
+            elif char == '\\':
+                quote = quote + '\\'
+            elif char == quote:
+                quote = None
+            continue
+        if char in '\'"' and starts_item:
+            quote = char
+            continue
+        if char.isspace():
+            continue
+        starts_item = char in ',[('
+        if char in _CLOSING:
+            stack.append(_CLOSING[char])
+            if len(stack) > MAX_OPTION_DEPTH:
+                raise ValueError(f'brackets nested deeper than '
+                                 f'{MAX_OPTION_DEPTH} levels')
+        elif char in ')]':
+            if not stack or stack.pop() != char:
+                raise ValueError('unbalanced brackets')
+        elif char == ',' and not stack:
+            commas.append(index)
+    if stack or quote:
+        raise ValueError('unbalanced brackets or quotes')
+    return commas
+
+
+def _scalar(text: str) -> Any:
+    """One value as typed: a number, ``True``/``False`` (any case),
+    ``None``, a string in matching quotes (what is between them; a
+    backslash before a quote or a backslash is dropped, any other kept),
+    else the text itself, spaces, quotes and unicode kept."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    if text.lower() in ('true', 'false'):
+        return text.lower() == 'true'
+    if text == 'None':
+        return None
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in '\'"':
+        if not re.fullmatch(r'{0}(?:[^{0}\\]|\\.)*{0}'.format(text[0]),
+                            text, re.DOTALL):
+            raise ValueError(f'{excerpt(text)} is not one quoted string (an '
+                             f'inner {text[0]} needs a backslash)')
+        return re.sub(r'\\([\\\'"])', r'\1', text[1:-1])
+    return text
+
+
+def parse_option_value(text: str) -> Any:
+    """A ``--cfg-options`` value exactly as typed (mmengine's
+    ``DictAction`` drops every space and strips quotes, so ``data_root=D/my
+    data`` would read ``D/mydata``): ``[a, b]`` a list, ``(a, b)`` a tuple,
+    ``a,b`` a list, items stripped of the spaces around them and read the
+    same way; a single value by :func:`_scalar`.
+
+    Raises:
+        ValueError: unbalanced brackets or quotes, nesting deeper than
+            :data:`MAX_OPTION_DEPTH`, or a quoted string that is not one.
+    """
+    commas = _top_level_commas(text)
+    stripped = text.strip()
+    if not commas and stripped[:1] in _CLOSING and \
+            stripped[-1:] == _CLOSING[stripped[0]]:
+        inner = stripped[1:-1]
+        items = _items(inner) if inner.strip() else []
+        return tuple(items) if stripped[0] == '(' else items
+    if commas:
+        return _items(text)
+    return _scalar(text)
+
+
+def _items(text: str) -> List[Any]:
+    """The comma-separated items of ``text`` (a trailing comma ends the
+    list), each read by :func:`parse_option_value`."""
+    bounds = [-1] + _top_level_commas(text) + [len(text)]
+    parts = [text[a + 1:b].strip() for a, b in zip(bounds, bounds[1:])]
+    if parts and parts[-1] == '' and len(parts) > 1:
+        parts.pop()
+    return [parse_option_value(part) for part in parts]
+
+
 class ConfigOptions(argparse.Action):
-    """mmengine's ``DictAction`` (``key=value`` words, values read as
-    Python literals by its parser, imported when a word is read), refusing a
-    word it cannot read and checking the spike settings against
-    :data:`SPIKE_SETTING_KINDS` as the command line is parsed, so argparse
-    exits with ``argument --cfg-options: num_steps must be ...``."""
+    """``--cfg-options key=value ...``, read as mmengine's ``DictAction`` reads
+    them (lists, tuples, numbers) but with every
+    value read exactly as typed (:func:`parse_option_value`; a word it
+    cannot read is refused naming it), and the spike settings checked
+    against :data:`SPIKE_SETTING_KINDS` as the command line is parsed, so
+    argparse exits with ``argument --cfg-options: num_steps must be
+    ...``."""
 
     def __call__(self, parser, namespace, values, option_string=None):
-        from mmengine.config import DictAction
-        options = copy.copy(getattr(namespace, self.dest, None) or {})
+        options = dict(getattr(namespace, self.dest, None) or {})
         for word in values or ():
             key, equals, value = word.partition('=')
             if not key or not equals:
                 raise argparse.ArgumentError(
                     self, f'must be key=value words, got {excerpt(word)}')
-            try:  # mmengine asserts balanced brackets, recurses on nesting
-                options[key] = DictAction._parse_iterable(value)
-            except (AssertionError, RecursionError):
-                raise argparse.ArgumentError(
-                    self, f'{key}: unbalanced or too deeply nested brackets '
-                    f'in {excerpt(value)}') from None
-        setattr(namespace, self.dest, options)
-        for key in SPIKE_SETTING_KINDS.keys() & options.keys():
             try:
-                check_setting(key, options[key], text=True)
+                options[key] = parse_option_value(value)
+            except ValueError as err:
+                raise argparse.ArgumentError(
+                    self, f'{key}: {err} in {excerpt(value)}') from None
+        for key in SPIKE_SETTING_KINDS.keys() & options.keys():
+            try:  # kept as checked: '41' (quoted) is T=41
+                options[key] = check_setting(key, options[key], text=True)
             except SpikeSettingsError as err:
                 raise argparse.ArgumentError(self, str(err)) from None
+        setattr(namespace, self.dest, options)
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:

@@ -16,6 +16,8 @@ Python by design in MMSeg (``Config.fromfile``), and is executed.
 import ast
 from typing import Any, Dict
 
+from ..core.limits import MAX_JSON_DEPTH, TEXT_FILE_LIMIT_BYTES
+
 __all__ = []
 
 
@@ -23,15 +25,35 @@ class ConfigDataError(ValueError):
     """Config text that is not plain data (or not parseable)."""
 
 
-def _value(node: ast.AST, source: str) -> Any:
+def _key(node: ast.AST, source: str, depth: int) -> Any:
+    """A dict display's key: a plain value that can be a key (a list or
+    dict cannot)."""
+    key = _value(node, source, depth)
+    try:
+        hash(key)
+    except TypeError:
+        raise ConfigDataError(
+            f'{source}: line {getattr(node, "lineno", "?")}: a dict key '
+            f'{ast.unparse(node)[:80]!r} is a {type(key).__name__}, which '
+            f'cannot be a key') from None
+    return key
+
+
+def _value(node: ast.AST, source: str, depth: int = 0) -> Any:
     """The plain value ``node`` spells, or :class:`ConfigDataError`."""
+    if depth > MAX_JSON_DEPTH:
+        raise ConfigDataError(
+            f'{source}: line {getattr(node, "lineno", "?")}: values nested '
+            f'deeper than {MAX_JSON_DEPTH} levels are not read '
+            f'(wgse_mmseg.core.limits.MAX_JSON_DEPTH)')
+    depth += 1
     if isinstance(node, ast.Constant):
         return node.value
     if isinstance(node, (ast.List, ast.Tuple)):
-        items = [_value(item, source) for item in node.elts]
+        items = [_value(item, source, depth) for item in node.elts]
         return items if isinstance(node, ast.List) else tuple(items)
     if isinstance(node, ast.Dict) and None not in node.keys:
-        return {_value(key, source): _value(value, source)
+        return {_key(key, source, depth): _value(value, source, depth)
                 for key, value in zip(node.keys, node.values)}
     if isinstance(node, ast.UnaryOp) and isinstance(
             node.op, (ast.USub, ast.UAdd)) and isinstance(
@@ -42,7 +64,7 @@ def _value(node: ast.AST, source: str) -> Any:
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and \
             node.func.id == 'dict' and not node.args and \
             all(keyword.arg is not None for keyword in node.keywords):
-        return {keyword.arg: _value(keyword.value, source)
+        return {keyword.arg: _value(keyword.value, source, depth)
                 for keyword in node.keywords}
     raise ConfigDataError(
         f'{source}: line {getattr(node, "lineno", "?")}: '
@@ -65,11 +87,18 @@ def read_config_data(text: str, source: str) -> Dict[str, Any]:
     if not isinstance(text, str):
         raise ConfigDataError(f'{source}: the config is a '
                               f'{type(text).__name__}, not text')
+    if len(text) > TEXT_FILE_LIMIT_BYTES:
+        raise ConfigDataError(
+            f'{source}: config text of {len(text)} characters; at most '
+            f'{TEXT_FILE_LIMIT_BYTES} are read')
     try:
         tree = ast.parse(text)
     except SyntaxError as error:
         raise ConfigDataError(f'{source}: the config text does not parse: '
                               f'{error.msg} (line {error.lineno})') from None
+    except (RecursionError, MemoryError):  # the parser's own nesting limit
+        raise ConfigDataError(f'{source}: the config text is nested too '
+                              f'deeply to parse') from None
     values = {}
     for statement in tree.body:
         if not (isinstance(statement, ast.Assign) and

@@ -96,6 +96,53 @@ def smallest_input_side(runs: Callable[[int], bool],
     return high
 
 
+def _smallest_side(model: nn.Module, num_steps: int,
+                   probe: Tuple[int, int], source: str) -> Optional[int]:
+    """``None`` where ``model`` runs a ``probe``-sized input; else the
+    smallest side it takes (:func:`smallest_input_side`).
+
+    Raises:
+        ModelFitError: naming ``source``, where it runs on no input.
+    """
+    failure = _dry_forward(model, num_steps, 1, *probe, training=False)
+    if failure is None:
+        return None
+    side = smallest_input_side(lambda s: _dry_forward(
+        model, num_steps, 1, s, s, training=False) is None, min(probe))
+    if side is None:
+        raise ModelFitError(
+            f'{source}: the model runs on no input up to {MAX_IMAGE_SIDE}x'
+            f'{MAX_IMAGE_SIDE} (num_steps={num_steps}): '
+            f'{type(failure).__name__}: {cut(str(failure), 300)}')
+    return side
+
+
+def check_input_fits(model: nn.Module, num_steps: int, height: int,
+                     width: int, source: str) -> None:
+    """Refuse, before inference, a ``(num_steps, height, width)`` input
+    (after the test pipeline) smaller than the smallest input ``model``
+    takes, as :func:`check_training_fits` refuses a crop: a dry forward
+    at the size the data preprocessor pads it to (its ``size_divisor``),
+    capped at :data:`PROBE_SIDE`; where it fails, the smallest side that
+    works is searched.
+
+    Raises:
+        ModelFitError: naming ``source``, its size and the smallest side.
+    """
+    model = getattr(model, 'module', model)
+    divisor = getattr(model.data_preprocessor, 'size_divisor', None) or 1
+    padded = [-(-side // divisor) * divisor for side in (height, width)]
+    probe = tuple(min(side, PROBE_SIDE) for side in padded)
+    side = _smallest_side(model, num_steps, probe, source)
+    if side is None or min(padded) >= side:
+        return
+    raise ModelFitError(
+        f'{source}: frames of {height}x{width} are below the smallest input '
+        f"the model takes, {side}x{side} (its backbone's strides and "
+        f'kernels); give a larger recording, or a test pipeline that '
+        f'resizes it')
+
+
 def _crop(cfg, model: nn.Module) -> Optional[Tuple[int, int]]:
     size = getattr(model.data_preprocessor, 'size', None) or cfg.get(
         'crop_size')
@@ -119,21 +166,13 @@ def check_training_fits(cfg, model: nn.Module) -> None:
         return
     name = getattr(cfg, 'filename', None) or 'the config'
     probe = tuple(min(side, PROBE_SIDE) for side in crop)
-    failure = _dry_forward(model, num_steps, 1, *probe, training=False)
-    if failure is not None:
-        side = smallest_input_side(lambda s: _dry_forward(
-            model, num_steps, 1, s, s, training=False) is None, min(probe))
-        if side is None:
-            raise ModelFitError(
-                f'{name}: the model runs on no input up to '
-                f'{MAX_IMAGE_SIDE}x{MAX_IMAGE_SIDE} (num_steps={num_steps}):'
-                f' {type(failure).__name__}: {cut(str(failure), 300)}')
-        if min(crop) < side:
-            raise ModelFitError(
-                f'{name}: crop_size={crop} is below the smallest input the '
-                f"model takes, {side}x{side} (its backbone's strides and "
-                f'kernels); set --cfg-options crop_size={max(crop[0], side)},'
-                f'{max(crop[1], side)} or larger')
+    side = _smallest_side(model, num_steps, probe, name)
+    if side is not None and min(crop) < side:
+        raise ModelFitError(
+            f'{name}: crop_size={crop} is below the smallest input the '
+            f"model takes, {side}x{side} (its backbone's strides and "
+            f'kernels); set --cfg-options crop_size={max(crop[0], side)},'
+            f'{max(crop[1], side)} or larger')
     batch = cfg.get('train_dataloader', {}).get('batch_size')
     if batch == 1:
         failure = _dry_forward(model, num_steps, 1, *probe, training=True)

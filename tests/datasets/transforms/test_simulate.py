@@ -120,6 +120,19 @@ def test_bad_frames_name_the_sample():
         transform(dict(img_path='data/x.png'))
 
 
+def test_frames_of_different_sizes_are_refused_naming_them(tmp_path):
+    transform = SimulateSpikes(num_steps=4)
+    with pytest.raises(ValueError, match=r"results\['frames'\]\[1\] is "
+                       r"shaped \(6, 9, 3\) but results\['frames'\]\[0\] "
+                       r"\(8, 9, 3\)"):
+        transform(dict(frames=[_bgr(8, 9), _bgr(6, 9)]))
+    paths = [str(tmp_path / 'a.png'), str(tmp_path / 'b.png')]
+    cv2.imwrite(paths[0], _bgr(8, 9))
+    cv2.imwrite(paths[1], _bgr(8, 7))
+    with pytest.raises(ValueError, match='b.png is shaped'):
+        transform(dict(frame_paths=paths))
+
+
 def test_pipeline_from_image_file_to_packed_inputs(tmp_path):
     image_path = str(tmp_path / 'frame.png')
     cv2.imwrite(image_path, _bgr(12, 16, seed=4))

@@ -15,6 +15,8 @@ from mmengine.config import Config
 
 from .settings import EPOCHS, ITERATIONS, check_schedule
 from ...core.arguments import declare
+from ...core.limits import excerpt
+from ...utils.config import parse_option_value
 
 _PACKAGE = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 #: where the package keeps its ``configs/`` and ``tools/``: ``wgse_mmseg/.mim``
@@ -73,10 +75,27 @@ def load_grid(path: str) -> Tuple[Config, List[Entry]]:
                 'latency'):
         if key not in grid:
             raise ValueError(f'{path}: the grid must define {key!r}')
+    for key, kinds in (('models', 'a config path or dict(config=..., '
+                                  'cfg_options=...)'),
+                       ('enhancers', 'None, an enhancer dict(type=...) or '
+                                     'dict(enhancer=..., cfg_options=...)')):
+        if not isinstance(grid[key], dict) or not grid[key]:
+            raise ValueError(
+                f'{path}: {key} must be a dict of names to {kinds}, got '
+                f'{excerpt(grid[key])}')
+        for name, value in grid[key].items():
+            if not (value is None and key == 'enhancers' or
+                    isinstance(value, dict) or
+                    isinstance(value, str) and key == 'models'):
+                raise ValueError(f'{path}: {key}[{name!r}] must be {kinds}, '
+                                 f'got {excerpt(value)}')
     entries = []
     for model, value in grid.models.items():
         config, model_options = _split(path, f'model {model!r}', value,
                                        'config', isinstance(value, str))
+        if not isinstance(config, str):
+            raise ValueError(f'{path}: model {model!r}: config must be a '
+                             f'path, got {excerpt(config)}')
         config = osp.join(PROJECT_ROOT, config)
         if not osp.isfile(config):
             raise FileNotFoundError(f'{path}: model {model!r}: {config} '
@@ -85,6 +104,10 @@ def load_grid(path: str) -> Tuple[Config, List[Entry]]:
             enhancer, options = _split(
                 path, f'enhancer {name!r}', value, 'enhancer',
                 value is None or 'type' in value)
+            if not (enhancer is None or isinstance(enhancer, dict)):
+                raise ValueError(f'{path}: enhancer {name!r} must be None '
+                                 f'or dict(type=...), got '
+                                 f'{excerpt(enhancer)}')
             entries.append(Entry(f'{model}_{name}', model, config, name,
                                  None if enhancer is None else
                                  dict(enhancer), model_options, options))
@@ -155,17 +178,25 @@ def schedule_options(epochs: Optional[int],
 
 
 def as_cli(options: Dict[str, Any]) -> List[str]:
-    """``key=value`` words that mmengine's ``DictAction`` parses back to
-    ``options`` (strings, ints, floats, booleans and ``None``)."""
+    """``key=value`` words that ``--cfg-options`` parses back to ``options``
+    (strings, ints, floats, booleans and ``None``;
+    :func:`~wgse_mmseg.utils.config.parse_option_value`; a string may
+    spell a number or a list, ``'32,64'``); a string that would come back
+    as another string, a boolean or ``None``, or not at all, is refused."""
     words = []
     for key, value in options.items():
         if not isinstance(value, (str, int, float, bool, type(None))):
             raise TypeError(f'{key}={value!r}: only str, int, float, bool '
                             f'and None can be passed as --cfg-options')
-        if isinstance(value, str) and (not value or value.lower() in (
-                'true', 'false', 'none')):
-            raise ValueError(f'{key}={value!r} would not survive the '
-                             f'command line as a string')
+        if isinstance(value, str):
+            try:
+                back = parse_option_value(value)
+            except ValueError:
+                back = None
+            if not value or back is None or isinstance(back, bool) or (
+                    isinstance(back, str) and back != value):
+                raise ValueError(f'{key}={value!r} would not survive the '
+                                 f'command line as a string')
         words.append(f'{key}={value}')
     return words
 

@@ -25,6 +25,7 @@ from ...benchmarks.machine import run_isolated
 from ...benchmarks.segmentation import benchmark_config, validation_cost
 from ...core.io import atomic_output
 from ...core.limits import LOG_FILE_LIMIT_BYTES, load_json_file, parse_json
+from ...core.output_folder import open_append
 from .grid import (PROJECT_ROOT, Entry, as_cli, enhancer_options,
                    schedule_options)
 from .settings import ExperimentSettings
@@ -51,8 +52,8 @@ def run_directory(work_dir: str, entry: Entry, seed: int) -> str:
 
 def _run_logged(command: List[str], log_path: str, what: str) -> None:
     os.makedirs(osp.dirname(log_path), exist_ok=True)
-    with open(log_path, 'a') as log:
-        log.write(f'$ {shlex.join(command)}\n')
+    with open_append(log_path) as log:  # never through a link
+        log.write(f'$ {shlex.join(command)}\n'.encode())
         log.flush()
         code = subprocess.call(command, stdout=log, stderr=subprocess.STDOUT)
     if code != 0:

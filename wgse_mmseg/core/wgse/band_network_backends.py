@@ -33,6 +33,13 @@ fails, ``'auto'`` runs ``torch`` and logs why. Naming a backend that cannot
 run a call, or that fails the check, is an error that says why; nothing
 falls back silently then.
 
+Second-order gradients (a backward pass with ``create_graph=True``, as a
+gradient penalty takes): ``torch``, ``compiled`` and ``reference`` give
+them (the CPU kernels then differentiate torch's convolutions,
+:func:`~wgse_mmseg.core.wgse.torch_band_networks.differentiable_backward`);
+``triton`` refuses them with an error naming ``'torch'``, never a wrong
+gradient (:class:`_FirstOrderOnly`).
+
 Every backend but ``'reference'`` keeps training memory ``O(B*T*H*W)``:
 hidden activations are recomputed in the backward pass, chunk by chunk
 (``torch``, ``compiled``) or tile by tile (``triton``), never kept for all
@@ -283,8 +290,9 @@ class TritonBackend(BandNetworkBackend):
         weights, _ = _weights(networks)
         precision = self.precision(coeffs)
         with torch.autocast(coeffs.device.type, enabled=False):
-            return triton_band_networks.triton_band_networks(
+            out = triton_band_networks.triton_band_networks(
                 coeffs, lengths, weights, precision, **launch)
+        return _FirstOrderOnly.apply(out, self.name)
 
     @property
     def first_use_check(self):
@@ -308,6 +316,27 @@ class TritonBackend(BandNetworkBackend):
         return [dict(forward_config=forward[min(i, len(forward) - 1)],
                      backward_config=backward[min(i, len(backward) - 1)])
                 for i in range(max(len(forward), len(backward)))]
+
+
+class _FirstOrderOnly(torch.autograd.Function):
+    """The identity on a kernel's output whose backward pass cannot be
+    differentiated: a backward with ``create_graph=True`` through it is an
+    error naming the backend, before the kernel's backward runs."""
+
+    @staticmethod
+    def forward(ctx, out: Tensor, backend: str) -> Tensor:
+        ctx.backend = backend
+        return out.view_as(out)
+
+    @staticmethod
+    def backward(ctx, grad: Tensor):
+        if torch.is_grad_enabled():
+            raise RuntimeError(
+                f'WGSE backend={ctx.backend!r} gives no second-order '
+                f'gradients (a backward pass with create_graph=True, as a '
+                f'gradient penalty takes); use backend=\'torch\', which '
+                f'does')
+        return grad, None
 
 
 #: name -> backend

@@ -18,8 +18,12 @@ tests compare them.
 Calls are split into chunks of about :data:`ROWS_PER_CALL` rows of one
 band, which run side by side on torch's threads
 (:func:`~wgse_mmseg.core.parallel.for_each_on_threads`) with the GIL released;
-each thread sums its gradients in its own buffer, and the buffers are added
-in thread order, so results do not depend on timing.
+the parameter gradients of fixed groups of chunks are summed apart and the
+groups added in order, so results depend neither on timing nor on the
+thread count. A backward pass with ``create_graph=True`` (second-order
+gradients) runs
+:func:`~wgse_mmseg.core.wgse.torch_band_networks.differentiable_backward`
+instead.
 """
 from itertools import accumulate
 from typing import List, Optional, Sequence, Tuple
@@ -28,6 +32,7 @@ import torch
 from torch import Tensor
 
 from ..parallel import for_each_on_threads
+from .torch_band_networks import chunk_groups, differentiable_backward
 
 try:
     from . import _band_networks
@@ -184,21 +189,33 @@ class _CompiledBandNetworks(torch.autograd.Function):
         for_each_on_threads(lambda chunk, _: bands.run(chunk, out=out),
                             len(bands.chunks), lambda: None)
         ctx.bands, ctx.weights = bands, weights
+        ctx.lengths, ctx.residuals = lengths, residuals
+        ctx.save_for_backward(coeffs, *params)
         return out
 
     @staticmethod
     def backward(ctx, grad_out: Tensor):
         bands, weights = ctx.bands, ctx.weights
+        if torch.is_grad_enabled():  # create_graph=True: second order
+            coeffs, *params = ctx.saved_tensors
+            grads = differentiable_backward(
+                grad_out, coeffs, params,
+                [False] + list(ctx.needs_input_grad[4:]), ctx.lengths,
+                ctx.residuals, KERNEL_SIZE // 2)
+            return (None, None, None, None, *grads[1:])
         grad_out = grad_out.contiguous()
+        groups = chunk_groups(len(bands.chunks))
+        sums = [None] * len(groups)
 
-        def backward_chunk(chunk: int, grads: Tensor) -> None:
-            bands.run(chunk, grad_out=grad_out, grads=grads)
+        def backward_group(group: int, _) -> None:
+            sums[group] = torch.zeros(bands.grad_total, dtype=torch.float64)
+            for chunk in groups[group]:
+                bands.run(chunk, grad_out=grad_out, grads=sums[group])
 
-        sums = for_each_on_threads(
-            backward_chunk, len(bands.chunks),
-            lambda: torch.zeros(bands.grad_total, dtype=torch.float64))
-        flat = sums[0]
-        for more in sums[1:]:
+        for_each_on_threads(backward_group, len(groups), lambda: None)
+        flat = sums[0] if sums else torch.zeros(bands.grad_total,
+                                                dtype=torch.float64)
+        for more in sums[1:]:  # in group order, whatever the threads
             flat = flat + more
         grads = []
         for band, where in zip(weights, bands.grad_slices):

@@ -31,12 +31,21 @@ checkpointing at chunk granularity: no activation of size ``B*H*W*C*32``
 outlives the forward pass, for about a third more arithmetic).
 
 The result equals ``BandNetwork`` applied per pixel (tests compare both, and
-``gradcheck`` the gradients in float64), and does not depend on timing: a
-thread's chunks are fixed, and its gradient sums are added in thread order.
+``gradcheck`` the gradients in float64), and depends neither on timing nor
+on the thread count: parameter gradients are summed over fixed groups of
+chunks (:func:`chunk_groups`, whatever thread runs a group) and the groups
+added in order.
+
+Second-order gradients (a backward pass with ``create_graph=True``, as a
+gradient penalty takes): the hand-written backward keeps no graph, so there
+it runs :func:`differentiable_backward` instead, torch's own convolutions
+on the whole input, whose gradients are differentiable again (memory as the
+``'reference'`` backend's).
 """
 from typing import Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
 from ..parallel import for_each_on_threads
@@ -79,9 +88,6 @@ class _Workspace:
     def __init__(self, like: Tensor):
         self._like = like
         self._flat: Dict[object, Tensor] = {}
-        #: the backward pass's parameter-gradient sums over this
-        #: workspace's chunks (one workspace per thread)
-        self.param_grads: Optional[List[Tensor]] = None
 
     def __call__(self, role: object, rows: int, columns: int) -> Tensor:
         """A ``(rows, columns)`` buffer for ``role``, contents undefined."""
@@ -269,6 +275,62 @@ def _zero_grads(params: Sequence[Tensor]) -> List[Tensor]:
             else torch.zeros_like(p) for p in params]
 
 
+#: most groups of chunks whose parameter gradients are summed apart
+#: (:func:`chunk_groups`): bounds the partial sums kept
+MAX_GROUPS = 64
+
+
+def chunk_groups(count: int) -> List[range]:
+    """Chunks ``0 .. count-1`` in consecutive groups, at most
+    :data:`MAX_GROUPS`, fixed by ``count`` alone: a group's gradient sum,
+    and the sum of the groups in order, come out the same whatever thread
+    runs which group and however many there are."""
+    size = max(1, -(-count // MAX_GROUPS))
+    return [range(first, min(first + size, count))
+            for first in range(0, count, size)]
+
+
+def _modules_forward(coeffs: Tensor, lengths: Sequence[int],
+                     residuals: Sequence[Optional[int]], pad: int,
+                     params: Sequence[Tensor]) -> Tensor:
+    """The band networks as torch convolutions on ``(N, C)`` coefficients
+    (the function of :func:`torch_band_networks`, differentiable to any
+    order, every activation kept)."""
+    per_band = 2 * len(residuals)
+    outs = []
+    for index, band in enumerate(coeffs.split(list(lengths), dim=1)):
+        acts = [band.unsqueeze(1)]  # (N, 1, L)
+        for layer, residual in enumerate(residuals):
+            first = index * per_band + 2 * layer
+            x = F.conv1d(acts[-1], params[first], params[first + 1],
+                         padding=pad)
+            if residual is not None:
+                x = x + acts[residual]
+            acts.append(F.relu(x))
+        outs.append(acts[-1].squeeze(1))
+    return torch.cat(outs, 1) if outs else coeffs.clone()
+
+
+def differentiable_backward(grad_out: Tensor, coeffs: Tensor,
+                            params: Sequence[Tensor],
+                            needs_input_grad: Sequence[bool],
+                            lengths: Sequence[int],
+                            residuals: Sequence[Optional[int]], pad: int
+                            ) -> List[Optional[Tensor]]:
+    """The gradients of the band networks, ``[d coeffs, *d params]``
+    (``None`` where ``needs_input_grad`` is false), as a graph that can be
+    differentiated again: what a band-network kernel's backward returns
+    when called with ``create_graph=True``."""
+    wanted = [tensor for tensor, need in zip([coeffs, *params],
+                                             needs_input_grad) if need]
+    with torch.enable_grad():
+        out = _modules_forward(coeffs, lengths, residuals, pad, params)
+        found = iter(torch.autograd.grad(out, wanted, grad_out,
+                                         create_graph=True,
+                                         allow_unused=True))
+    return [next(found) if need else None for need in needs_input_grad]
+
+
 class _TorchBandNetworks(torch.autograd.Function):
     """Autograd wrapper; see :func:`torch_band_networks`."""
 
@@ -295,6 +357,12 @@ class _TorchBandNetworks(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_out: Tensor):
         coeffs, *params = ctx.saved_tensors
+        if torch.is_grad_enabled():  # create_graph=True: second order
+            grads = differentiable_backward(
+                grad_out, coeffs, params,
+                [ctx.needs_input_grad[0]] + list(ctx.needs_input_grad[4:]),
+                ctx.lengths, ctx.residuals, ctx.pad)
+            return (grads[0], None, None, None, *grads[1:])
         need_input_grad = ctx.needs_input_grad[0]
         grad_coeffs = torch.zeros_like(coeffs) if need_input_grad else None
         grad_out = grad_out.contiguous()
@@ -302,25 +370,29 @@ class _TorchBandNetworks(torch.autograd.Function):
         chunks = list(_chunks(coeffs, ctx.lengths, ctx.residuals, ctx.pad,
                               params))
 
-        def backward_chunk(chunk: int, scratch: _Workspace) -> None:
-            band, columns, rows, layers = chunks[chunk]
-            if scratch.param_grads is None:
-                scratch.param_grads = _zero_grads(params)
-            acts = _chunk_forward(columns[rows], layers, ctx.pad, scratch)
-            first = band.index * per_band
-            grad_in = _chunk_backward(
-                acts, grad_out[rows, band.offset], layers,
-                scratch.param_grads[first:first + per_band], ctx.pad,
-                need_input_grad, scratch)
-            if need_input_grad:
-                grad_coeffs[rows, band.offset] = grad_in
+        groups = chunk_groups(len(chunks))
+        sums: List[List[Tensor]] = [[] for _ in groups]
 
-        workspaces = for_each_on_threads(backward_chunk, len(chunks),
-                                         lambda: _Workspace(coeffs))
-        sums = [w.param_grads for w in workspaces if w.param_grads] or [
-            _zero_grads(params)]  # no pixels, no chunks
-        param_grads = [torch.stack(grads).sum(0) if len(grads) > 1
-                       else grads[0] for grads in zip(*sums)]
+        def backward_group(group: int, scratch: _Workspace) -> None:
+            sums[group] = param_grads = _zero_grads(params)
+            for chunk in groups[group]:
+                band, columns, rows, layers = chunks[chunk]
+                acts = _chunk_forward(columns[rows], layers, ctx.pad,
+                                      scratch)
+                first = band.index * per_band
+                grad_in = _chunk_backward(
+                    acts, grad_out[rows, band.offset], layers,
+                    param_grads[first:first + per_band], ctx.pad,
+                    need_input_grad, scratch)
+                if need_input_grad:
+                    grad_coeffs[rows, band.offset] = grad_in
+
+        for_each_on_threads(backward_group, len(groups),
+                            lambda: _Workspace(coeffs))
+        param_grads = sums[0] if sums else _zero_grads(params)
+        for more in sums[1:]:  # in group order
+            param_grads = [total.add_(part)
+                           for total, part in zip(param_grads, more)]
         param_grads = [g.permute(2, 1, 0) if g.dim() == 3 else g
                        for g in param_grads]
         return (grad_coeffs, None, None, None, *param_grads)

@@ -330,6 +330,11 @@ class WGSE(nn.Module):
                 enhanced = torch.matmul(synthesis, enhanced)  # (B, T, P)
             out = enhanced.reshape(batch, num_steps, height, width)
         if self.output_norm is not None:
+            if self.output_norm.training and out.numel() < 2:
+                raise ValueError(
+                    f'WGSE(output_norm=True) standardises a training batch '
+                    f'by its own statistics and needs at least 2 values; '
+                    f'got spikes shaped {tuple(spikes.shape)}')
             out = self.output_norm(out.reshape(batch, 1, -1)).reshape(
                 batch, num_steps, height, width)
         return out.contiguous()

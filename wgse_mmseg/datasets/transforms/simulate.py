@@ -15,14 +15,30 @@ from typing import Optional
 
 import mmcv
 import numpy as np
+from cv2 import IMREAD_COLOR
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
 from ...core.arguments import NUM_STEPS, SEED, Choice, Number, declare
+from ...core.images import read_image
 from ...core.seeding import derive_seed, draw_seed
 from ...core.simulation import parse_effects, read_scene_file, simulate_spikes
 
 __all__ = ['SimulateSpikes']
+
+
+def _stacked(frames, names) -> np.ndarray:
+    """``frames`` of one shape as one array; frames of different sizes
+    (or kinds) are a ``ValueError`` naming the first that differs."""
+    if not frames:
+        raise ValueError('SimulateSpikes: no frames given')
+    for frame, name in zip(frames[1:], names[1:]):
+        if frame.shape != frames[0].shape:
+            raise ValueError(
+                f'SimulateSpikes: {name} is shaped {frame.shape} but '
+                f'{names[0]} {frames[0].shape}; the frames of one clip share '
+                f'one size')
+    return np.stack(frames)
 
 
 @TRANSFORMS.register_module()
@@ -85,10 +101,13 @@ class SimulateSpikes(BaseTransform):
     def _frames(self, results: dict) -> np.ndarray:
         """``(N, H, W)`` or ``(N, H, W, 3)`` frames, colour as RGB."""
         if 'frame_paths' in results and 'frames' not in results:
-            return np.stack([mmcv.imread(path, 'color', channel_order='rgb')
-                             for path in results['frame_paths']])
+            paths = list(results['frame_paths'])
+            return _stacked([mmcv.bgr2rgb(read_image(path, IMREAD_COLOR))
+                             for path in paths], paths)
         if 'frames' in results:
-            frames = np.stack([np.asarray(f) for f in results['frames']])
+            frames = _stacked([np.asarray(f) for f in results['frames']],
+                              [f"results['frames'][{index}]" for index in
+                               range(len(results['frames']))])
         elif 'img' in results:
             frames = np.asarray(results['img'])[None]
         else:

@@ -57,6 +57,13 @@ class SpikeRandomCrop(RandomCrop):
 
     def transform(self, results: dict) -> dict:
         _check_label_matches(results)
+        if self.cat_max_ratio < 1. and 'gt_seg_map' not in results:
+            raise ValueError(
+                f'SpikeRandomCrop: cat_max_ratio={self.cat_max_ratio} '
+                f'weighs the crop by its labels, and '
+                f'{results.get("img_path", "this sample")} has none '
+                f'(gt_seg_map; LoadAnnotations before the crop), or set '
+                f'cat_max_ratio=1')
         return super().transform(results)
 
 

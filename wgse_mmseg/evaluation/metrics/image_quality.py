@@ -11,6 +11,8 @@ as ``value / 255``).
 import cv2
 import numpy as np
 
+from ...core.arguments import Integer, Number, declare
+from ...core.limits import MAX_IMAGE_SIDE
 from ...core.quality import as_unit_grey, entropy_2d
 
 __all__ = ['psnr', 'ssim', 'entropy_2d']
@@ -33,14 +35,23 @@ def psnr(pred, gt) -> float:
     return float('inf') if mse == 0 else float(10 * np.log10(1.0 / mse))
 
 
+#: the declared window of :func:`ssim` and :func:`gaussian_window`: an odd
+#: side (a centred window) and a finite standard deviation > 0
+WINDOW = dict(size=Integer(1, MAX_IMAGE_SIDE, odd=True),
+              sigma=Number(0, MAX_IMAGE_SIDE, strict_minimum=True))
+
+
+@declare(**WINDOW)
 def gaussian_window(size: int = 11, sigma: float = 1.5) -> np.ndarray:
     """``(size, size)`` Gaussian weights summing to 1 (MATLAB ``fspecial``)."""
     axis = np.arange(size, dtype=np.float64) - (size - 1) / 2
-    g = np.exp(-axis ** 2 / (2 * sigma ** 2))
+    with np.errstate(over='ignore'):  # a tiny sigma: weight 0 off centre
+        g = np.exp(-0.5 * (axis / sigma) ** 2)
     g /= g.sum()
     return np.outer(g, g)
 
 
+@declare(**WINDOW)
 def ssim(pred, gt, size: int = 11, sigma: float = 1.5) -> float:
     """Mean structural similarity (Wang et al., 2004), data range 1.
 
@@ -49,7 +60,8 @@ def ssim(pred, gt, size: int = 11, sigma: float = 1.5) -> float:
     (not sample) statistics, averaged over the windows that lie inside the
     image ('valid'); equals ``skimage.metrics.structural_similarity(...,
     gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
-    data_range=1)``.
+    data_range=1)``. ``size`` (odd, >= 1) and ``sigma`` (finite, > 0)
+    are checked: an error naming the parameter.
     """
     pred, gt = _pair(pred, gt)
     if min(pred.shape) < size:
@@ -60,7 +72,8 @@ def ssim(pred, gt, size: int = 11, sigma: float = 1.5) -> float:
 
     def local_mean(x):
         return cv2.filter2D(x, cv2.CV_64F, window,
-                            borderType=cv2.BORDER_REFLECT)[pad:-pad, pad:-pad]
+                            borderType=cv2.BORDER_REFLECT)[
+                                pad:x.shape[0] - pad, pad:x.shape[1] - pad]
 
     c1, c2 = _K1 ** 2, _K2 ** 2
     mu_x, mu_y = local_mean(pred), local_mean(gt)
