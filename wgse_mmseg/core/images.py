@@ -30,7 +30,6 @@ import os
 import struct
 from typing import Iterator, Tuple
 
-import cv2
 import numpy as np
 
 from .limits import MAX_IMAGE_SIDE, check_utf8_path
@@ -263,8 +262,12 @@ def _truncated(path: str, kind: str) -> bool:
     return b'\xff\xd9' not in tail
 
 
-def read_image(path: str, flags: int = cv2.IMREAD_UNCHANGED
-               ) -> np.ndarray:
+#: ``cv2.IMREAD_UNCHANGED`` and ``cv2.INTER_AREA``, without importing
+#: OpenCV where no image is read
+IMREAD_UNCHANGED, INTER_AREA = -1, 3
+
+
+def read_image(path: str, flags: int = IMREAD_UNCHANGED) -> np.ndarray:
     """``cv2.imread(path, flags)`` of a file checked first: a regular file
     (a FIFO would block the reader), of a kind :func:`image_size` reads,
     at most :data:`~wgse_mmseg.core.limits.MAX_IMAGE_SIDE` pixels a side
@@ -287,6 +290,7 @@ def read_image(path: str, flags: int = cv2.IMREAD_UNCHANGED
     if _truncated(path, kind):
         raise ImageFileError(f'{path}: a truncated {kind.upper()} (its end '
                              f'is missing); the file is incomplete')
+    import cv2
     image = cv2.imread(path, flags)
     if image is None:
         raise ImageFileError(f'{path}: a {kind.upper()} that OpenCV cannot '
@@ -295,7 +299,7 @@ def read_image(path: str, flags: int = cv2.IMREAD_UNCHANGED
 
 
 def fit_within(image: np.ndarray, max_side: int,
-               interpolation: int = cv2.INTER_AREA) -> np.ndarray:
+               interpolation: int = INTER_AREA) -> np.ndarray:
     """``image`` ``(H, W[, C])`` scaled down by one factor so that neither
     side exceeds ``max_side``, each side at least 1 pixel (a 100000x1
     image does not become 0 pixels wide); as it is where it fits."""
@@ -304,6 +308,7 @@ def fit_within(image: np.ndarray, max_side: int,
     if scale >= 1:
         return image
     size = (max(1, round(width * scale)), max(1, round(height * scale)))
+    import cv2
     return cv2.resize(image, size, interpolation=interpolation)
 
 
@@ -317,6 +322,7 @@ def read_grey_image(path: str) -> np.ndarray:
         ValueError: naming ``path``, for an image of another kind (module
             docstring).
     """
+    import cv2
     # full depth, grey or colour as stored, EXIF orientation applied
     image = read_image(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if image.ndim == 3:
