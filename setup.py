@@ -62,7 +62,10 @@ if __name__ == '__main__':
         long_description_content_type='text/markdown',
         license='Apache-2.0',
         python_requires='>=3.9',
-        packages=find_packages(include=['wgse_mmseg', 'wgse_mmseg.*']),
+        # the library, and beside it the measurement wing (benchmarks,
+        # experiment grids), which the library never imports
+        packages=find_packages(include=['wgse_mmseg', 'wgse_mmseg.*',
+                                        'wgse_bench', 'wgse_bench.*']),
         include_package_data=True,
         package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*', '.mim/**/**/**/*',
                                      'weights/*.pth', 'core/quality/data/*']},

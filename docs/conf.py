@@ -99,8 +99,9 @@ def _internal_reference(app, env, node, contnode):
     documented = re.search(r'docstring of ([\w.]+)', node.source or '')
     if documented:
         scopes.insert(0, documented.group(1))
-    if not any(scope.startswith('wgse_mmseg') for scope in scopes) and \
-            not target.startswith('wgse_mmseg'):
+    ours = ('wgse_mmseg', 'wgse_bench')
+    if not any(scope.startswith(ours) for scope in scopes) and \
+            not target.startswith(ours):
         return None
     return contnode if _existing(target, scopes) is not None else None
 

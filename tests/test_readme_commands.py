@@ -104,18 +104,18 @@ HOW = {
     'python tools/analysis_tools/benchmark.py configs/pspnet_wgse.py '
     'configs/pspnet_raw.py configs/segformer_b0_wgse.py '
     'configs/segformer_b0_raw.py --crop 64 128 --repeat 3 --cfg-options '
-    'num_steps=41': 'tests/apis/test_benchmarking.py::'
+    'num_steps=41': 'tests/bench/test_segmentation.py::'
     'test_cli_prints_the_table_and_writes_json',
     'python tools/analysis_tools/run_experiments.py '
     'configs/experiments/grid_cpu.py --data-root '
     'data/synthetic_spike_cityscapes --work-dir work_dirs/grid_cpu '
-    '--report-dir docs': 'tests/tools/test_run_experiments.py::'
+    '--report-dir docs': 'tests/bench/test_experiments.py::'
     'test_tiny_grid_end_to_end_and_resume',
     'python tools/analysis_tools/benchmark.py configs/pspnet_wgse.py '
     'configs/pspnet_raw.py configs/segformer_b0_wgse.py '
     'configs/segformer_b0_raw.py --crop 64 128 --repeat 3 --cfg-options '
     'num_steps=41 --out docs/configs_benchmark_cpu.json':
-        'tests/apis/test_benchmarking.py::'
+        'tests/bench/test_segmentation.py::'
         'test_cli_prints_the_table_and_writes_json',
     'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
     '203_part2_key_id151.dat --height 250 --width 400 --frames 100,150,200 '
@@ -125,9 +125,9 @@ HOW = {
     'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
     '203_part2_key_id151.dat --height 250 --width 400 --stride 30 --fps 4 '
     '--out walk.gif': RUN,
-    'python -m wgse_mmseg.apis.reconstruction_benchmark '
+    'python -m wgse_bench.reconstruction '
     '../shared/data/reds_sample': RUN,
-    'python -m wgse_mmseg.benchmarks.reconstruction '
+    'python -m wgse_bench.reconstruction '
     '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150': RUN,
     'bash tools/train_reconstruction.sh':
         'tests/tools/test_train_reconstruction.py::'
@@ -149,9 +149,9 @@ PRINTS = {
     '--out walk.gif': r'9 windows of 41 readouts centred on readouts '
                       r'30\.\.270 every 30 .* at the start 0, at the end 300'
                       r'\nwalk\.gif\nwalk\.csv',
-    'python -m wgse_mmseg.apis.reconstruction_benchmark '
+    'python -m wgse_bench.reconstruction '
     '../shared/data/reds_sample': r'\| WGSE \| \d\d\.\d\d \|',
-    'python -m wgse_mmseg.benchmarks.reconstruction '
+    'python -m wgse_bench.reconstruction '
     '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150':
         r'\| WGSE +\| +\d+\.\d+ \|',
 }
@@ -219,9 +219,9 @@ def test_readme_command_names_what_exists(command):
     checked by exists."""
     for word in shlex.split(command):
         value = word.split('=', 1)[-1]
-        if re.match(r'(tools|configs)/', value):
+        if re.match(r'(tools|dev|configs)/', value):
             assert osp.exists(osp.join(ROOT, value)), (command, value)
-        elif value.startswith('wgse_mmseg.'):
+        elif value.startswith(('wgse_mmseg.', 'wgse_bench.')):
             module = osp.join(ROOT, *value.split('.'))
             assert osp.isfile(module + '.py'), (command, value)
     how = HOW.get(command)
@@ -252,7 +252,7 @@ def _session(tmp_path):
 RUN_HERE = [c for c in readme_commands() if HOW.get(c) == RUN]
 #: the commands run here that take tens of seconds: ``long`` tests
 LONG = {'bash tools/quickstart.sh': 100,
-        'python -m wgse_mmseg.apis.reconstruction_benchmark '
+        'python -m wgse_bench.reconstruction '
         '../shared/data/reds_sample': 30,
         'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
         '203_part2_key_id151.dat --height 250 --width 400 --stride 30 --fps 4 '
@@ -260,7 +260,7 @@ LONG = {'bash tools/quickstart.sh': 100,
         'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
         '203_part2_key_id151.dat --height 250 --width 400 --frames '
         '100,150,200 --out recon/': 17,
-        'python -m wgse_mmseg.benchmarks.reconstruction '
+        'python -m wgse_bench.reconstruction '
         '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150': 17}
 
 

@@ -36,8 +36,8 @@ from .version import __version__
 _MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
                 'wgse_mmseg.evaluation', 'wgse_mmseg.models')
 #: the subpackages, imported where first used (a tool's ``--help`` needs none)
-_LAZY = ('apis', 'benchmarks', 'compat', 'core', 'data_generation',
-         'datasets', 'engine', 'evaluation', 'models', 'utils')
+_LAZY = ('apis', 'compat', 'core', 'data_generation', 'datasets', 'engine',
+         'evaluation', 'models', 'utils')
 
 
 def register_all_modules() -> None:

@@ -79,7 +79,7 @@ def require_openmmlab(what: str) -> None:
             f'{_stack_list()}. wgse_mmseg.core (spike I/O, wavelets, '
             f'representations, WGSE, the simulator) works without them; for '
             f'the rest run {_SETUP_HINT} or, on a GPU machine without '
-            f'network, `bash tools/gpu_bundle.sh install` (docs/wgse_speed.md).')
+            f'network, `bash dev/gpu_bundle.sh install` (docs/wgse_speed.md).')
     stacks = installed_stacks()
     if len(stacks) > 1:
         found = '; '.join(

@@ -31,7 +31,7 @@ import torch
 from wgse_mmseg.core.arguments import (NUM_STEPS, SIDE, Integer, SequenceOf,
                                        Text)
 from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
-from wgse_mmseg.benchmarks.simulator import header, load_rows, simulator_rows
+from wgse_bench.simulator import header, load_rows, simulator_rows
 from wgse_mmseg.data_generation.synthetic import render_street_scene
 
 
