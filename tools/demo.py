@@ -24,18 +24,11 @@ spike rate in that window (the highest rate is white), blended with
 
 ``--stride N`` walks the recording instead
 (:mod:`wgse_mmseg.core.recording_walk`): the window of ``num_steps``
-readouts centred on every ``N``-th readout (``0, N, 2N, ...``; those whose
-window does not fit at the ends are skipped and said so) is segmented,
-``--batch-size`` windows a model call, each exactly as the one-window demo
-segments its window, and its overlay becomes a frame of the video
+readouts centred on every ``N``-th readout is segmented as the one-window
+demo segments it, and its overlay becomes a frame of the video
 ``--out-file`` (``.mp4`` or ``.gif``; default ``<stem>_seg.mp4``), with
-``<out stem>.csv`` (window, centre readout, start, end, batch, time_ms) and,
-with ``--save-frames``, ``<out stem>_frames/*.png``. A progress bar goes to
-stderr. An interrupted walk re-run with the same arguments continues where
-it stopped (its state is in ``<out-file>.partial/``; a damaged frame there
-is made again); with other arguments it is refused, naming the differences.
-A second walk into the same video while one runs stops at once naming the
-first (process, host, command, start), or with ``--wait`` waits for it.
+``<out stem>.csv`` beside it; an interrupted walk re-run with the same
+arguments resumes (docs/user_guide.md, "Train and test", has the rest).
 
 ``--backend onnxruntime`` runs an exported model: CHECKPOINT is then the
 ``.onnx`` file (``OnnxSpikeSegmentor`` of ``wgse_mmseg.apis.onnx_segmentor``,

@@ -2,6 +2,7 @@
 argument or the file and what was expected (``SystemExit`` with a message),
 never a traceback."""
 import io
+import os
 import os.path as osp
 import runpy
 import sys
@@ -161,6 +162,10 @@ CASES = [
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
                              '--stride', '10', '--batch-size', '0'],
      'argument --batch-size: must be an integer >= 1 and <= 4096'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--height', '8'],
+     'error: --height and --width go together'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--width', '12'],
+     'error: --height and --width go together'),
 ]
 
 
@@ -171,3 +176,31 @@ def test_bad_input_gives_a_one_line_error(tool, args, expected, files,
     args = [a.format(t=files) for a in args]
     message = _run(tool, args, monkeypatch)
     assert expected.format(t=files) in message, message
+
+
+def test_the_figure_tool_pairs_height_and_width(load_tool, files, capsys):
+    """The maintainers' figure tool shares the same check (written once,
+    ``core.arguments.check_frame_size``)."""
+    tool = load_tool('dev/make_reconstruction_figure.py')
+    with pytest.raises(SystemExit) as info:
+        tool.parse_args([str(files / 'ok.npy'), '--out',
+                         str(files / 'fig.png'), '--height', '8'])
+    assert info.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(
+        'error: --height and --width go together')
+
+
+@pytest.mark.parametrize('room', ['tools', 'dev'])
+def test_every_tool_is_at_most_300_lines(room):
+    """A tool is a thin command line; what it needs beyond that belongs in
+    the package, once."""
+    long = {}
+    for folder, _, names in os.walk(osp.join(ROOT, room)):
+        for name in names:
+            if name.endswith(('.py', '.sh')):
+                path = osp.join(folder, name)
+                with open(path, encoding='utf-8') as f:
+                    lines = sum(1 for _ in f)
+                if lines > 300:
+                    long[osp.relpath(path, ROOT)] = lines
+    assert not long, long
