@@ -14,7 +14,8 @@ import re
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 ROLE = re.compile(r':(?:mod|func|class|data|meth|attr):`~?([A-Za-z_.][\w.]*)`')
 PATH = re.compile(r'(?<![\w./-])((?:tests|tools|dev|docs|configs|'
-                  r'wgse_mmseg|wgse_bench)/[\w./-]*\.(?:py|md|sh|c|json))')
+                  r'wgse_mmseg|wgse_bench)/[\w./-]*\.(?:py|md|sh|c|json))'
+                  r'(?![\w])')  # whole extensions: .csv is not .c
 SOURCES = sorted(path for folder in ('wgse_mmseg', 'wgse_bench', 'tools',
                                      'dev')
                  for path in glob.glob(osp.join(ROOT, folder, '**', '*.py'),

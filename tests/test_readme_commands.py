@@ -1,7 +1,10 @@
-"""Every command the README gives works as written, in the README's install
-mode (``tools/setup_env.sh``'s editable install in ``.venv``).
+"""Every command the README and the pages its sections moved to give works
+as written, in the README's install mode (``tools/setup_env.sh``'s editable
+install in ``.venv``).
 
-Each command of the README's ``bash`` blocks (continuation lines joined,
+The pages are :data:`PAGES`: the README and the docs pages that hold what it
+held before it was cut to the OpenMMLab projects' form (install, user guide,
+security, troubleshooting, known limits). Each command of their ``bash`` blocks (continuation lines joined,
 comments and ``[optional]`` parts left out) must have an entry in
 :data:`HOW`, keyed by its exact text, saying how it is checked:
 
@@ -14,7 +17,7 @@ comments and ``[optional]`` parts left out) must have an entry in
 
 A command added or changed in the README without an entry here, an entry
 whose command is gone, a repository path a command names that does not
-exist, or a node id that names no test fails. The README's Python examples
+exist, or a node id that names no test fails. The pages' Python examples
 run as written.
 """
 import ast
@@ -30,7 +33,9 @@ import numpy as np
 import pytest
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
-README = osp.join(ROOT, 'README.md')
+#: the pages whose commands are checked here, each path from the root
+PAGES = ('README.md', 'docs/install.md', 'docs/user_guide.md',
+         'docs/security.md', 'docs/troubleshooting.md', 'docs/known_limits.md')
 BIN = osp.dirname(sys.executable)
 SHARED = osp.normpath(osp.join(ROOT, '..', 'shared'))
 
@@ -65,6 +70,7 @@ HOW = {
     'source .venv-onedl/bin/activate': RUN,
     'CONFIG=configs/pspnet_wgse.py': RUN,
     'python tools/train.py $CONFIG': TRAIN_TESTS,
+    'mim train wgse_mmseg $CONFIG': TRAIN_TESTS,
     'python tools/train.py $CONFIG --resume': TRAIN_TESTS,
     'python tools/test.py $CONFIG work_dirs/pspnet_wgse/epoch_100.pth':
         TRAIN_TESTS,
@@ -184,20 +190,23 @@ INPUTS = {
 
 
 def _blocks(language):
-    text = open(README, encoding='utf-8').read()
-    return re.findall(rf'^```{language}\n(.*?)^```', text, re.S | re.M)
+    blocks = []
+    for page in PAGES:
+        text = open(osp.join(ROOT, page), encoding='utf-8').read()
+        blocks += re.findall(rf'^```{language}\n(.*?)^```', text, re.S | re.M)
+    return blocks
 
 
 def readme_commands():
-    """The README's shell commands: continuation lines joined, comments and
-    ``[optional]`` parts left out, whitespace collapsed."""
+    """The pages' shell commands, each once: continuation lines joined,
+    comments and ``[optional]`` parts left out, whitespace collapsed."""
     commands = []
     for block in _blocks('bash'):
         for line in block.replace('\\\n', ' ').splitlines():
             line = re.sub(r'\s#.*$', '', line)  # comments
             line = re.sub(r'\[[^\]]*\]', '', line)  # [optional] parts
             line = ' '.join(line.split())
-            if line:
+            if line and line not in commands:
                 commands.append(line)
     return commands
 
@@ -301,8 +310,8 @@ def test_readme_command_runs(command, tmp_path):
         assert re.search(PRINTS[command], log), f'{command}:\n{log[-3000:]}'
 
 
-@pytest.mark.parametrize('block', [b for b in _blocks('python')
-                                   if not b.startswith('_base_')])
+@pytest.mark.parametrize('block', list(dict.fromkeys(
+    b for b in _blocks('python') if not b.startswith('_base_'))))
 def test_readme_python_example_runs(block, tmp_path):
     """The README's Python examples run as written, in a fresh process;
     config excerpts (``_base_ = ...``) are checked by the config tests."""

@@ -27,7 +27,7 @@ __all__ = []
 #: the import names of the stack
 OPENMMLAB = ('mmengine', 'mmcv', 'mmseg')
 #: stack (``STACK=`` of tools/setup_env.sh) -> import name -> the
-#: distributions that provide it (README "Install")
+#: distributions that provide it (docs/install.md)
 STACKS = {
     'openmmlab': {'mmengine': ('mmengine',), 'mmcv': ('mmcv-lite', 'mmcv'),
                   'mmseg': ('mmsegmentation',)},

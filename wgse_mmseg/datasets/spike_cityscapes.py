@@ -21,7 +21,7 @@ _VERIFY_MODES = ('size', 'full', 'none')
 class SpikeCityscapesDataset(CityscapesDataset):
     """Spike streams beside Cityscapes' fine labels (19 classes, palette).
 
-    Layout under ``data_root`` (README, "Spike-Cityscapes")::
+    Layout under ``data_root`` (docs/user_guide.md, "Spike-Cityscapes layout")::
 
         spike/{train,val}/<city>/<city>_<seq>_<frame>_spike.spk
         spike/{train,val}/<city>/<city>_<seq>_<frame>_spike.json  marker
@@ -68,8 +68,8 @@ class SpikeCityscapesDataset(CityscapesDataset):
                 raise FileNotFoundError(
                     f'SpikeCityscapesDataset: {folder} ({key} under '
                     f'data_root={self.data_root!r}) is not a directory; set '
-                    f'data_root to a Spike-Cityscapes root (README, '
-                    f'"Spike-Cityscapes layout") or make one with '
+                    f'data_root to a Spike-Cityscapes root (docs/'
+                    f'user_guide.md, "Spike-Cityscapes layout") or make one with '
                     f'tools/dataset_converters/spike_cityscapes.py')
         listed = self._listing()
         served, problems = [], Counter()
