@@ -72,10 +72,10 @@ def measure_deployment(name: str, config: str,
 
     Returns:
         ``name``, ``config``, ``shape``, ``batch_size``, ``threads``, per
-        backend of :data:`BACKENDS` the call's wall and CPU seconds
-        (``seconds``, ``cpu_seconds``: :func:`~.timing.summarize`) and
+        backend (torch eager and ONNX Runtime) the call's wall and CPU
+        seconds (``seconds``, ``cpu_seconds``: median and MAD) and
         ``windows_per_s`` (batch over the median wall time), and the machine
-        (:func:`~.machine.machine_record`). ``repeat`` and ``warmup`` are
+        (device, CPU, load, versions). ``repeat`` and ``warmup`` are
         :func:`~.timing.time_calls`'s, checked before anything is built.
     """
     time_calls(lambda: None, 'cpu', repeat, warmup)  # their checks, first

@@ -437,7 +437,7 @@ def run_report(plan: Plan, root: str, targets: Targets,
                models: Optional[Dict[str, Tuple[str, str]]] = None
                ) -> Dict[str, Any]:
     """Measure every section of the module docstring; ``root`` is the
-    repository (where the configs of ``models``, default :data:`MODELS`,
+    repository (where the configs of ``models``, default PSPNet and SegFormer-B0,
     are), ``targets`` what the figures are judged against. Returns the
     JSON-ready report."""
     models = MODELS if models is None else models

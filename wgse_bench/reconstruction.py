@@ -249,8 +249,8 @@ def score_recording(path: str, methods: Sequence[str] = METHODS,
     """No-reference scores of each method on a recording without ground
     truth: ``{method: {'NIQE', 'BRISQUE', 'Entropy2D', 'gain'}}``, means
     over the centre ``frames`` (default: the middle frame; ``None`` for a
-    measure undefined on any of them, see
-    :func:`~wgse_mmseg.core.quality.no_reference_scores`).
+    measure undefined on any of them, as the package's no-reference
+    measures define them).
 
     Each image is scored as ``tools/misc/reconstruct.py`` writes it: the
     method's output at ``exposure`` (``'auto'``, ``'none'`` or a gain;

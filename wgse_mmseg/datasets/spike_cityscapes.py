@@ -34,7 +34,7 @@ class SpikeCityscapesDataset(CityscapesDataset):
 
     Complete or absent: the converter and the synthetic dataset write, last,
     a marker ``<name>_spike.json`` recording the size and SHA-256 of the
-    spike file and label their run wrote (:mod:`wgse_mmseg.core.markers`).
+    spike file and label their run wrote.
     Only samples whose marker matches are served; the others (a run killed
     mid-sample, a re-run with other settings killed after writing one of
     the files) are skipped, and how many and why is logged and kept in
