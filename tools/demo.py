@@ -196,7 +196,8 @@ def onnx_segmentor(path: str, device: str):
 
 def walk(args, cfg) -> None:
     """``--stride``: segment a window every ``args.stride`` readouts into
-    the video ``args.out_file`` (:func:`walk_recording`)."""
+    the video ``args.out_file``
+    (:func:`~wgse_mmseg.core.recording_walk.walk_recording`)."""
     import torch
 
     from wgse_mmseg.apis.window_segmentor import (PipelineSegmentor,
