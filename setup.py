@@ -3,7 +3,7 @@
 Like MMSegmentation, the package carries its ``configs/`` and ``tools/`` inside
 ``wgse_mmseg/.mim/`` so that ``mim train wgse_mmseg configs/<config>.py``
 finds both from a regular install. A regular build copies them there. The
-editable installs of the two stacks' mims differ (README "Install"):
+editable installs of the two stacks' mims differ (docs/install.md):
 OpenMMLab's mim 0.3.8 looks in ``wgse_mmseg/.mim`` of an egg-link install
 (``setup.py develop``), so that links them and edits take effect at once;
 onedl-mim takes a PEP 660 install (``editable_wheel``) to be this checkout,
@@ -62,13 +62,16 @@ if __name__ == '__main__':
         long_description_content_type='text/markdown',
         license='Apache-2.0',
         python_requires='>=3.9',
-        packages=find_packages(include=['wgse_mmseg', 'wgse_mmseg.*']),
+        # the library, and beside it the measurement wing (benchmarks,
+        # experiment grids), which the library never imports
+        packages=find_packages(include=['wgse_mmseg', 'wgse_mmseg.*',
+                                        'wgse_bench', 'wgse_bench.*']),
         include_package_data=True,
         package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*', '.mim/**/**/**/*',
                                      'weights/*.pth', 'core/quality/data/*']},
         # The OpenMMLab stack is an extra, one per stack: both publish the
         # import packages mmseg, mmengine, mmcv and mim, so naming one here
-        # would install it over the other (README "Install";
+        # would install it over the other (docs/install.md;
         # tools/setup_env.sh pins either). The MMSeg layer says at import
         # which is missing (wgse_mmseg._openmmlab.require_openmmlab).
         install_requires=[

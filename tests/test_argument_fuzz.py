@@ -22,24 +22,32 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import wgse_bench
 import wgse_mmseg
 from wgse_mmseg.core.arguments import LAYOUT, ArgumentError, Choice, Path
 from wgse_mmseg.data_generation.cityscapes_conversion import ConversionSettings
 
 wgse_mmseg.register_all_modules()
 
+#: the packages whose entry points are fuzzed
+PACKAGES = (wgse_mmseg, wgse_bench)
+PACKAGE_NAMES = tuple(package.__name__ for package in PACKAGES)
+
 
 def _declared_entry_points():
     """``(callable, declaration)`` of every entry point that :func:`declare`
-    checks, found in every module of the package: a function, or a class
-    whose ``__init__`` is declared, defined in the module that holds it (a
-    module whose optional dependency is absent is skipped)."""
+    checks, found in every module of the library and of the measurement
+    wing: a function, or a class whose ``__init__`` is declared, defined in
+    the module that holds it (a module whose optional dependency is absent
+    is skipped)."""
     found = []
-    for info in pkgutil.walk_packages(wgse_mmseg.__path__, 'wgse_mmseg.'):
+    infos = [info for package in PACKAGES for info in pkgutil.walk_packages(
+        package.__path__, package.__name__ + '.')]
+    for info in infos:
         try:
             module = importlib.import_module(info.name)
         except ModuleNotFoundError as err:
-            if err.name and err.name.split('.')[0] != 'wgse_mmseg':
+            if err.name and err.name.split('.')[0] not in PACKAGE_NAMES:
                 continue
             raise
         for value in vars(module).values():
@@ -258,7 +266,8 @@ def test_bad_arguments(call, declaration, name, single_thread,
             assert accepted or (isinstance(value, str) and value in message) \
                 or name in message, f'{type(err).__name__}: {message}'
             raised_in = _traceback_files(err)[-1]
-            assert 'wgse_mmseg' in raised_in, (raised_in, message)
+            assert any(package in raised_in for package in PACKAGE_NAMES), (
+                raised_in, message)
         else:
             assert accepted, (
                 f'{declaration.entry}({name}={value!r}) was accepted but '

@@ -1,8 +1,9 @@
 """Every cross-reference in the package's docstrings and the docs points at
 something that exists: Sphinx roles (``:mod:``, ``:func:``, ``:class:``,
-``:data:``, ``:meth:``) naming ``wgse_mmseg`` objects resolve, and the
-repository paths they mention (``tests/...``, ``tools/...``, ``docs/...``,
-``configs/...``, ``wgse_mmseg/...``) are there."""
+``:data:``, ``:meth:``) naming ``wgse_mmseg`` or ``wgse_bench`` objects
+resolve, and the repository paths they mention (``tests/...``,
+``tools/...``, ``dev/...``, ``docs/...``, ``configs/...``,
+``wgse_mmseg/...``, ``wgse_bench/...``) are there."""
 import ast
 import glob
 import importlib
@@ -12,12 +13,13 @@ import re
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 ROLE = re.compile(r':(?:mod|func|class|data|meth|attr):`~?([A-Za-z_.][\w.]*)`')
-PATH = re.compile(r'(?<![\w./-])((?:tests|tools|docs|configs|wgse_mmseg)'
-                  r'/[\w./-]*\.(?:py|md|sh|c|json))')
-SOURCES = sorted(glob.glob(osp.join(ROOT, 'wgse_mmseg', '**', '*.py'),
-                           recursive=True) +
-                 glob.glob(osp.join(ROOT, 'tools', '**', '*.py'),
-                           recursive=True))
+PATH = re.compile(r'(?<![\w./-])((?:tests|tools|dev|docs|configs|'
+                  r'wgse_mmseg|wgse_bench)/[\w./-]*\.(?:py|md|sh|c|json))'
+                  r'(?![\w])')  # whole extensions: .csv is not .c
+SOURCES = sorted(path for folder in ('wgse_mmseg', 'wgse_bench', 'tools',
+                                     'dev')
+                 for path in glob.glob(osp.join(ROOT, folder, '**', '*.py'),
+                                       recursive=True))
 DOCS = sorted(glob.glob(osp.join(ROOT, 'docs', '*.md')) +
               [osp.join(ROOT, 'README.md')])
 
@@ -66,7 +68,7 @@ def _references():
         package = _package(path)
         for doc in _docstrings(path):
             for name in ROLE.findall(doc):
-                if name.startswith(('wgse_mmseg', '.')):
+                if name.startswith(('wgse_mmseg', 'wgse_bench', '.')):
                     yield path, package, name, None
                 elif '.' not in name:  # a name of this module or its classes
                     yield path, _module_name(path), name, 'local'

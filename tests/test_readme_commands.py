@@ -1,7 +1,10 @@
-"""Every command the README gives works as written, in the README's install
-mode (``tools/setup_env.sh``'s editable install in ``.venv``).
+"""Every command the README and the pages its sections moved to give works
+as written, in the README's install mode (``tools/setup_env.sh``'s editable
+install in ``.venv``).
 
-Each command of the README's ``bash`` blocks (continuation lines joined,
+The pages are :data:`PAGES`: the README and the docs pages that hold what it
+held before it was cut to the OpenMMLab projects' form (install, user guide,
+security, troubleshooting, known limits). Each command of their ``bash`` blocks (continuation lines joined,
 comments and ``[optional]`` parts left out) must have an entry in
 :data:`HOW`, keyed by its exact text, saying how it is checked:
 
@@ -14,7 +17,7 @@ comments and ``[optional]`` parts left out) must have an entry in
 
 A command added or changed in the README without an entry here, an entry
 whose command is gone, a repository path a command names that does not
-exist, or a node id that names no test fails. The README's Python examples
+exist, or a node id that names no test fails. The pages' Python examples
 run as written.
 """
 import ast
@@ -30,7 +33,9 @@ import numpy as np
 import pytest
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
-README = osp.join(ROOT, 'README.md')
+#: the pages whose commands are checked here, each path from the root
+PAGES = ('README.md', 'docs/install.md', 'docs/user_guide.md',
+         'docs/security.md', 'docs/troubleshooting.md', 'docs/known_limits.md')
 BIN = osp.dirname(sys.executable)
 SHARED = osp.normpath(osp.join(ROOT, '..', 'shared'))
 
@@ -65,6 +70,7 @@ HOW = {
     'source .venv-onedl/bin/activate': RUN,
     'CONFIG=configs/pspnet_wgse.py': RUN,
     'python tools/train.py $CONFIG': TRAIN_TESTS,
+    'mim train wgse_mmseg $CONFIG': TRAIN_TESTS,
     'python tools/train.py $CONFIG --resume': TRAIN_TESTS,
     'python tools/test.py $CONFIG work_dirs/pspnet_wgse/epoch_100.pth':
         TRAIN_TESTS,
@@ -104,18 +110,18 @@ HOW = {
     'python tools/analysis_tools/benchmark.py configs/pspnet_wgse.py '
     'configs/pspnet_raw.py configs/segformer_b0_wgse.py '
     'configs/segformer_b0_raw.py --crop 64 128 --repeat 3 --cfg-options '
-    'num_steps=41': 'tests/apis/test_benchmarking.py::'
+    'num_steps=41': 'tests/bench/test_segmentation.py::'
     'test_cli_prints_the_table_and_writes_json',
     'python tools/analysis_tools/run_experiments.py '
     'configs/experiments/grid_cpu.py --data-root '
     'data/synthetic_spike_cityscapes --work-dir work_dirs/grid_cpu '
-    '--report-dir docs': 'tests/tools/test_run_experiments.py::'
+    '--report-dir docs': 'tests/bench/test_experiments.py::'
     'test_tiny_grid_end_to_end_and_resume',
     'python tools/analysis_tools/benchmark.py configs/pspnet_wgse.py '
     'configs/pspnet_raw.py configs/segformer_b0_wgse.py '
     'configs/segformer_b0_raw.py --crop 64 128 --repeat 3 --cfg-options '
     'num_steps=41 --out docs/configs_benchmark_cpu.json':
-        'tests/apis/test_benchmarking.py::'
+        'tests/bench/test_segmentation.py::'
         'test_cli_prints_the_table_and_writes_json',
     'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
     '203_part2_key_id151.dat --height 250 --width 400 --frames 100,150,200 '
@@ -125,9 +131,9 @@ HOW = {
     'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
     '203_part2_key_id151.dat --height 250 --width 400 --stride 30 --fps 4 '
     '--out walk.gif': RUN,
-    'python -m wgse_mmseg.apis.reconstruction_benchmark '
+    'python -m wgse_bench.reconstruction '
     '../shared/data/reds_sample': RUN,
-    'python -m wgse_mmseg.benchmarks.reconstruction '
+    'python -m wgse_bench.reconstruction '
     '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150': RUN,
     'bash tools/train_reconstruction.sh':
         'tests/tools/test_train_reconstruction.py::'
@@ -149,9 +155,9 @@ PRINTS = {
     '--out walk.gif': r'9 windows of 41 readouts centred on readouts '
                       r'30\.\.270 every 30 .* at the start 0, at the end 300'
                       r'\nwalk\.gif\nwalk\.csv',
-    'python -m wgse_mmseg.apis.reconstruction_benchmark '
+    'python -m wgse_bench.reconstruction '
     '../shared/data/reds_sample': r'\| WGSE \| \d\d\.\d\d \|',
-    'python -m wgse_mmseg.benchmarks.reconstruction '
+    'python -m wgse_bench.reconstruction '
     '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150':
         r'\| WGSE +\| +\d+\.\d+ \|',
 }
@@ -184,20 +190,23 @@ INPUTS = {
 
 
 def _blocks(language):
-    text = open(README, encoding='utf-8').read()
-    return re.findall(rf'^```{language}\n(.*?)^```', text, re.S | re.M)
+    blocks = []
+    for page in PAGES:
+        text = open(osp.join(ROOT, page), encoding='utf-8').read()
+        blocks += re.findall(rf'^```{language}\n(.*?)^```', text, re.S | re.M)
+    return blocks
 
 
 def readme_commands():
-    """The README's shell commands: continuation lines joined, comments and
-    ``[optional]`` parts left out, whitespace collapsed."""
+    """The pages' shell commands, each once: continuation lines joined,
+    comments and ``[optional]`` parts left out, whitespace collapsed."""
     commands = []
     for block in _blocks('bash'):
         for line in block.replace('\\\n', ' ').splitlines():
             line = re.sub(r'\s#.*$', '', line)  # comments
             line = re.sub(r'\[[^\]]*\]', '', line)  # [optional] parts
             line = ' '.join(line.split())
-            if line:
+            if line and line not in commands:
                 commands.append(line)
     return commands
 
@@ -219,9 +228,9 @@ def test_readme_command_names_what_exists(command):
     checked by exists."""
     for word in shlex.split(command):
         value = word.split('=', 1)[-1]
-        if re.match(r'(tools|configs)/', value):
+        if re.match(r'(tools|dev|configs)/', value):
             assert osp.exists(osp.join(ROOT, value)), (command, value)
-        elif value.startswith('wgse_mmseg.'):
+        elif value.startswith(('wgse_mmseg.', 'wgse_bench.')):
             module = osp.join(ROOT, *value.split('.'))
             assert osp.isfile(module + '.py'), (command, value)
     how = HOW.get(command)
@@ -252,7 +261,7 @@ def _session(tmp_path):
 RUN_HERE = [c for c in readme_commands() if HOW.get(c) == RUN]
 #: the commands run here that take tens of seconds: ``long`` tests
 LONG = {'bash tools/quickstart.sh': 100,
-        'python -m wgse_mmseg.apis.reconstruction_benchmark '
+        'python -m wgse_bench.reconstruction '
         '../shared/data/reds_sample': 30,
         'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
         '203_part2_key_id151.dat --height 250 --width 400 --stride 30 --fps 4 '
@@ -260,7 +269,7 @@ LONG = {'bash tools/quickstart.sh': 100,
         'python tools/misc/reconstruct.py ../shared/data/reds_sample/spike/'
         '203_part2_key_id151.dat --height 250 --width 400 --frames '
         '100,150,200 --out recon/': 17,
-        'python -m wgse_mmseg.benchmarks.reconstruction '
+        'python -m wgse_bench.reconstruction '
         '../shared/data/real/uhsr_helicopter.npz --frames 50,100,150': 17}
 
 
@@ -301,8 +310,8 @@ def test_readme_command_runs(command, tmp_path):
         assert re.search(PRINTS[command], log), f'{command}:\n{log[-3000:]}'
 
 
-@pytest.mark.parametrize('block', [b for b in _blocks('python')
-                                   if not b.startswith('_base_')])
+@pytest.mark.parametrize('block', list(dict.fromkeys(
+    b for b in _blocks('python') if not b.startswith('_base_'))))
 def test_readme_python_example_runs(block, tmp_path):
     """The README's Python examples run as written, in a fresh process;
     config excerpts (``_base_ = ...``) are checked by the config tests."""

@@ -7,35 +7,23 @@ or walk a recording into a video of overlays.
         [--backend pytorch|onnxruntime]
         [--stride N [--batch-size 8] [--fps 10] [--save-frames]]
 
-``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.spk``, ``.npy``,
-``.npz``; ``.dat`` needs ``--height``/``--width`` or a ``<file>.json`` side
-file). It goes through the config's test pipeline, so ``LoadSpikeFromFile``
-takes the window of ``num_steps`` frames centred on the middle frame, exactly
-as in testing; a stream shorter than ``num_steps`` is an error naming the file
-and both numbers (``--cfg-options num_steps=T`` sets the model's ``T``).
-An ``.npy``/``.npz`` that does not record its layout needs ``--layout THW``
-or ``HWT`` (or a ``layout`` in the config's ``LoadSpikeFromFile``).
+``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat`` needs
+``--height``/``--width`` or a side file; an ``.npy``/``.npz`` without its
+layout, ``--layout``). The config's test pipeline takes the window of
+``num_steps`` frames centred on the middle frame, as in testing
+(``--cfg-options num_steps=T`` sets the model's ``T``).
 
-The prediction is painted in the dataset's palette (from the checkpoint's
-``dataset_meta``, else Spike-Cityscapes') over a grey image of the stream's
-spike rate in that window (the highest rate is white), blended with
-``--opacity``, and written as a PNG to ``--out-file`` (default
-``<stem>_seg.png`` in the current directory). The path is printed.
+The prediction, in the dataset's palette, is blended (``--opacity``) over
+the window's spike rate and written as a PNG to ``--out-file`` (default
+``<stem>_seg.png`` here); the path is printed.
 
 ``--stride N`` walks the recording instead
 (:mod:`wgse_mmseg.core.recording_walk`): the window of ``num_steps``
-readouts centred on every ``N``-th readout (``0, N, 2N, ...``; those whose
-window does not fit at the ends are skipped and said so) is segmented,
-``--batch-size`` windows a model call, each exactly as the one-window demo
-segments its window, and its overlay becomes a frame of the video
+readouts centred on every ``N``-th readout is segmented as the one-window
+demo segments it, and its overlay becomes a frame of the video
 ``--out-file`` (``.mp4`` or ``.gif``; default ``<stem>_seg.mp4``), with
-``<out stem>.csv`` (window, centre readout, start, end, batch, time_ms) and,
-with ``--save-frames``, ``<out stem>_frames/*.png``. A progress bar goes to
-stderr. An interrupted walk re-run with the same arguments continues where
-it stopped (its state is in ``<out-file>.partial/``; a damaged frame there
-is made again); with other arguments it is refused, naming the differences.
-A second walk into the same video while one runs stops at once naming the
-first (process, host, command, start), or with ``--wait`` waits for it.
+``<out stem>.csv`` beside it; an interrupted walk re-run with the same
+arguments resumes (docs/user_guide.md, "Train and test", has the rest).
 
 ``--backend onnxruntime`` runs an exported model: CHECKPOINT is then the
 ``.onnx`` file (``OnnxSpikeSegmentor`` of ``wgse_mmseg.apis.onnx_segmentor``,

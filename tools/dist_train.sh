@@ -7,7 +7,7 @@
 # One process per GPU; the batch in the config is per process (MMSeg's convention:
 # 8 GPUs x batch 2 is a total batch of 16), and BN becomes SyncBN (`sync_bn` in
 # configs/_base_/default_runtime.py). Without CUDA the processes run on the CPU with
-# gloo: the way to try a multi-process run without GPUs (README "Distributed").
+# gloo: the way to try a multi-process run without GPUs (docs/user_guide.md, "Train and test").
 # Variables: NNODES (1), NODE_RANK (0), MASTER_ADDR (127.0.0.1), PORT (29500),
 # PYTHON (python).
 set -euo pipefail

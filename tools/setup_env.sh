@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Create (or bring up to date) a virtual environment with one of the two
-# OpenMMLab stacks the package runs on (README "Install"):
+# OpenMMLab stacks the package runs on (docs/install.md):
 #
 #   bash tools/setup_env.sh                  # STACK=openmmlab in .venv: OpenMMLab's final releases
 #   STACK=onedl bash tools/setup_env.sh      # the maintained onedl-* fork, in .venv-onedl

@@ -64,5 +64,5 @@ export_weights(last, out)
 print(f'exported {last} -> {out}')
 PY
 if [ -d "$REDS_TEST" ]; then
-    "$PY" -m wgse_mmseg.benchmarks.reconstruction "$REDS_TEST" --checkpoint "$OUT"
+    "$PY" -m wgse_bench.reconstruction "$REDS_TEST" --checkpoint "$OUT"
 fi

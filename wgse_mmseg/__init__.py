@@ -36,16 +36,16 @@ from .version import __version__
 _MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
                 'wgse_mmseg.evaluation', 'wgse_mmseg.models')
 #: the subpackages, imported where first used (a tool's ``--help`` needs none)
-_LAZY = ('apis', 'benchmarks', 'compat', 'core', 'data_generation',
-         'datasets', 'engine', 'evaluation', 'models', 'utils')
+_LAZY = ('apis', 'compat', 'core', 'data_generation', 'datasets', 'engine',
+         'evaluation', 'models', 'utils')
 
 
 def register_all_modules() -> None:
     """Set up the MMSeg layer: apply the compatibility patches (once per
-    process; :func:`wgse_mmseg._openmmlab.prepare_mmseg_layer`), then
-    register every module of the package with MMSeg's registries (import
-    :data:`_MMSEG_LAYER`). Call it before importing MMSeg or a layer
-    package."""
+    process), then register every module of the package with MMSeg's
+    registries (its datasets, transforms, models, metrics, runner and hooks).
+    Call it before importing MMSeg or a layer package; a config does the
+    same by naming ``wgse_mmseg.mmseg_layer`` in ``custom_imports``."""
     from ._openmmlab import prepare_mmseg_layer
     prepare_mmseg_layer()
     for name in _MMSEG_LAYER:

@@ -27,7 +27,7 @@ __all__ = []
 #: the import names of the stack
 OPENMMLAB = ('mmengine', 'mmcv', 'mmseg')
 #: stack (``STACK=`` of tools/setup_env.sh) -> import name -> the
-#: distributions that provide it (README "Install")
+#: distributions that provide it (docs/install.md)
 STACKS = {
     'openmmlab': {'mmengine': ('mmengine',), 'mmcv': ('mmcv-lite', 'mmcv'),
                   'mmseg': ('mmsegmentation',)},
@@ -79,7 +79,7 @@ def require_openmmlab(what: str) -> None:
             f'{_stack_list()}. wgse_mmseg.core (spike I/O, wavelets, '
             f'representations, WGSE, the simulator) works without them; for '
             f'the rest run {_SETUP_HINT} or, on a GPU machine without '
-            f'network, `bash tools/gpu_bundle.sh install` (docs/wgse_speed.md).')
+            f'network, `bash dev/gpu_bundle.sh install` (docs/wgse_speed.md).')
     stacks = installed_stacks()
     if len(stacks) > 1:
         found = '; '.join(

@@ -342,7 +342,7 @@ def test_measure_deployment_times_both_backends(exported, monkeypatch):
     windows per second the batch over the median call, the machine named.
     Its export is the module's file of the same model (seed 0 both), as the
     exporter would write it (the export itself is checked above)."""
-    from wgse_mmseg.benchmarks import deployment
+    from wgse_bench import deployment
     exports = []
 
     def export(graph, path, num_steps, height, width):

@@ -825,7 +825,7 @@ def test_any_window_arguments_read_or_name_the_problem(ext, start, length):
 
 # ------------------------------------------------------ the format registry
 def test_the_registry_is_the_one_list_of_formats():
-    from wgse_mmseg.benchmarks import simulator
+    from wgse_bench import simulator
     assert spike_io.SPIKE_EXTENSIONS == tuple(spike_io.SPIKE_FORMATS) == (
         '.dat', '.spk', '.npy', '.npz')
     for ext, fmt in spike_io.SPIKE_FORMATS.items():

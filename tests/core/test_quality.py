@@ -229,7 +229,7 @@ def test_the_measures_need_no_openmmlab(without_openmmlab, tmp_path):
 
 # ------------------------------------------- the model files' extraction
 def test_extraction_refuses_a_pickle_that_imports(load_tool):
-    tool = load_tool('tools/misc/extract_quality_models.py')
+    tool = load_tool('dev/extract_quality_models.py')
     plain = {'min_': [0.5] * 36, 'max_': [1.5] * 36}
     assert tool.feature_range(pickle.dumps(plain)) == {
         'min': [0.5] * 36, 'max': [1.5] * 36}
@@ -240,7 +240,7 @@ def test_extraction_refuses_a_pickle_that_imports(load_tool):
 
 
 def test_extraction_parses_libsvm_text_and_writes_a_fixed_npz(load_tool):
-    tool = load_tool('tools/misc/extract_quality_models.py')
+    tool = load_tool('dev/extract_quality_models.py')
     text = ('svm_type epsilon_svr\nkernel_type rbf\ngamma 0.05\nnr_class 2\n'
             'total_sv 2\nrho -1.5\nSV\n-1024 1:0.25 36:-0.5 \n'
             '3.5 2:0.125 \n')

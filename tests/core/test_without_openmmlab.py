@@ -77,7 +77,7 @@ BENCHMARKS = '''
 import json, sys
 from types import SimpleNamespace
 import numpy as np
-from wgse_mmseg.benchmarks import gpu_report, machine, simulator, timing, wgse
+from wgse_bench import gpu_report, machine, simulator, timing, wgse
 args = SimpleNamespace(height=6, width=8, steps=12, repeat=1, device='cpu',
                        load_shape=(12, 6, 8))
 frames = np.random.default_rng(0).random((3, 6, 8))

@@ -23,7 +23,7 @@ from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
 from wgse_mmseg.data_generation.views import render_trajectory
 from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
                                    gaussian_window, psnr, ssim)
-from wgse_mmseg.benchmarks.reconstruction import (benchmark, format_table,
+from wgse_bench.reconstruction import (benchmark, format_table,
                                                   main, multiply_adds,
                                                   score_recording)
 from wgse_mmseg.core.quality import no_reference_scores
@@ -678,7 +678,7 @@ def test_figure_tool_grid(tmp_path, load_tool):
         np.uint8)
     save_spikes(str(tmp_path / 'clip.npy'), spikes)
     out = str(tmp_path / 'fig.png')
-    load_tool('tools/misc/make_reconstruction_figure.py').main(
+    load_tool('dev/make_reconstruction_figure.py').main(
         [str(tmp_path / 'clip.npy'), '--out', out, '--methods', 'tfp,tfi',
          '--count', '3', '--scale', '2'])
     figure = cv2.imread(out, cv2.IMREAD_UNCHANGED)

@@ -12,7 +12,7 @@ from mmengine.optim import OptimWrapper
 
 import wgse_mmseg
 from mmseg.registry import MODELS
-from wgse_mmseg.benchmarks.segmentation import count_flops, make_spike_batch
+from wgse_bench.segmentation import count_flops, make_spike_batch
 from wgse_mmseg.utils.config import load_config
 
 wgse_mmseg.register_all_modules()

@@ -34,11 +34,13 @@ from wgse_mmseg.data_generation.shards import Shard, ShardArgument
 from wgse_mmseg.utils.config import SPIKE_SETTING_KINDS, ConfigOptions
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-#: the scripts under tools/, and the package's modules with a command line
-TOOL_FILES = sorted(osp.relpath(p, ROOT) for p in glob.glob(
-    osp.join(ROOT, 'tools', '**', '*.py'), recursive=True))
-TOOL_MODULES = ['wgse_mmseg.benchmarks.reconstruction',
-                'wgse_mmseg.benchmarks.triton_resources',
+#: the scripts under tools/ (users') and dev/ (maintainers'), and the
+#: modules of the library and the measurement wing with a command line
+TOOL_FILES = sorted(osp.relpath(p, ROOT) for room in ('tools', 'dev')
+                    for p in glob.glob(osp.join(ROOT, room, '**', '*.py'),
+                                       recursive=True))
+TOOL_MODULES = ['wgse_bench.reconstruction',
+                'wgse_bench.triton_resources',
                 'wgse_mmseg.data_generation.training_images']
 TOOLS = TOOL_FILES + TOOL_MODULES
 
@@ -95,11 +97,12 @@ def test_every_command_line_is_declared():
                 f'{tool}: {_display(action)}: use type=Choice(...)')
     # every module of the package that builds a parser is listed (the WGSE
     # benchmark's worker reads words its own driver writes)
-    building = {osp.relpath(p, ROOT) for p in glob.glob(
-        osp.join(ROOT, 'wgse_mmseg', '**', '*.py'), recursive=True)
-        if 'ArgumentParser(' in open(p).read()}
+    building = {osp.relpath(p, ROOT) for package in ('wgse_mmseg', 'wgse_bench')
+                for p in glob.glob(osp.join(ROOT, package, '**', '*.py'),
+                                   recursive=True)
+                if 'ArgumentParser(' in open(p).read()}
     listed = {m.replace('.', '/') + '.py' for m in TOOL_MODULES}
-    assert building - listed == {'wgse_mmseg/benchmarks/wgse.py'}
+    assert building - listed == {'wgse_bench/wgse.py'}
 
 
 def _source(tool):
@@ -110,8 +113,8 @@ def _source(tool):
 
 #: the tools that read a user's recording: each takes ``--layout``
 RECORDING_READERS = {'tools/demo.py', 'tools/misc/reconstruct.py',
-                     'tools/misc/make_reconstruction_figure.py',
-                     'wgse_mmseg.benchmarks.reconstruction'}
+                     'dev/make_reconstruction_figure.py',
+                     'wgse_bench.reconstruction'}
 
 
 def test_every_tool_reading_a_recording_takes_the_declared_layout():

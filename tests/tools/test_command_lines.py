@@ -35,7 +35,9 @@ def _run(tool, args, monkeypatch):
     err = io.StringIO()
     with pytest.raises(SystemExit) as info, redirect_stderr(err), \
             redirect_stdout(io.StringIO()):
-        runpy.run_path(osp.join(ROOT, 'tools', tool), run_name='__main__')
+        runpy.run_path(osp.join(ROOT, tool if tool.startswith('dev/') else
+                                osp.join('tools', tool)),
+                       run_name='__main__')
     assert info.value.code != 0
     message = (info.value.code if isinstance(info.value.code, str) else
                err.getvalue())
@@ -160,7 +162,7 @@ CASES = [
     ('train.py', [CONFIG, '--work-dir', '{t}/work', '--cfg-options',
                   'data_root={t}/my data', 'num_steps=9'],  # kept, refused
      "{t}/my data/spike/train (img_path under data_root='{t}/my data')"),
-    ('misc/make_reconstruction_figure.py', ['{t}/ok.npy', '--out',
+    ('dev/make_reconstruction_figure.py', ['{t}/ok.npy', '--out',
                                             '{t}/f.png', '--methods', 'tfp',
                                             '--scale', '0.01'],
      '--scale 0.01: makes the 8x12 frames of {t}/ok.npy tiles of 0 pixels'),
@@ -170,6 +172,10 @@ CASES = [
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
                              '--stride', '10', '--batch-size', '0'],
      'argument --batch-size: must be an integer >= 1 and <= 4096'),
+    ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/o', '--height', '8'],
+     'error: --height and --width go together'),
+    ('demo.py', ['{t}/ok.npy', CONFIG, '{t}/notes.pth', '--width', '12'],
+     'error: --height and --width go together'),
 ]
 
 
@@ -195,7 +201,7 @@ OUTPUT_OVER_INPUT = [
                                     'OUT'], 'notes.pth'),
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', 'OUT', '--method', 'tfp'],
      'ok.npy'),
-    ('misc/make_reconstruction_figure.py', ['{t}/ok.npy', '--out', 'OUT',
+    ('dev/make_reconstruction_figure.py', ['{t}/ok.npy', '--out', 'OUT',
                                             '--methods', 'tfp'], 'ok.npy'),
     ('dataset_converters/spike_cityscapes.py', ['{t}/city', 'OUT'], 'city'),
 ]
@@ -222,3 +228,31 @@ def test_no_tool_writes_its_output_over_its_input(tool, args, source, link,
     assert f'{out}: this output is the input' in message, message
     assert str(path) in message
     assert before is None or path.read_bytes() == before
+
+
+def test_the_figure_tool_pairs_height_and_width(load_tool, files, capsys):
+    """The maintainers' figure tool shares the same check (written once,
+    ``core.arguments.check_frame_size``)."""
+    tool = load_tool('dev/make_reconstruction_figure.py')
+    with pytest.raises(SystemExit) as info:
+        tool.parse_args([str(files / 'ok.npy'), '--out',
+                         str(files / 'fig.png'), '--height', '8'])
+    assert info.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(
+        'error: --height and --width go together')
+
+
+@pytest.mark.parametrize('room', ['tools', 'dev'])
+def test_every_tool_is_at_most_300_lines(room):
+    """A tool is a thin command line; what it needs beyond that belongs in
+    the package, once."""
+    long = {}
+    for folder, _, names in os.walk(osp.join(ROOT, room)):
+        for name in names:
+            if name.endswith(('.py', '.sh')):
+                path = osp.join(folder, name)
+                with open(path, encoding='utf-8') as f:
+                    lines = sum(1 for _ in f)
+                if lines > 300:
+                    long[osp.relpath(path, ROOT)] = lines
+    assert not long, long

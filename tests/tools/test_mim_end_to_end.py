@@ -51,7 +51,7 @@ def test_mim_in_the_readme_install_mode(tiny_spike_dataset, tiny_run_options,
     # is on sys.path, and the other stack's setup.py develop leaves a
     # wgse_mmseg.egg-info there that importlib.metadata would find first.
     # mim 0.3.8 sees the egg-link's package folder (with .mim), onedl-mim
-    # the PEP 660 install's checkout (README "Install")
+    # the PEP 660 install's checkout (docs/install.md)
     installed = run([sys.executable, '-c',
                      'from mim.utils import get_installed_path; '
                      "print(get_installed_path('wgse_mmseg'))"],
@@ -123,7 +123,7 @@ def test_mim_train_and_test_from_a_regular_install(installed,
     if found.endswith('.dist-info'):
         pytest.skip('this mim (onedl-mim 0.5.1) takes the first file of a '
                     'wheel install\'s RECORD, wgse_mmseg-*.dist-info, for '
-                    'the package: README "Known limits"')
+                    'the package: docs/known_limits.md')
     assert found == str(installed / 'wgse_mmseg')
     work_dir = tmp_path / 'work'
     mim = osp.join(BIN, 'mim')

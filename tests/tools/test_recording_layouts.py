@@ -91,7 +91,7 @@ def test_reconstruct_tool_reads_both_layouts(both_ways, tmp_path, capsys, load_t
 
 def test_figure_tool_reads_both_layouts(both_ways, tmp_path, load_tool):
     paths, _ = both_ways
-    tool = load_tool('tools/misc/make_reconstruction_figure.py')
+    tool = load_tool('dev/make_reconstruction_figure.py')
     figures = {}
     for layout, path in paths.items():
         out = str(tmp_path / f'{layout}.png')
@@ -102,7 +102,7 @@ def test_figure_tool_reads_both_layouts(both_ways, tmp_path, load_tool):
 
 
 def test_reconstruction_benchmark_reads_both_layouts(tmp_path, capsys):
-    from wgse_mmseg.benchmarks import reconstruction
+    from wgse_bench import reconstruction
     clip = _clip(1)
     tables = {}
     for layout in ('THW', 'HWT'):

@@ -1,20 +1,20 @@
 """A tool answers ``--help`` and an argument error before it imports torch,
 OpenMMLab, Triton, ONNX or OpenCV, and ``import wgse_mmseg`` imports none of
 them (what makes them answer at once: the figures are
-``tools/analysis_tools/benchmark_startup.py``'s, not a test's)."""
+``dev/benchmark_startup.py``'s, not a test's)."""
 import pytest
 
 #: the measurement tools whose parsers still read declarations of modules
 #: that import torch (the WGSE benchmark's shapes, the band kernels' launch
-#: entries, the grid's schedule); they move with the measurement wing
+#: entries, the grid's schedule)
 TORCH_AT_PARSE = {'tools/analysis_tools/benchmark_wgse.py',
-                  'tools/analysis_tools/sweep_band_kernels.py',
+                  'dev/sweep_band_kernels.py', 'dev/gpu_report.py',
                   'tools/analysis_tools/run_experiments.py'}
 
 
 @pytest.fixture(scope='module')
 def startup(load_tool):
-    return load_tool('tools/analysis_tools/benchmark_startup.py')
+    return load_tool('dev/benchmark_startup.py')
 
 
 def test_every_tool_answers_before_the_heavy_imports(startup):

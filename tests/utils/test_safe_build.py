@@ -194,18 +194,18 @@ REVIEWED = {
     ('wgse_mmseg/models/data_preprocessor.py',
      'SpikeSegDataPreProcessor.__init__', 'MODELS.build'):
         'its enhancer argument, from the user\'s config file',
-    ('wgse_mmseg/benchmarks/segmentation.py', 'build_model', 'MODELS.build'):
+    ('wgse_bench/segmentation.py', 'build_model', 'MODELS.build'):
         'the user\'s config file',
-    ('wgse_mmseg/benchmarks/segmentation.py', 'validation_cost', 'DATASETS.build'):
+    ('wgse_bench/segmentation.py', 'validation_cost', 'DATASETS.build'):
         'the user\'s config file',
-    ('wgse_mmseg/benchmarks/segmentation.py', 'validation_cost',
+    ('wgse_bench/segmentation.py', 'validation_cost',
      'init_default_scope'):
         'the user\'s config file',
     ('wgse_mmseg/apis/inferencer.py', 'SpikeSegInferencer._init_pipeline',
      'Compose'):
         'the test pipeline of the user\'s config (a config is required: '
         'SpikeSegInferencer._init_model refuses a checkpoint\'s config text)',
-    ('wgse_mmseg/apis/experiments/grid.py', 'load_grid',
+    ('wgse_bench/experiments/grid.py', 'load_grid',
      'Config.fromfile'):
         'the user\'s grid config file (Python by design)',
     ('wgse_mmseg/utils/config.py', 'load_config', 'Config.fromfile'):
@@ -227,8 +227,10 @@ REVIEWED = {
         'a fixed list of the package\'s modules',
     ('wgse_mmseg/__init__.py', '__getattr__', 'importlib.import_module'):
         'the package\'s own submodule names (attribute access in code)',
-    ('wgse_mmseg/core/__init__.py', '__getattr__', 'importlib.import_module'):
-        'core\'s own names and submodule names (attribute access in code)',
+    ('wgse_mmseg/core/__init__.py', '__getattr__',
+     'importlib.import_module'):
+        'the fixed _NAMES table, else a submodule of wgse_mmseg.core '
+        '(attribute access in code)',
     ('wgse_mmseg/compat/checkpoint_safety.py', '_resolve',
      'importlib.import_module'):
         'the fixed MMENGINE_CHECKPOINT_GLOBALS',
@@ -242,10 +244,10 @@ REVIEWED = {
         'weights-only, loaded strictly) and its dataset meta as data',
     ('tools/deployment/pytorch2onnx.py', 'main', 'init_default_scope'):
         'the user\'s config file',
-    ('wgse_mmseg/benchmarks/deployment.py', '_measure',
+    ('wgse_bench/deployment.py', '_measure',
      'MODELS.build'):
         'the user\'s grid and config files; random weights',
-    ('wgse_mmseg/benchmarks/deployment.py', '_measure',
+    ('wgse_bench/deployment.py', '_measure',
      'init_default_scope'):
         'the user\'s config file',
 }
@@ -254,7 +256,7 @@ REVIEWED = {
 def _build_calls():
     """``(file, enclosing function, callee)`` of every matching call."""
     found = set()
-    for top in ('wgse_mmseg', 'tools'):
+    for top in ('wgse_mmseg', 'wgse_bench', 'tools', 'dev'):
         for folder, _, names in os.walk(osp.join(ROOT, top)):
             for name in names:
                 if not name.endswith('.py'):

@@ -9,13 +9,13 @@ Prints a Markdown table, one row per config, with the device and software
 versions beneath it; ``--out`` also writes every number (and the raw timing
 samples) as JSON. Each config is measured in a fresh process; one that
 fails is reported and the others are still measured (exit status 1). What
-each column measures: docs/benchmark.md and wgse_mmseg/benchmarks/segmentation.py.
+each column measures: docs/benchmark.md and wgse_bench/segmentation.py.
 """
 import argparse
 import json
 import sys
 
-from wgse_mmseg.benchmarks.timing import time_calls
+from wgse_bench.timing import time_calls
 from wgse_mmseg.core.arguments import SIDE, Integer, Path, Text
 from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
 from wgse_mmseg.utils.config import add_config_options
@@ -53,8 +53,8 @@ def main():
     # the stack once the arguments are read (--help answers at once)
     import wgse_mmseg
     wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
-    from wgse_mmseg.benchmarks.machine import run_isolated
-    from wgse_mmseg.benchmarks.segmentation import (benchmark_config,
+    from wgse_bench.machine import run_isolated
+    from wgse_bench.segmentation import (benchmark_config,
                                                     format_results)
     from wgse_mmseg.core.io import atomic_output
     results, failures = [], []

@@ -9,7 +9,7 @@ Each selected entry of GRID (e.g. configs/experiments/grid_cpu.py; entries
 as ``run_experiments.py --list`` names them) is built with the grid's
 options and random weights, timed in torch, exported to ONNX and timed in
 ONNX Runtime on the same random streams, in a fresh process
-(``wgse_mmseg.benchmarks.deployment``). Prints a Markdown table naming the
+(``wgse_bench.deployment``). Prints a Markdown table naming the
 machine; ``--out`` writes every number as JSON, which
 ``run_experiments.py --deployment FILE`` adds to the report's table. An
 entry that fails (TFI does not export) is reported and the others are
@@ -20,7 +20,7 @@ import json
 import sys
 
 from wgse_mmseg.apis.onnx_settings import SHAPE_ENTRY
-from wgse_mmseg.benchmarks.timing import time_calls
+from wgse_bench.timing import time_calls
 from wgse_mmseg.core.arguments import Integer, Path, Text
 from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
 
@@ -60,11 +60,11 @@ def main(argv=None) -> int:
     # the stack once the arguments are read (--help answers at once)
     import wgse_mmseg
     wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
-    from wgse_mmseg.apis.experiments import load_grid, select
-    from wgse_mmseg.apis.experiments.grid import enhancer_options
-    from wgse_mmseg.benchmarks.deployment import (format_deployment,
+    from wgse_bench.experiments import load_grid, select
+    from wgse_bench.experiments.grid import enhancer_options
+    from wgse_bench.deployment import (format_deployment,
                                                   measure_deployment)
-    from wgse_mmseg.benchmarks.machine import run_isolated
+    from wgse_bench.machine import run_isolated
     from wgse_mmseg.core.io import atomic_output
     grid, entries = load_grid(args.grid)
     results, failures = [], []

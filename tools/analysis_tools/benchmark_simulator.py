@@ -54,8 +54,7 @@ def main():
     import numpy as np
     import torch
 
-    from wgse_mmseg.benchmarks.simulator import (header, load_rows,
-                                                 simulator_rows)
+    from wgse_bench.simulator import header, load_rows, simulator_rows
     from wgse_mmseg.data_generation.synthetic import render_street_scene
     if args.threads:
         torch.set_num_threads(args.threads)

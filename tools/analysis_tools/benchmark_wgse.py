@@ -33,7 +33,7 @@ import torch
 
 from wgse_mmseg.core.arguments import Choice, Integer, Path
 from wgse_mmseg.core.limits import MAX_REPEAT
-from wgse_mmseg.benchmarks.wgse import (DEFAULT_SHAPES, IMPLEMENTATIONS,
+from wgse_bench.wgse import (DEFAULT_SHAPES, IMPLEMENTATIONS,
                                         SHAPE, available_backends,
                                         run_benchmark)
 

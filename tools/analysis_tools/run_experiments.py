@@ -35,7 +35,7 @@ import time
 
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_mmseg.apis.experiments import (ExperimentSettings, RunFailed,
+from wgse_bench.experiments import (ExperimentSettings, RunFailed,
                                          StaleRunError, benchmark_entry,
                                          describe, finished, load_grid, plan,
                                          report, run_one, schedule_options,

@@ -96,8 +96,8 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
 
     The input ``spikes`` is ``(batch, num_steps, height, width)`` float32
     with a dynamic batch; the output ``logits`` ``(batch, K, height,
-    width)``. ``dataset_meta`` (``classes``, ``palette``; checked by
-    :func:`~.onnx_segmentor.check_dataset_meta` before anything is done) is
+    width)``. ``dataset_meta`` (``classes``, ``palette``; checked
+    before anything is done) is
     stored as JSON in the model's metadata (``dataset_meta``). The file is
     written to a temporary beside ``path``, opened as
     :class:`~.onnx_segmentor.OnnxSpikeSegmentor` opens it (its interface
@@ -138,7 +138,7 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
         raise ValueError(
             f'{path}: this model does not export to ONNX '
             f'({type(graph.enhancer).__name__} enhancer; TFI does not: '
-            f'see the README, "Export to ONNX"): {type(err).__name__}: '
+            f'see docs/user_guide.md, "Export to ONNX"): {type(err).__name__}: '
             f'{summary[0][:300] if summary else ""}') from err
     model = program.model_proto
     if dataset_meta is not None:

@@ -48,8 +48,7 @@ def load_segmentor(cfg, checkpoint: str) -> Tuple[nn.Module, dict]:
     with the weights of ``checkpoint``, and its dataset meta (``classes``,
     ``palette``).
 
-    The checkpoint is read weights-only
-    (:func:`~wgse_mmseg.utils.checkpoint.read_checkpoint`), its state dict
+    The checkpoint is read weights-only, its state dict
     and dataset meta checked before the model is built, and must fit the
     model exactly: a ``ValueError`` names the file and the field otherwise
     (one trained with another ``T`` needs ``--cfg-options num_steps=T``).

@@ -2,7 +2,7 @@
 
 The package runs on two stacks with the same import packages (``mmseg``,
 ``mmengine``, ``mmcv``, ``mim``): OpenMMLab's final releases and the
-maintained onedl-* fork (README "Install"). :func:`apply_compat` makes each
+maintained onedl-* fork (docs/install.md). :func:`apply_compat` makes each
 change below only where a check of the installed stack finds it missing,
 never by version lists; what the checks find on the two pinned stacks:
 

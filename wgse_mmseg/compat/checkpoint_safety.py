@@ -177,5 +177,5 @@ def guard_mmengine_checkpoint_loader() -> bool:
             "mmengine's checkpoint loader (mmengine.runner.checkpoint."
             "load_from_local) unpickles checkpoints in full, which would run "
             "code from any checkpoint, and wgse_mmseg cannot replace it in "
-            "this mmengine; use the pinned stacks (README \"Install\")")
+            "this mmengine; use the pinned stacks (docs/install.md)")
     return True

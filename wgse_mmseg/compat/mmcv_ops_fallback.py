@@ -50,7 +50,7 @@ NOTICE_SHOWN = 'WGSE_MMSEG_MMCV_NOTICE_SHOWN'
 _INSTALL_HINT = ('install mmcv with its ops: `MMCV=full bash '
                  'tools/setup_env.sh` (a source build, about 30 minutes on 2 '
                  'cores) or, on a GPU, the fork\'s prebuilt wheels (`STACK='
-                 'onedl MMCV=full MMCV_WHEELS=...`), see README "Install"')
+                 'onedl MMCV=full MMCV_WHEELS=...`), see docs/install.md')
 
 
 class MissingCompiledOpError(RuntimeError):

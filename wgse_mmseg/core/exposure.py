@@ -107,13 +107,13 @@ def apply_exposure(image: np.ndarray, exposure: Exposure = 'auto') -> Exposed:
 
     Args:
         image: ``(H, W)`` non-negative intensities, 1 = white.
-        exposure: ``'auto'`` (:func:`auto_exposure`: only a clearly
-            under-exposed image is brightened), ``'none'`` (gain 1) or a
+        exposure: ``'auto'`` (only a clearly under-exposed image is
+            brightened: its 99.5th percentile to white), ``'none'`` (gain 1) or a
             positive gain.
 
     Returns:
-        :class:`Exposed`: the ``(H, W)`` float32 image in ``[0, 1]``, the
-        gain applied and the reason.
+        The ``(H, W)`` float32 image in ``[0, 1]`` (``image``), the gain
+        applied (``gain``) and the reason (``reason``), as a named tuple.
     """
     if exposure == 'auto':
         gain, reason = auto_exposure(image)

@@ -796,8 +796,7 @@ def load_spikes(path: str, height: Optional[int] = None,
     """Read frames ``[start, start + length)`` of a spike file.
 
     Args:
-        path: a file of one of :data:`SPIKE_FORMATS` (``.dat``, ``.spk``,
-            ``.npy``, ``.npz``).
+        path: a spike file (``.dat``, ``.spk``, ``.npy``, ``.npz``).
         height, width: frame size of a ``.dat`` file (others record it).
         start: first frame.
         length: number of frames; ``None`` reads to the end.
@@ -814,8 +813,8 @@ def load_spikes(path: str, height: Optional[int] = None,
     Raises:
         SpikeFileError: naming the file, for bad arguments, a file that
             does not fit its declared sizes, a layout that cannot be told
-            or contradicts the file, or a window over
-            :data:`~wgse_mmseg.core.limits.READ_LIMIT_BYTES`.
+            or contradicts the file, or a window over the read limit (2 GiB,
+            docs/security.md).
     """
     path = os.fspath(path)
     fmt = _existing(path)
@@ -832,8 +831,8 @@ def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
     ``<path>.json``, written first).
 
     Each file appears complete or not at all. Returns what was written to
-    ``path`` (:class:`WrittenFile`: size and SHA-256 of the bytes, from
-    memory).
+    ``path``, as a named tuple: ``size`` and ``sha256`` of the bytes, from
+    memory.
     """
     path = os.fspath(path)
     fmt = _format(path)

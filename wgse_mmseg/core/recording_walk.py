@@ -451,9 +451,10 @@ def walk_recording(path: str, video: str,
     """Walk the recording ``path`` into ``video`` (see the module).
 
     Args:
-        path: a spike file (:data:`~wgse_mmseg.core.io.SPIKE_FORMATS`).
+        path: a spike file (``.dat``, ``.spk``, ``.npy``, ``.npz``).
         video: the ``.mp4`` or ``.gif`` to write; the CSV, frames and state
-            folder lie beside it (:func:`walk_outputs`).
+            folder lie beside it (``<stem>.csv``, ``<stem>_frames/``,
+            ``<video>.partial/``).
         model: ``(B, T, H, W)`` float32 CPU tensor of 0/1 -> ``B`` results.
         render: ``((T, H, W) uint8 window, its result)`` -> 8-bit ``(H, W)``
             grey or ``(H, W, 3)`` RGB frame.

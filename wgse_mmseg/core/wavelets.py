@@ -260,7 +260,8 @@ def wavedec(data: torch.Tensor, wavelet, mode: str = 'symmetric',
         data: a tensor of any shape; integer and half-precision inputs are
             transformed in float32, float64 stays float64.
         wavelet: a discrete PyWavelets wavelet name or ``pywt.Wavelet``.
-        mode: one of :data:`SUPPORTED_MODES` (PyWavelets' default,
+        mode: a PyWavelets mode of zero, constant, symmetric, reflect,
+            periodic, antisymmetric, periodization (PyWavelets' default,
             ``'symmetric'``; WGSE uses the paper's ``'zero'``).
         level: number of levels; ``None`` uses ``pywt.dwt_max_level``.
         axis: the axis to transform.

@@ -148,11 +148,10 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
     Files: ``spike/{train,val}/synth/synth_<scene>_000019_spike.spk``,
     ``gtFine/{train,val}/synth/synth_<scene>_000019_gtFine_labelTrainIds.png``
     and the sample's marker ``..._spike.json`` (the settings and the size
-    and SHA-256 of the bytes written, written last:
-    :mod:`wgse_mmseg.core.markers`). A sample whose
+    and SHA-256 of the bytes written, written last). A sample whose
     marker matches these settings and its files is kept, so an interrupted
     run resumes; any other is made again. The run owns ``out_dir``
-    (:func:`~wgse_mmseg.core.output_folder.own_folder`): another run into
+    (an output folder with one writer): another run into
     it is refused naming this one, or waits for it with ``wait``; a link
     at a sample's file is replaced, a linked folder refused. Returns the
     number of samples written now.

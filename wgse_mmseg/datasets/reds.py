@@ -201,10 +201,10 @@ class SimulatedSpikeImageDataset(BaseDataset):
     """Spike windows simulated from still images moved along trajectories.
 
     Sample ``i`` is drawn from ``derive_generator(seed, i)`` and its spikes
-    from ``derive_seed(seed, i, 'spikes')``
-    (:mod:`wgse_mmseg.core.seeding`), so the set is the same on every run: an image (chosen with probability
+    from ``derive_seed(seed, i, 'spikes')`` (the package's one seed
+    derivation rule), so the set is the same on every run: an image (chosen with probability
     proportional to its area), a view of ``crop_size`` moved along a random
-    trajectory (:func:`render_trajectory`), a random brightness (gain in
+    trajectory, a random brightness (gain in
     ``gain_range``, gamma log-uniform in ``gamma_range``), then
     :func:`~wgse_mmseg.core.simulation.simulate_spikes` with
     ``threshold = 1 / white_rate`` (the REDS scale). The ground truth is the
@@ -213,7 +213,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
 
     Args:
         image_dir: folder of images (searched recursively, colour -> grey);
-            ``None`` for :func:`_default_image_dir`. Images are read once into
+            ``None`` for the sample images matplotlib ships. Images are read once into
             memory, downscaled to at most ``max_side`` pixels per side.
         num_samples: length of the dataset.
         crop_size: ``(h, w)`` of each sample.
@@ -221,7 +221,8 @@ class SimulatedSpikeImageDataset(BaseDataset):
         seed: seed of the whole set; give a validation set another seed.
         white_rate: spikes per step of a white pixel (REDS: 0.6).
         max_speed, max_rotation, max_zoom, scale_range: trajectory limits
-            (see :func:`render_trajectory`).
+            (view pixels and radians per step, zoom per step, the range of
+            the view's scale).
         gain_range, gamma_range: brightness augmentation; the ground truth
             is the augmented image.
         max_side: longest image side kept in memory.

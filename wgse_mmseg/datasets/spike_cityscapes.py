@@ -21,7 +21,7 @@ _VERIFY_MODES = ('size', 'full', 'none')
 class SpikeCityscapesDataset(CityscapesDataset):
     """Spike streams beside Cityscapes' fine labels (19 classes, palette).
 
-    Layout under ``data_root`` (README, "Spike-Cityscapes")::
+    Layout under ``data_root`` (docs/user_guide.md, "Spike-Cityscapes layout")::
 
         spike/{train,val}/<city>/<city>_<seq>_<frame>_spike.spk
         spike/{train,val}/<city>/<city>_<seq>_<frame>_spike.json  marker
@@ -34,7 +34,7 @@ class SpikeCityscapesDataset(CityscapesDataset):
 
     Complete or absent: the converter and the synthetic dataset write, last,
     a marker ``<name>_spike.json`` recording the size and SHA-256 of the
-    spike file and label their run wrote (:mod:`wgse_mmseg.core.markers`).
+    spike file and label their run wrote.
     Only samples whose marker matches are served; the others (a run killed
     mid-sample, a re-run with other settings killed after writing one of
     the files) are skipped, and how many and why is logged and kept in
@@ -68,8 +68,8 @@ class SpikeCityscapesDataset(CityscapesDataset):
                 raise FileNotFoundError(
                     f'SpikeCityscapesDataset: {folder} ({key} under '
                     f'data_root={self.data_root!r}) is not a directory; set '
-                    f'data_root to a Spike-Cityscapes root (README, '
-                    f'"Spike-Cityscapes layout") or make one with '
+                    f'data_root to a Spike-Cityscapes root (docs/'
+                    f'user_guide.md, "Spike-Cityscapes layout") or make one with '
                     f'tools/dataset_converters/spike_cityscapes.py')
         listed = self._listing()
         served, problems = [], Counter()

@@ -34,11 +34,11 @@ __all__ = ['SpikeRunner']
 @RUNNERS.register_module()
 class SpikeRunner(Runner):
     """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` sets up the
-    MMSeg layer (:func:`~wgse_mmseg._openmmlab.prepare_mmseg_layer`, once
-    per process) and applies the config's spike settings first (also those
+    MMSeg layer (as :func:`wgse_mmseg.register_all_modules` does, once per
+    process) and applies the config's spike settings first (also those
     ``--cfg-options`` of MMSeg's own tools merged in), whose :meth:`train`
     first checks that the crop and the batch fit the model
-    (:mod:`wgse_mmseg.utils.cross_checks`) and owns the work dir while it
+    (:class:`~wgse_mmseg.utils.cross_checks.ModelFitError` where not) and owns the work dir while it
     trains, whose :meth:`save_checkpoint` is atomic on local disks and
     whose :meth:`load_checkpoint` refuses config text that mmengine would
     execute; otherwise the same."""

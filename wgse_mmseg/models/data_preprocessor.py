@@ -37,8 +37,8 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
     parameter the loss depends on), so the loss backpropagates into it.
     What measures only the model's forward (mmengine's
     ``get_model_complexity_info``) leaves the enhancer out; the project's
-    benchmark (:func:`wgse_mmseg.benchmarks.segmentation.count_flops`) counts it
-    on its own and adds it.
+    benchmark (``wgse_bench.segmentation.count_flops``) counts it on its own
+    and adds it.
 
     Args:
         num_steps: the ``T`` the model is built for (the backbone's

@@ -223,7 +223,7 @@ def load_reconstructor(checkpoint: Optional[str] = None,
         checkpoint: an mmengine checkpoint of a reconstruction config
             (``work_dirs/.../iter_N.pth``) or a file written by
             :func:`export_weights`; ``None`` for the shipped weights
-            :data:`DEFAULT_WEIGHTS`.
+            (``wgse_mmseg/weights/wgse_reconstruction_cpu.pth``).
         device: torch device.
     """
     path = checkpoint or DEFAULT_WEIGHTS

@@ -8,6 +8,10 @@ process group itself, for GPUs: ``init_dist`` calls
 and wraps the model in :class:`~wgse_mmseg.engine.CPUDistributedDataParallel`
 (gradients averaged across processes, as on GPUs). That is the documented
 way to try a multi-process run without GPUs; it trains as slowly as CPUs do.
+The wrapper is named here by its registered type; the layer's set-up
+(:func:`wgse_mmseg.register_all_modules`, which the tools make before they
+read a config) registers it, so this module imports nothing of the layer
+above it (``engine``).
 """
 import os
 import warnings
@@ -49,7 +53,6 @@ def prepare_launcher(cfg: Config) -> None:
     cfg.env_cfg.dist_cfg.backend = 'gloo'
     if not dist.is_initialized():
         dist.init_process_group('gloo')
-    from .. import engine  # noqa: F401 (registers the wrapper)
     wrapper = cfg.get('model_wrapper_cfg') or {}
     cfg.model_wrapper_cfg = dict(wrapper, type='CPUDistributedDataParallel')
     if cfg.get('sync_bn'):

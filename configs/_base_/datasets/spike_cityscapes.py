@@ -1,4 +1,4 @@
-# Spike-Cityscapes: Cityscapes scenes as spike streams (README, "Spike-Cityscapes").
+# Spike-Cityscapes: Cityscapes scenes as spike streams (docs/user_guide.md, "Spike-Cityscapes layout").
 #
 # The spike settings are set here, once:
 #   num_steps  T, spike frames per sample (the paper: 129)

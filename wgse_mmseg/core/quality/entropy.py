@@ -31,8 +31,8 @@ def _joint_codes(levels: np.ndarray, first: int,
 
 def entropy_2d(image) -> float:
     """Two-dimensional image entropy in bits of an ``(H, W)`` image (no
-    reference needed; any kind :mod:`wgse_mmseg.core.images` accepts,
-    scored as 8 bits).
+    reference needed; bool, 8 or 16 bits, or float in [0, 1], scored as
+    8 bits).
 
     The joint distribution of each pixel's 8-bit grey level ``i`` and the
     mean ``j`` of its 3x3 neighbourhood (reflected at the border, rounded to
@@ -41,7 +41,7 @@ def entropy_2d(image) -> float:
     reconstructions of the same recording).
 
     Memory: the 8-bit image (1 byte per pixel; none for a ``uint8`` image)
-    and, per block of rows (:func:`~wgse_mmseg.core.images.row_blocks`),
+    and, per block of rows,
     the integer 3x3 sums and the joint codes, counted into one 256x256
     histogram: at most 2 bytes per pixel beyond the input plus a fixed
     working set, whatever the size.

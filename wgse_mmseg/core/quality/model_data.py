@@ -1,6 +1,6 @@
 """The published model data NIQE and BRISQUE need, shipped in ``data/``.
 
-Made by ``tools/misc/extract_quality_models.py`` from pinned registry
+Made by ``dev/extract_quality_models.py`` from pinned registry
 packages (basicsr 1.4.2, brisque 0.2.0, both Apache-2.0: their licences lie
 beside the files) and recorded with their SHA-256 in ``data/SOURCES.json``;
 nothing is downloaded at run time and no pickle is read (``.npz`` files are

@@ -45,9 +45,8 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
     """Simulate a spike-camera stream from frames.
 
     The base model is integrate-and-fire with subtract reset and a random
-    initial charge (:mod:`.fixed_point`) on light resampled linearly from
-    the frames (:mod:`.light`); ``effects`` switches on more
-    (:mod:`.scene`, docs/simulator.md).
+    initial charge, exact in fixed point, on light resampled linearly from
+    the frames; ``effects`` switches on more (docs/simulator.md).
 
     Args:
         frames: ``(N, H, W)`` or ``(N, H, W, 3)`` RGB, ``uint8`` or float in
@@ -69,7 +68,7 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
         readout_hz: readout rate, converting rates in Hz (dark current, hot
             pixels, ``camera_motion`` per second) to steps.
         backend: what integrates: ``'auto'``, ``'torch'`` or
-            ``'compiled'`` (:mod:`.fixed_point`); every backend gives the
+            ``'compiled'`` (a small C kernel); every backend gives the
             same spikes bit for bit.
 
     Returns:

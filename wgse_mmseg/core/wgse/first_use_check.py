@@ -58,7 +58,7 @@ __all__ = ['FirstUseCheckFailed']
 
 #: where a failed check asks to be reported
 REPORT_TO = ("the project's bug tracker with this line and the docs/gpu.md "
-             'and gpu.json that `bash tools/gpu_report.sh` writes on this '
+             'and gpu.json that `bash dev/gpu_report.sh` writes on this '
              'machine')
 
 

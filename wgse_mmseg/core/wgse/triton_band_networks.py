@@ -24,7 +24,7 @@ power of two) times every entry once and keeps the fastest
 (:func:`tuned_configs` lists the choices); under the interpreter, and where
 a caller names one, a given entry runs. Every entry is compiled ahead of
 time for sm_80, sm_89 and sm_90 by
-:mod:`~wgse_mmseg.benchmarks.triton_resources` and tested in the
+:mod:`~wgse_bench.triton_resources` and tested in the
 interpreter.
 
 Triton's interpreter (``TRITON_INTERPRET=1`` in the environment before

@@ -34,8 +34,8 @@ class LoadSpikeFromFile(BaseTransform):
         height, width: frame size of ``.dat`` files (other formats, and
             ``.dat`` files with a ``.json`` side file, record it).
         center: frame the window is centred on; ``None`` for the middle.
-            A window that does not fit in the stream is an error
-            (:func:`~wgse_mmseg.core.io.centered_window`).
+            A window that does not fit in the stream is an error naming
+            the centres that fit.
         layout: how ``.npy``/``.npz`` arrays that do not record it are
             stored, ``'THW'`` ``(T, H, W)`` or ``'HWT'`` ``(H, W, T)``;
             ``None`` (default) takes the layout each file records, and a

@@ -66,8 +66,8 @@ class SimulateSpikes(BaseTransform):
         seed: ``None`` draws a new stream each call (from NumPy's global
             generator, which mmengine seeds per worker). An integer makes
             each sample's stream deterministic: its seed is derived from
-            this one and the sample's ``img_path`` (or ``sample_idx``) by
-            :func:`~wgse_mmseg.core.seeding.derive_seed`, so samples differ
+            this one and the sample's ``img_path`` (or ``sample_idx``) by the
+            package's one derivation rule, so samples differ
             from each other but not from epoch to epoch.
         channel_order: ``'bgr'`` (``LoadImageFromFile``'s and OpenCV's) or
             ``'rgb'``: the order of colour frames in ``frames`` and ``img``.

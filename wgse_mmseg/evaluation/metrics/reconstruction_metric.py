@@ -25,7 +25,8 @@ class ReconstructionMetric(BaseMetric):
     :class:`~wgse_mmseg.models.reconstruction.SpikeReconstructor`).
 
     Returns ``PSNR`` (dB) and ``SSIM`` over the samples with ground truth
-    (see :mod:`~wgse_mmseg.evaluation.metrics.image_quality`), and ``Entropy2D``
+    (:func:`~wgse_mmseg.evaluation.psnr`,
+    :func:`~wgse_mmseg.evaluation.ssim`), and ``Entropy2D``
     (bits, no reference) over all samples. A set without ground truth gives
     ``Entropy2D`` alone.
     """

@@ -1,0 +1,193 @@
+"""WGSE's Triton kernels compile for real GPUs (sm_80, sm_89, sm_90) with no
+GPU: every variant the dispatcher can launch, and the tensor-core ones use
+no local memory, leave room for two programs per SM and stay within the
+cost model's instruction budget
+(``wgse_bench.triton_resources``; the table is in
+docs/wgse_speed.md)."""
+import ast
+import inspect
+import json
+import textwrap
+
+import pytest
+
+from wgse_bench import triton_resources
+from wgse_mmseg.core.wgse import triton_band_networks
+
+_triton_band_kernels = pytest.importorskip(
+    'wgse_mmseg.core.wgse._triton_band_kernels')
+
+pytestmark = pytest.mark.skipif(
+    triton_band_networks.unavailable() is not None,
+    reason=str(triton_band_networks.unavailable()))
+
+
+@pytest.fixture(scope='session')
+def rows(built_once):
+    # once a run, in a fresh process without TRITON_INTERPRET, two compiles
+    # side by side (CI's two cores)
+    def build(path):
+        with open(path, 'w') as f:
+            json.dump(triton_resources.compile_all(jobs=2), f)
+    with open(built_once('triton_resources.json', build)) as f:
+        return json.load(f)
+
+
+def test_every_launchable_variant_compiles_for_every_target(rows):
+    """Forward (writing the output or the output gradient) and backward
+    (with and without the input gradient) at every width, precision and
+    launch entry of each target, for sm_80, sm_89 and sm_90."""
+    compiled = [(r['arch'], r['kernel'], r['hidden'], r['precision'],
+                 r['input_grad'], r['block'], r['num_warps'], r['maxnreg'])
+                for r in rows]
+    expected = {(a, *v) for v, a in triton_resources.jobs_for(
+        triton_resources.ARCHITECTURES)}
+    assert len(compiled) == len(set(compiled)) and set(compiled) == expected
+    assert {a for a, *_ in compiled} == {'sm_80', 'sm_89', 'sm_90'}
+    backward = {(r['arch'], r['precision'], r['input_grad'], r['block'])
+                for r in rows if r['kernel'] == 'band_backward'}
+    # 16 pixels for the input gradient and bf16 on sm_90, 32 otherwise
+    assert {(a, p, g) for a, p, g, b in backward if b == 16} == {
+        (a, p, True) for a in triton_resources.ARCHITECTURES
+        for p in triton_band_networks.TOLERANCES} | {('sm_90', 'bf16', False)}
+    assert all(b in (16, 32) for *_, b in backward)
+    assert all(r['registers'] > 0 and r['programs_per_sm'] >= 1
+               for r in rows)
+
+
+def _names_assigned(statements, input_grad):
+    """Names assigned by ``statements`` (the branches under ``if
+    INPUT_GRAD:`` only when ``input_grad``)."""
+    names = set()
+    for statement in statements:
+        if isinstance(statement, ast.If) and \
+                getattr(statement.test, 'id', None) == 'INPUT_GRAD':
+            if input_grad:
+                names |= _names_assigned(statement.body, input_grad)
+            continue
+        for node in ast.walk(statement):
+            targets = (node.targets if isinstance(node, ast.Assign) else
+                       [node.target] if isinstance(node, ast.AugAssign)
+                       else [])
+            names |= {n.id for t in targets for n in ast.walk(t)
+                      if isinstance(n, ast.Name)}
+    return names
+
+
+def _carried(body, defined, input_grad):
+    """The names the ``for`` loops in ``body`` (nested too) carry: per loop,
+    those its body assigns that were assigned before it."""
+    count = 0
+    for statement in body:
+        if isinstance(statement, ast.For):
+            count += len(_names_assigned(statement.body, input_grad) &
+                         defined)
+            count += _carried(statement.body, set(defined), input_grad)
+        defined |= _names_assigned([statement], input_grad)
+    return count
+
+
+def _loop_variables(kernel, input_grad):
+    """How many values a kernel's ``for`` loops must carry from one step to
+    the next: the names each assigns that were assigned before it."""
+    source = textwrap.dedent(inspect.getsource(
+        getattr(_triton_band_kernels, kernel).fn))
+    return _carried(ast.parse(source).body[0].body, set(), bool(input_grad))
+
+
+def test_every_loop_variable_is_carried_into_the_next_step(rows):
+    """Triton carries a name into the next iteration only if one pass over
+    the body changes it: windows that start as one shared tensor
+    (``h1_2 = h1_1 = zeros``, then ``h1_2, h1_1 = h1_1, h1_0``) compile to
+    a loop in which ``h1_2`` stays zero, which the interpreter never
+    shows. Every name the loop reassigns must be carried."""
+    for r in rows:
+        assert r['loop_carried'] == _loop_variables(
+            r['kernel'], r['input_grad']), r
+
+
+@pytest.mark.parametrize('ttir, carried', [
+    ('%r:2 = scf.for %s = %c0 to %c9 step %c1 iter_args(%a = %x, %b = %y)'
+     ' -> (f32, f32)  : i32 {', 2),
+    ('%r = scf.for %s = %c0 to %c9 step %c1 iter_args(%a = %x) -> (f32)',
+     1),
+    ('%r:2 = scf.for %t = %c0 to %c9 step %c1 iter_args(%a = %x, %b = %y)'
+     ' -> (f32, f32) {\n %q = scf.for %s = %c0 to %c9 step %c1 '
+     'iter_args(%c = %a) -> (f32) {', 3),
+])
+def test_loop_carried_by_hand(ttir, carried):
+    assert triton_resources.loop_carried(ttir) == carried
+
+
+def test_loop_carried_needs_a_loop():
+    with pytest.raises(ValueError, match='found none'):
+        triton_resources.loop_carried('tt.func @k() { tt.return }')
+
+
+def test_tensor_core_variants_spill_nothing_and_fit_two_programs(rows):
+    """What runs at TF32, fp16 and bf16 (every entry of each target) uses
+    no local memory, and two programs of it share an SM (full float32 on
+    the FMA units may spill)."""
+    tensor_cores = [r for r in rows if r['tensor_cores']]
+    assert {r['precision'] for r in tensor_cores} == {'tf32', 'fp16', 'bf16'}
+    bad = [r for r in tensor_cores if r['spill_bytes'] or r['local_bytes']
+           or r['programs_per_sm'] < 2]
+    assert not bad, triton_resources.format_table(bad)
+
+
+#: The cost model's budget: the most warp instructions a coefficient
+#: position may cost in a kernel's step loop at TF32, fp16 and bf16, and
+#: the fewest of them on tensor cores, per kernel and tile, on every target.
+#: As compiled by triton 3.6 (docs/wgse_speed.md, "Compiled for GPUs"):
+#: forward 17-35 at 64 pixels, backward 66-106 at 32 and 95-162 at 16; the
+#: kernels these replaced took 140 in the backward on sm_90. A change of
+#: the kernels or of triton that costs more shows here first.
+STEP_BUDGET = {('band_forward', 64): (40, 0.15),
+               ('band_backward', 32): (115, 2.5),
+               ('band_backward', 16): (175, 2.5)}
+
+
+def test_the_step_loop_stays_within_its_instruction_budget(rows):
+    over = [r for r in rows if r['tensor_cores'] and (
+        r['per_position'] > STEP_BUDGET[r['kernel'], r['block']][0] or
+        r['tensor_core_per_position'] <
+        STEP_BUDGET[r['kernel'], r['block']][1])]
+    assert not over, triton_resources.format_table(over)
+
+
+_SASS = """
+        /*0000*/                   MOV R1, c[0x0][0x28] ;
+        /*0010*/                   HMMA.1688.F32.TF32 R4, R8, R12, R4 ;
+        /*0020*/                   IADD3 R2, R2, 0x1, RZ ;
+        /*0030*/                   HGMMA.64x32x8.F32.TF32 R24, gdesc[UR4], R24 ;
+        /*0040*/               @P0 BRA 0x10 ;
+        /*0050*/              @!P1 BRA 0x0 ;
+        /*0060*/                   EXIT ;
+"""
+
+
+def test_step_loop_and_cost_by_hand():
+    """The innermost loop is the shortest a backward branch closes."""
+    opcodes = triton_resources.step_loop(_SASS)
+    assert opcodes == ['HMMA.1688.F32.TF32', 'IADD3',
+                       'HGMMA.64x32x8.F32.TF32', 'BRA']
+    assert triton_resources.step_cost(opcodes) == (4, 2)
+    assert triton_resources.per_position(4, 4, 16) == 1.0
+    # 1e8 positions at 50 instructions on 132 SMs of 4 schedulers, 1.5 GHz
+    assert triton_resources.predicted_ms(1e8, 50, 132, 1.5) == \
+        pytest.approx(1e8 * 50 / (132 * 4 * 1.5e9) * 1e3)
+    with pytest.raises(ValueError, match='no loop'):
+        triton_resources.step_loop(_SASS.replace('BRA', 'NOP'))
+
+
+@pytest.mark.parametrize('registers, warps, shared, arch, programs', [
+    (96, 4, 13312, 'sm_90', 5),    # 96 x 32 = 3072 a warp: 21 warps
+    (128, 4, 5120, 'sm_90', 4),    # exactly 16 warps of 4096
+    (129, 4, 5120, 'sm_90', 3),    # rounds up to 4352 a warp
+    (32, 4, 0, 'sm_89', 12),       # 48 warps at most on sm_89
+    (32, 1, 0, 'sm_90', 32),       # 32 programs at most
+    (64, 4, 99 * 1024, 'sm_89', 1),  # shared: 100 KB on sm_89
+])
+def test_programs_per_sm_by_hand(registers, warps, shared, arch, programs):
+    assert triton_resources.programs_per_sm(registers, warps, shared,
+                                            arch) == programs

@@ -1,0 +1,336 @@
+"""WGSE's Triton kernels compiled ahead of time for real GPUs, no GPU needed.
+
+``triton.compile`` with a ``GPUTarget`` runs triton's whole pipeline and the
+``ptxas`` of the triton wheel, so it works on a machine without a GPU or a
+driver; ``cuobjdump --dump-resource-usage`` (also in the wheel) then reads
+each cubin's registers per thread, spill stack and static shared memory.
+From those, the dynamic shared memory triton asks for and the launch's warps,
+:func:`programs_per_sm` says how many programs of a variant an SM holds at
+once (its occupancy). Each row also counts the values the kernel's streaming
+loop carries from one step to the next in triton's IR
+(:func:`loop_carried`): triton carries a name only if one pass over the
+loop body changes its value, which the interpreter does not model.
+
+Every variant the dispatcher can launch is compiled: forward (which also
+writes the backward pass's output gradient) and backward (with and without
+the input gradient), each precision of
+:data:`~wgse_mmseg.core.wgse.triton_band_networks.TOLERANCES`, each width of
+``HIDDEN_CHANNELS`` and each launch entry of the target, for sm_80 (A100),
+sm_89 (L40, RTX 4090) and sm_90 (H100). Band lengths are run-time values
+of the kernels, so one compile serves every band.
+
+The cost model (:func:`step_cost`) reads the compiled code: the
+instructions of the loop over a band's coefficients (the step every
+coefficient of a tile takes), all and tensor-core ones (``HMMA``,
+``HGMMA``), as warp instructions per coefficient position (times the
+warps, over the pixels of a tile). An SM issues at most one warp
+instruction per scheduler and clock, so :func:`predicted_ms` turns those
+counts into a lower bound on a pass's time at a GPU's clock.
+
+Triton's interpreter (``TRITON_INTERPRET=1``) replaces the kernels by
+Python functions that cannot be compiled, so the compiles run in a fresh
+process with it unset: ``python -m wgse_bench.triton_resources``
+(what :func:`compile_all` starts). Table: docs/wgse_speed.md.
+"""
+import argparse
+import concurrent.futures
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from typing import Dict, List, NamedTuple, Optional, Sequence
+
+from wgse_mmseg.core.arguments import Choice, Integer
+from wgse_mmseg.core.limits import MAX_WORKERS
+
+__all__ = []
+
+#: target name -> (compute capability, registers per SM, most warps per SM,
+#: most programs per SM, shared memory per SM in bytes, most per program)
+ARCHITECTURES = {
+    'sm_80': (80, 65536, 64, 32, 164 * 1024, 163 * 1024),
+    'sm_89': (89, 65536, 48, 24, 100 * 1024, 99 * 1024),
+    'sm_90': (90, 65536, 64, 32, 228 * 1024, 227 * 1024),
+}
+#: registers are allocated per warp in units of this many
+_REGISTER_UNIT = 256
+#: shared memory the CUDA runtime reserves per program (sm_80 and later)
+_RESERVED_SHARED = 1024
+
+_POINTERS = ['w1_ptr', 'b1_ptr', 'w2_ptr', 'b2_ptr', 'w3_ptr', 'b3_ptr']
+_SIGNATURES = {
+    'band_forward': dict(x_ptr='*fp32', gy_ptr='*fp32', out_ptr='*fp32',
+                         pixels='i32', columns='i32',
+                         tiles_per_sample='i32', lengths_ptr='*i32',
+                         offsets_ptr='*i32'),
+    'band_backward': dict(x_ptr='*fp32', d3_ptr='*fp32', gx_ptr='*fp32',
+                          partial_ptr='*fp32', work_ptr='*i32',
+                          pixels='i32', columns='i32',
+                          tiles_per_sample='i32', tiles='i32',
+                          lengths_ptr='*i32', offsets_ptr='*i32'),
+}
+
+
+class Variant(NamedTuple):
+    """One compiled kernel: name, hidden width, precision, whether it
+    computes the input gradient (the forward: whether it writes the output
+    gradient), the launch entry's ``block``, ``num_warps`` and
+    ``maxnreg``."""
+    kernel: str
+    hidden: int
+    precision: str
+    input_grad: bool
+    block: int
+    num_warps: int
+    maxnreg: Optional[int] = None
+
+    @property
+    def tensor_cores(self) -> bool:
+        """Whether its products run on tensor cores: every precision but
+        full float32 (``'ieee'``, where TF32 is turned off), which
+        multiplies on the FMA units and may spill."""
+        return self.precision != 'ieee'
+
+
+class Resources(NamedTuple):
+    """What one variant uses per thread and per program on one target."""
+    registers: int
+    spill_bytes: int  # cuobjdump's STACK: local memory a thread needs
+    local_bytes: int
+    shared_bytes: int  # static + dynamic, per program
+    programs_per_sm: int
+    loop_carried: int  # values the loops carry to their next step
+    step_instructions: int  # warp instructions of the step loop, a warp
+    step_tensor_core: int  # of which HMMA/HGMMA
+
+
+def variants(arch: str) -> List[Variant]:
+    """Every kernel variant the dispatcher can launch on ``arch``."""
+    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
+                                                           HIDDEN_CHANNELS,
+                                                           TOLERANCES,
+                                                           backward_configs)
+    capability = ARCHITECTURES[arch][0]
+    found = []
+    for hidden in HIDDEN_CHANNELS:
+        for precision in TOLERANCES:
+            found += [Variant('band_forward', hidden, precision, grad, *c)
+                      for grad in (False, True) for c in FORWARD_CONFIGS]
+            found += [Variant('band_backward', hidden, precision, grad, *c)
+                      for grad in (False, True)
+                      for c in backward_configs(capability, grad,
+                                                precision)]
+    return found
+
+
+def jobs_for(archs: Sequence[str]) -> List[tuple]:
+    """``(variant, arch)``: every variant of each target of ``archs``."""
+    return [(v, a) for a in archs for v in variants(a)]
+
+
+def programs_per_sm(registers: int, num_warps: int, shared_bytes: int,
+                    arch: str) -> int:
+    """Programs of ``num_warps`` warps using ``registers`` per thread and
+    ``shared_bytes`` (static + dynamic) that one SM of ``arch`` holds."""
+    _, sm_registers, sm_warps, sm_programs, sm_shared, _ = \
+        ARCHITECTURES[arch]
+    per_warp = -(-registers * 32 // _REGISTER_UNIT) * _REGISTER_UNIT
+    by_registers = (sm_registers // per_warp) // num_warps
+    by_shared = sm_shared // (shared_bytes + _RESERVED_SHARED)
+    return min(by_registers, sm_warps // num_warps, sm_programs, by_shared)
+
+
+def loop_carried(ttir: str) -> int:
+    """The number of values the ``scf.for`` loops in a kernel's triton IR
+    (``compiled.asm['ttir']``) carry from one iteration to the next."""
+    loops = re.findall(r'scf\.for .*? iter_args\((.*?)\) ->', ttir)
+    if not loops:
+        raise ValueError('expected an scf.for loop in the kernel, found none')
+    return sum(loop.count('=') for loop in loops)
+
+
+#: SASS opcodes of the tensor cores' matrix products
+TENSOR_CORE_OPCODES = ('HMMA', 'HGMMA')
+
+
+def step_loop(sass: str) -> List[str]:
+    """The opcodes of the innermost loop of ``cuobjdump -sass`` text: the
+    shortest range that a backward branch closes (the step over a band's
+    coefficients; the backward kernel's loop over tiles encloses it)."""
+    code = re.findall(r'/\*([0-9a-f]{4,})\*/\s+(@!?U?P\w+\s+)?([A-Z][\w.]*)'
+                      r'\s*([^;]*);', sass)
+    addresses = [int(address, 16) for address, *_ in code]
+    loops = []
+    for index, (address, _, opcode, operands) in enumerate(code):
+        target = re.match(r'\s*(?:`\()?(0x[0-9a-f]+)', operands)
+        if opcode.startswith('BRA') and target and \
+                int(target.group(1), 16) < addresses[index]:
+            start = addresses.index(int(target.group(1), 16))
+            loops.append(code[start:index + 1])
+    if not loops:
+        raise ValueError('no loop in the compiled kernel')
+    return [opcode for _, _, opcode, _ in min(loops, key=len)]
+
+
+def step_cost(opcodes: Sequence[str]) -> tuple:
+    """``(instructions, tensor-core instructions)`` of a step loop's
+    opcodes (:func:`step_loop`)."""
+    return len(opcodes), sum(op.split('.')[0] in TENSOR_CORE_OPCODES
+                             for op in opcodes)
+
+
+def per_position(step_instructions: int, num_warps: int, block: int
+                 ) -> float:
+    """Warp instructions a coefficient position costs: a step of every
+    warp of a program, over the pixels of its tile."""
+    return step_instructions * num_warps / block
+
+
+def predicted_ms(positions: float, instructions_per_position: float,
+                 sms: int, clock_ghz: float, schedulers: int = 4) -> float:
+    """The least time ``positions`` coefficient positions take at
+    ``instructions_per_position`` warp instructions each, on ``sms`` SMs
+    of ``schedulers`` issuing one warp instruction a clock each at
+    ``clock_ghz``: every cycle issuing, none waiting."""
+    return positions * instructions_per_position / (
+        sms * schedulers * clock_ghz * 1e6)
+
+
+def _cuobjdump() -> str:
+    import triton
+    path = os.path.join(os.path.dirname(triton.__file__), 'backends',
+                        'nvidia', 'bin', 'cuobjdump')
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f'{path}: the triton wheel ships no '
+                                f'cuobjdump here')
+    return path
+
+
+def compile_variant(variant: Variant, arch: str) -> Resources:
+    """Compile ``variant`` for ``arch`` (``'sm_90'``, ...) and read its
+    resource use. Needs triton with ``TRITON_INTERPRET`` unset."""
+    import triton
+    from triton.backends.compiler import GPUTarget
+    from triton.compiler import ASTSource
+
+    from wgse_mmseg.core.wgse import _triton_band_kernels as kernels
+    signature = dict(_SIGNATURES[variant.kernel])
+    signature.update({name: '*fp32' for name in _POINTERS})
+    constants = dict(HIDDEN=variant.hidden, BLOCK=variant.block,
+                     PRECISION=variant.precision)
+    constants['INPUT_GRAD' if variant.kernel == 'band_backward' else
+              'OUTPUT_GRAD'] = variant.input_grad
+    signature.update({name: 'constexpr' for name in constants})
+    source = ASTSource(fn=getattr(kernels, variant.kernel),
+                       signature=signature, constexprs=constants)
+    compiled = triton.compile(
+        source, target=GPUTarget('cuda', ARCHITECTURES[arch][0], 32),
+        options=dict(num_warps=variant.num_warps, maxnreg=variant.maxnreg))
+    with tempfile.NamedTemporaryFile(suffix='.cubin') as cubin:
+        cubin.write(compiled.asm['cubin'])
+        cubin.flush()
+        dump, sass = (subprocess.run(
+            [_cuobjdump(), option, cubin.name], capture_output=True,
+            text=True, check=True).stdout
+            for option in ('--dump-resource-usage', '--dump-sass'))
+    match = re.search(r'REG:(\d+) STACK:(\d+) SHARED:(\d+) LOCAL:(\d+)',
+                      dump)
+    if match is None:
+        raise RuntimeError(f'cuobjdump printed no resource usage for '
+                           f'{variant} on {arch}:\n{dump}')
+    registers, stack, static, local = map(int, match.groups())
+    shared = static + compiled.metadata.shared
+    return Resources(registers, stack, local, shared,
+                     programs_per_sm(registers, variant.num_warps, shared,
+                                     arch),
+                     loop_carried(compiled.asm['ttir']),
+                     *step_cost(step_loop(sass)))
+
+
+def _compile_row(job) -> Dict:
+    variant, arch = job
+    resources = compile_variant(variant, arch)
+    return dict(arch=arch, **variant._asdict(),
+                tensor_cores=variant.tensor_cores, **resources._asdict(),
+                per_position=per_position(resources.step_instructions,
+                                          variant.num_warps, variant.block),
+                tensor_core_per_position=per_position(
+                    resources.step_tensor_core, variant.num_warps,
+                    variant.block))
+
+
+def _compile_here(archs: Sequence[str], jobs: int) -> List[Dict]:
+    with concurrent.futures.ProcessPoolExecutor(jobs) as pool:
+        return list(pool.map(_compile_row, jobs_for(archs)))
+
+
+def compile_all(archs: Sequence[str] = tuple(ARCHITECTURES),
+                jobs: Optional[int] = None) -> List[Dict]:
+    """One row per variant and target (:func:`jobs_for`): the variant's
+    fields, ``arch``, ``tensor_cores``, the :class:`Resources` and the
+    step's warp instructions per coefficient position, all
+    (``per_position``) and tensor-core ones. Runs in a
+    fresh process with ``TRITON_INTERPRET`` unset, ``jobs`` compiles side by
+    side (default: the CPUs)."""
+    env = {k: v for k, v in os.environ.items() if k != 'TRITON_INTERPRET'}
+    command = [sys.executable, '-m', __name__, '--json', '--jobs',
+               str(jobs or os.cpu_count() or 1), '--archs', *archs]
+    proc = subprocess.run(command, capture_output=True, text=True, env=env)
+    if proc.returncode != 0:
+        raise RuntimeError(f'compiling the Triton kernels failed:\n'
+                           f'{proc.stderr}')
+    return json.loads(proc.stdout)
+
+
+def format_table(rows: Sequence[Dict]) -> str:
+    """The rows as a Markdown table; full-float32 variants (no tensor
+    cores) marked with ``-``."""
+    lines = ['| arch | kernel | H | precision | grad | block | warps '
+             '| registers | spills B | shared B | programs/SM '
+             '| step instr | TC instr | instr/position | TC/position |',
+             '|---|---|--:|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|']
+    for r in rows:
+        cap = '' if r['maxnreg'] is None else f" r{r['maxnreg']}"
+        lines.append(
+            f"| {r['arch']} | {r['kernel']} | {r['hidden']} | "
+            f"{r['precision']}{'' if r['tensor_cores'] else ' -'} | "
+            f"{r['input_grad']} | {r['block']} | {r['num_warps']}{cap} | "
+            f"{r['registers']} | {r['spill_bytes']} | "
+            f"{r['shared_bytes']} | {r['programs_per_sm']} | "
+            f"{r['step_instructions']} | {r['step_tensor_core']} | "
+            f"{r['per_position']:.1f} | {r['tensor_core_per_position']:.2f} |")
+    return '\n'.join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        description='Compile every WGSE Triton kernel variant for GPU '
+        'targets (no GPU needed) and print registers, spills, shared memory, '
+        'programs per SM and the step loop\'s instructions per coefficient '
+        'position (all and tensor-core).')
+    parser.add_argument('--archs', nargs='+',
+                        type=Choice(list(ARCHITECTURES)),
+                        default=list(ARCHITECTURES),
+                        help=f'of {list(ARCHITECTURES)} (default: all)')
+    parser.add_argument('--jobs', type=Integer(1, MAX_WORKERS),
+                        default=min(os.cpu_count() or 1, MAX_WORKERS))
+    parser.add_argument('--json', action='store_true',
+                        help='print the rows as JSON instead of a table')
+    return parser
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
+        parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
+                     'cannot be compiled')
+    rows = _compile_here(args.archs, args.jobs)
+    print(json.dumps(rows) if args.json else format_table(rows))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
