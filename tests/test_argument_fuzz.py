@@ -148,6 +148,7 @@ def _required(entry):
                                        sources=('matplotlib',)),
         'score_recording': dict(path=files['clip'], methods=['tfp'],
                                 num_steps=5),
+        'ssim': dict(pred=np.full((12, 12), 0.5), gt=np.full((12, 12), 0.5)),
         'plan_walk': dict(total=100, length=9, stride=10),
         'walk_recording': dict(
             path=files['clip'], video=str(files['root'] / 'walk.gif'),

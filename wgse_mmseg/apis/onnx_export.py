@@ -107,8 +107,7 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
 
     Raises:
         ValueError: naming ``path``, for a shape below the smallest input
-            the model takes
-            (:func:`~wgse_mmseg.utils.cross_checks.check_input_fits`), a
+            the model takes (the check a training's start makes), a
             model the exporter cannot trace
             (TFI's data-dependent scans), metadata that is not classes and
             a palette, or a file its own checks refuse; nothing is left.
