@@ -24,6 +24,7 @@ from typing import Dict, List, Sequence
 
 from wgse_mmseg.core.arguments import Integer, Path
 from wgse_mmseg.core.limits import MAX_REPEAT
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 #: the modules a tool's --help must not need: each takes from a tenth of a
@@ -106,8 +107,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    check_tool_outputs(args, 'out')
     from wgse_bench.machine import machine_record
     from wgse_bench.markdown import markdown_table
     from wgse_mmseg.core.io import atomic_output

@@ -44,6 +44,7 @@ import numpy as np
 
 from wgse_mmseg.core.arguments import Path
 from wgse_mmseg.core.io import write_bytes
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 
 DEFAULT_OUT = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),
                        'wgse_mmseg', 'core', 'quality', 'data')
@@ -190,8 +191,10 @@ def make_files(basicsr_sdist: bytes, brisque_wheel: bytes) -> dict:
     return files
 
 
+@keeps_inputs
 def main(argv=None):
     args = build_parser().parse_args(argv)
+    check_tool_outputs(args, 'out')
     with tempfile.TemporaryDirectory() as folder:
         files = make_files(download(BASICSR, folder),
                            download(BRISQUE, folder))

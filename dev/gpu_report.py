@@ -17,6 +17,8 @@ import os
 import os.path as osp
 import sys
 
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 #: docs/gpu.md's targets on one H100 or H200 (issue 43): figure
 #: (``gpu_report.FIGURES``) -> (at most, aim or None)
@@ -48,11 +50,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if '--smoke' in argv:  # before triton is first imported
         os.environ['TRITON_INTERPRET'] = '1'
     args = build_parser().parse_args(argv)
+    check_tool_outputs(args, 'out_dir')
     import torch
 
     from wgse_bench import gpu_report

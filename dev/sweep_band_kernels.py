@@ -38,6 +38,7 @@ from wgse_bench.timing import time_calls
 from wgse_mmseg.core.arguments import (Choice, Integer, Path, Text,
                                        excerpt)
 from wgse_mmseg.core.limits import MAX_REPEAT
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 from wgse_mmseg.core.wgse import triton_band_networks as tbn
 
 #: the longest band of WGSE's default (db8, 5 levels) at T = 129
@@ -185,9 +186,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    check_tool_outputs(args, 'out')
     entries = {}
     for option in ('forward', 'backward'):
         try:

@@ -10,6 +10,7 @@ import os.path as osp
 import sys
 
 from wgse_mmseg.core.arguments import Path
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
 
@@ -24,8 +25,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main():
     args = build_parser().parse_args()
+    check_tool_outputs(args, 'out')
     # torch and OpenMMLab once the arguments are read (--help answers at once)
     from wgse_mmseg.core.io import SpikeFileError
     from wgse_mmseg.utils.checkpoint import read_checkpoint

@@ -204,6 +204,7 @@ OUTPUT_OVER_INPUT = [
     ('dev/make_reconstruction_figure.py', ['{t}/ok.npy', '--out', 'OUT',
                                             '--methods', 'tfp'], 'ok.npy'),
     ('dataset_converters/spike_cityscapes.py', ['{t}/city', 'OUT'], 'city'),
+    ('test.py', [CONFIG, '{t}/notes.pth', '--out', 'OUT'], 'notes.pth'),
 ]
 
 

@@ -18,6 +18,7 @@ import sys
 from wgse_bench.timing import time_calls
 from wgse_mmseg.core.arguments import SIDE, Integer, Path, Text
 from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 from wgse_mmseg.utils.config import add_config_options
 
 #: the declarations of a measurement's repeats and warm-up calls
@@ -48,8 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main():
     args = build_parser().parse_args()
+    check_tool_outputs(args, 'out')
     # the stack once the arguments are read (--help answers at once)
     import wgse_mmseg
     wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import

@@ -23,6 +23,7 @@ from wgse_mmseg.apis.onnx_settings import SHAPE_ENTRY
 from wgse_bench.timing import time_calls
 from wgse_mmseg.core.arguments import Integer, Path, Text
 from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 
 #: the declarations of a measurement's repeats and warm-up calls
 TIMING = time_calls.declaration.arguments
@@ -55,8 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    check_tool_outputs(args, 'out')
     # the stack once the arguments are read (--help answers at once)
     import wgse_mmseg
     wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import

@@ -36,6 +36,7 @@ from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_bench.wgse import (DEFAULT_SHAPES, IMPLEMENTATIONS,
                                         SHAPE, available_backends,
                                         run_benchmark)
+from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -57,9 +58,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    check_tool_outputs(args, 'out')
     if args.device == 'cuda' and not torch.cuda.is_available():
         parser.error('--device cuda: torch sees no CUDA device here')
     backends = available_backends(args.device)

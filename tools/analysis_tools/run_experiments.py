@@ -41,7 +41,9 @@ from wgse_bench.experiments import (ExperimentSettings, RunFailed,
                                          report, run_one, schedule_options,
                                          select)
 from wgse_mmseg.core.arguments import SEED, Path, Text
-from wgse_mmseg.core.output_folder import OutputFolderError, own_folder
+from wgse_mmseg.core.output_folder import (OutputFolderError,
+                                           check_tool_outputs, keeps_inputs,
+                                           own_folder)
 
 #: the declarations of the training length
 SCHEDULE = schedule_options.declaration.arguments
@@ -131,8 +133,10 @@ def measure_entries(runs, grid, work_dir):
     return failures
 
 
+@keeps_inputs
 def main(argv=None):
     args = parse_args(argv)
+    check_tool_outputs(args, 'work_dir')
     command = shlex.join(['python', osp.relpath(__file__, os.getcwd())] +
                          list(sys.argv[1:] if argv is None else argv))
     grid, entries = load_grid(args.grid)

@@ -9,7 +9,8 @@ import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.output_folder import add_wait_option
+from wgse_mmseg.core.output_folder import (add_wait_option, check_tool_outputs,
+                                           keeps_inputs)
 from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
 
 
@@ -34,8 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@keeps_inputs
 def main():
     args = build_parser().parse_args()
+    check_tool_outputs(args, 'out_dir')
     try:
         written = make_synthetic_dataset(
             args.out_dir, args.num_train, args.num_val, args.height,
