@@ -114,10 +114,10 @@ def test_the_benchmarks_run_without_the_stack(without_openmmlab, tmp_path):
     assert 'torch' in report['backends']
     assert 'reference' not in report['backends']
     assert {r['backend'] for r in report['rows']} >= {'torch'}
-    # full float32 judged, TF32 and bf16 measured (gpu_report's note)
+    # full float32 judged, TF32, bf16 and fp16 measured (gpu_report's note)
     torch_rows = {r['precision']: r for r in report['rows']
                   if r['backend'] == 'torch'}
     assert torch_rows.pop('ieee')['ok'] is True
-    assert set(torch_rows) == {'tf32', 'bf16'}
+    assert set(torch_rows) == {'tf32', 'bf16', 'fp16'}
     assert all(r['ok'] is None and r['max_rel_error'] < 1e-2
                for r in torch_rows.values())
