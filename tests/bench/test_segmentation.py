@@ -13,9 +13,9 @@ import torch.nn as nn
 from mmseg.registry import MODELS
 from wgse_bench.markdown import markdown_table
 from wgse_bench.segmentation import (build_model, count_flops,
-                                                inference_parameters,
-                                                measure_enhancer_step,
-                                                measure_train_step)
+                                     inference_parameters,
+                                     measure_enhancer_step,
+                                     measure_train_step)
 from wgse_bench.timing import summarize, time_calls
 
 pytestmark = pytest.mark.usefixtures('single_thread')

@@ -58,7 +58,7 @@ def main():
     wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
     from wgse_bench.machine import run_isolated
     from wgse_bench.segmentation import (benchmark_config,
-                                                    format_results)
+                                         format_results)
     from wgse_mmseg.core.io import atomic_output
     results, failures = [], []
     for config in args.configs:

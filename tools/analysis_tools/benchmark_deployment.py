@@ -66,7 +66,7 @@ def main(argv=None) -> int:
     from wgse_bench.experiments import load_grid, select
     from wgse_bench.experiments.grid import enhancer_options
     from wgse_bench.deployment import (format_deployment,
-                                                  measure_deployment)
+                                       measure_deployment)
     from wgse_bench.machine import run_isolated
     from wgse_mmseg.core.io import atomic_output
     grid, entries = load_grid(args.grid)

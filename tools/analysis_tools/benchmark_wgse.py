@@ -34,8 +34,8 @@ import torch
 from wgse_mmseg.core.arguments import Choice, Integer, Path
 from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_bench.wgse import (DEFAULT_SHAPES, IMPLEMENTATIONS,
-                                        SHAPE, available_backends,
-                                        run_benchmark)
+                             SHAPE, available_backends,
+                             run_benchmark)
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 
 

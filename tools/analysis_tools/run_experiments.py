@@ -36,10 +36,10 @@ import time
 import wgse_mmseg
 wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
 from wgse_bench.experiments import (ExperimentSettings, RunFailed,
-                                         StaleRunError, benchmark_entry,
-                                         describe, finished, load_grid, plan,
-                                         report, run_one, schedule_options,
-                                         select)
+                                    StaleRunError, benchmark_entry,
+                                    describe, finished, load_grid, plan,
+                                    report, run_one, schedule_options,
+                                    select)
 from wgse_mmseg.core.arguments import SEED, Path, Text
 from wgse_mmseg.core.output_folder import (OutputFolderError,
                                            check_tool_outputs, keeps_inputs,
