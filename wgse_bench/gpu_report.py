@@ -66,7 +66,7 @@ from wgse_mmseg.core.wgse import (WGSE, band_network_backends, first_use_check,
                                   triton_band_networks)
 
 from . import wgse as wgse_benchmark
-from . import wgse_profile
+from . import wgse_choices, wgse_profile
 from .machine import machine_record, run_isolated
 from .markdown import markdown_table
 
@@ -712,7 +712,7 @@ def format_report(report: Dict[str, Any], command: str) -> str:
             markdown_table(
                 ['implementation', 'median ms', 'min-max ms', 'peak MiB',
                  'time / reference', 'memory / reference', 'status'],
-                [[wgse_benchmark.IMPLEMENTATIONS[r['impl']],
+                [[wgse_choices.IMPLEMENTATIONS[r['impl']],
                   _num(1e3 * r['median_s'], 1) if 'median_s' in r else '-',
                   f"{1e3 * r['min_s']:.1f}-{1e3 * r['max_s']:.1f}"
                   if 'min_s' in r else '-',

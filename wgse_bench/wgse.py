@@ -21,27 +21,13 @@ from typing import Dict, List, Optional
 
 import torch
 
-from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, SequenceOf
 from wgse_mmseg.core.io import atomic_output
-from wgse_mmseg.core.limits import MAX_BATCH_SIZE
 from wgse_mmseg.core.wgse import (WGSE, band_network_backends,
                                   triton_band_networks)
 
 from .machine import machine_record
 from .timing import time_calls
-
-IMPLEMENTATIONS = {
-    'reference': 'pytorch_wavelets + per-pixel nn.Conv1d',
-    'torch': "WGSE, backend='torch'",
-    'compiled': "WGSE, backend='compiled'",
-    'triton': "WGSE, backend='triton'",
-}
-DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
-
-
-#: a batch's shape, ``BxTxHxW`` on a command line
-SHAPE = SequenceOf((Integer(1, MAX_BATCH_SIZE), NUM_STEPS, SIDE, SIDE),
-                 names=('B', 'T', 'H', 'W'), separator='x')
+from .wgse_choices import IMPLEMENTATIONS, SHAPE
 
 
 class ReferenceWGSE(torch.nn.Module):

@@ -5,10 +5,9 @@ them (what makes them answer at once: the figures are
 import pytest
 
 #: the measurement tools whose parsers still read declarations of modules
-#: that import torch (the WGSE benchmark's shapes, the band kernels' launch
-#: entries, the grid's schedule)
-TORCH_AT_PARSE = {'tools/analysis_tools/benchmark_wgse.py',
-                  'dev/sweep_band_kernels.py', 'dev/gpu_report.py',
+#: that import torch (the band kernels' launch entries, the grid's
+#: schedule)
+TORCH_AT_PARSE = {'dev/sweep_band_kernels.py',
                   'tools/analysis_tools/run_experiments.py'}
 
 

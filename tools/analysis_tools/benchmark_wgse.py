@@ -29,13 +29,9 @@ Needs ``pytorch_wavelets`` (``requirements/tests.txt``).
 import argparse
 import sys
 
-import torch
-
+from wgse_bench.wgse_choices import DEFAULT_SHAPES, IMPLEMENTATIONS, SHAPE
 from wgse_mmseg.core.arguments import Choice, Integer, Path
 from wgse_mmseg.core.limits import MAX_REPEAT
-from wgse_bench.wgse import (DEFAULT_SHAPES, IMPLEMENTATIONS,
-                             SHAPE, available_backends,
-                             run_benchmark)
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 
 
@@ -63,6 +59,10 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     check_tool_outputs(args, 'out')
+    # torch once the arguments are read (--help answers at once)
+    import torch
+
+    from wgse_bench.wgse import available_backends, run_benchmark
     if args.device == 'cuda' and not torch.cuda.is_available():
         parser.error('--device cuda: torch sees no CUDA device here')
     backends = available_backends(args.device)
