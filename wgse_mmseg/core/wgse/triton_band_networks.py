@@ -203,6 +203,9 @@ class BandKernelInputs(NamedTuple):
     lengths: Tensor
     offsets: Tensor
     params: Tuple[Tensor, ...]
+    #: the lengths as Python ints: the backward's work division reads them
+    #: without waiting on the device
+    band_lengths: Tuple[int, ...]
 
     @property
     def hidden(self) -> int:
@@ -227,7 +230,8 @@ def band_kernel_inputs(lengths: Sequence[int], params: Sequence[Tensor]
     return BandKernelInputs(
         torch.tensor(lengths, dtype=torch.int32, device=device),
         torch.tensor(offsets, dtype=torch.int32, device=device),
-        tuple(torch.stack(params[kind::6]).contiguous() for kind in range(6)))
+        tuple(torch.stack(params[kind::6]).contiguous() for kind in range(6)),
+        tuple(lengths))
 
 
 class _Tuned(NamedTuple):
@@ -323,8 +327,7 @@ def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
     of its programs' rows (``slots``: programs in all, about)."""
     batch, columns, pixels = coeffs.shape
     tiles = batch * triton.cdiv(pixels, config.block)
-    division = work_division([int(n) for n in inputs.lengths.tolist()],
-                             tiles, slots)
+    division = work_division(inputs.band_lengths, tiles, slots)
     work = torch.tensor(division, dtype=torch.int32, device=coeffs.device)
     partial = coeffs.new_empty(len(division),
                                sum(p[0].numel() for p in inputs.params))
@@ -362,7 +365,7 @@ class _TritonBandNetworks(torch.autograd.Function):
             launch_forward(configs[0] or FORWARD_CONFIGS[0], coeffs, out,
                            inputs, precision)
         ctx.lengths, ctx.precision = lengths, precision
-        ctx.configs = configs
+        ctx.configs, ctx.inputs = configs, inputs
         ctx.save_for_backward(coeffs, *params)
         return out
 
@@ -379,7 +382,7 @@ class _TritonBandNetworks(torch.autograd.Function):
         if not coeffs.numel():
             return (torch.zeros_like(coeffs) if input_grad else None, None,
                     None, None, *[torch.zeros_like(p) for p in params])
-        inputs = band_kernel_inputs(ctx.lengths, params)
+        inputs = ctx.inputs  # the forward's stacked parameters
         forward_config, backward_config = ctx.configs
         d3 = torch.empty_like(coeffs)
         launch_forward(forward_config or FORWARD_CONFIGS[0], coeffs, d3,
@@ -395,7 +398,7 @@ class _TritonBandNetworks(torch.autograd.Function):
                              ctx.precision),
             ('band_backward', ctx.lengths, inputs.hidden, ctx.precision,
              input_grad, coeffs.shape[0] * coeffs.shape[2]),
-            coeffs.device, lambda c: launch(c))
+            coeffs.device, launch)
         grads = []
         for total, band_params in zip(launch(config),
                                       zip(*[iter(params)] * 6)):
