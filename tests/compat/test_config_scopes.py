@@ -78,18 +78,25 @@ def test_the_configs_folder_of_each_install_mode(tmp_path, monkeypatch,
         assert config_scopes.package_configs() == str(expected)
 
 
+def _one_epoch(tmp_path, dataset, run_options):
+    """The BiSeNetV2 config by scope in ``tmp_path``, its work dir and the
+    options of one epoch on ``dataset`` with a checkpoint."""
+    config = _config(tmp_path, [f'wgse_mmseg::{base}' for base in BASES])
+    options = run_options(dataset, 'train_cfg.max_epochs=1',
+                          'train_cfg.val_interval=2',
+                          'default_hooks.checkpoint.interval=1',
+                          batch_size=4)
+    return config, tmp_path / 'work', options
+
+
 @pytest.mark.long(40)
 def test_a_config_elsewhere_trains_with_the_package_tool(
         tmp_path, tiny_spike_dataset, tiny_run_options):
     """tools/train.py (what ``mim train wgse_mmseg`` runs) trains the
     BiSeNetV2 config of another folder one iteration, its checkpoint
     written."""
-    config = _config(tmp_path, [f'wgse_mmseg::{base}' for base in BASES])
-    work_dir = tmp_path / 'work'
-    options = tiny_run_options(tiny_spike_dataset, 'train_cfg.max_epochs=1',
-                               'train_cfg.val_interval=2',
-                               'default_hooks.checkpoint.interval=1',
-                               batch_size=4)
+    config, work_dir, options = _one_epoch(tmp_path, tiny_spike_dataset,
+                                           tiny_run_options)
     result = subprocess.run(
         [sys.executable, osp.join(ROOT, 'tools', 'train.py'), config,
          '--work-dir', str(work_dir), *options],
@@ -117,12 +124,8 @@ def test_mim_trains_a_config_elsewhere(tmp_path, tiny_spike_dataset,
     if found not in (osp.join(ROOT, 'wgse_mmseg'), ROOT):
         pytest.skip(f'mim finds wgse_mmseg at {found!r}, not in this '
                     f'checkout (tests/tools/test_mim_end_to_end.py says so)')
-    config = _config(tmp_path, [f'wgse_mmseg::{base}' for base in BASES])
-    work_dir = tmp_path / 'work'
-    options = tiny_run_options(tiny_spike_dataset, 'train_cfg.max_epochs=1',
-                               'train_cfg.val_interval=2',
-                               'default_hooks.checkpoint.interval=1',
-                               batch_size=4)
+    config, work_dir, options = _one_epoch(tmp_path, tiny_spike_dataset,
+                                           tiny_run_options)
     result = subprocess.run(
         [osp.join(bin_dir, 'mim'), 'train', 'wgse_mmseg', config, '--gpus',
          '0', '--launcher', 'none', '--work-dir', str(work_dir), *options],
