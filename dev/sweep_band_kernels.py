@@ -28,18 +28,15 @@ import re
 import statistics
 import sys
 import time
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
-import torch
-
-from wgse_bench.machine import machine_record
 from wgse_bench.markdown import markdown_table
 from wgse_bench.timing import time_calls
+from wgse_bench.wgse_choices import HIDDEN_CHANNELS, PRECISIONS
 from wgse_mmseg.core.arguments import (Choice, Integer, Path, Text,
                                        excerpt)
 from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
-from wgse_mmseg.core.wgse import triton_band_networks as tbn
 
 #: the longest band of WGSE's default (db8, 5 levels) at T = 129
 BAND_LENGTH = 72
@@ -47,9 +44,10 @@ DEFAULT_FORWARD = ['64x4', '32x4', '64x8', '128x8']
 DEFAULT_BACKWARD = ['32x4', '64x4', '16x4', '64x8', '32x2']
 
 
-def launch_entry(text: str) -> tbn.LaunchConfig:
-    """``'16x4'`` or ``'16x4r168'`` as a launch entry; ``ValueError`` for
-    one that cannot launch."""
+def launch_entry(text: str) -> Tuple[int, int, Optional[int]]:
+    """``'16x4'`` or ``'16x4r168'`` as a launch entry's ``(block, warps,
+    registers)`` (``LaunchConfig``'s fields); ``ValueError`` for one that
+    cannot launch."""
     match = re.fullmatch(r'(\d{1,4})x(\d{1,2})(?:r(\d{1,3}))?', text)
     if match is None:
         raise ValueError(f'expected BLOCKxWARPS or BLOCKxWARPSrREGISTERS '
@@ -62,12 +60,13 @@ def launch_entry(text: str) -> tbn.LaunchConfig:
         raise ValueError(f'{excerpt(text)}: the block must be a power of '
                          f'two >= 16 (tl.dot), the warps a power of two in '
                          f'[1, 16], the registers in [24, 255]')
-    return tbn.LaunchConfig(block, warps, registers)
+    return block, warps, registers
 
 
 def _band(length: int, hidden: int, pixels: int, device: str) -> Dict:
     """Coefficients ``(1, length, pixels)``, an output gradient of the
     same shape and one band network's six parameters, seeded."""
+    import torch
     generator = torch.Generator().manual_seed(0)
     layers = [torch.nn.Conv1d(1, hidden, 3),
               torch.nn.Conv1d(hidden, hidden, 3),
@@ -85,6 +84,9 @@ def _band(length: int, hidden: int, pixels: int, device: str) -> Dict:
 def _runner(kernel: str, band: Dict, precision: str, input_grad: bool):
     """A function of a launch entry that runs ``kernel`` once and returns
     what it computed (a list of tensors)."""
+    import torch
+
+    from wgse_mmseg.core.wgse import triton_band_networks as tbn
     coeffs, length = band['coeffs'], band['coeffs'].shape[1]
     inputs = tbn.band_kernel_inputs([length], band['params'])
     d3 = torch.empty_like(coeffs)
@@ -106,8 +108,7 @@ def _runner(kernel: str, band: Dict, precision: str, input_grad: bool):
     return run
 
 
-def _difference(got: Sequence[torch.Tensor],
-                want: Sequence[torch.Tensor]) -> float:
+def _difference(got: Sequence, want: Sequence) -> float:
     """Largest ``|got - want|`` relative to ``want``'s largest magnitude,
     over the tensors."""
     return max(((g - w).abs().max() / w.abs().max().clamp_min(1e-30)).item()
@@ -121,11 +122,14 @@ def _milliseconds(fn, device: str, repeat: int) -> float:
     return 1e3 * statistics.median(time_calls(fn, device, repeat, 0).wall)
 
 
-def sweep(kernel: str, entries: Sequence[tbn.LaunchConfig], band: Dict,
-          precision: str, input_grad: bool, device: str,
-          repeat: int) -> List[Dict]:
-    """One row per entry: ``entry``, ``listed``, ``compile_s``, ``ms`` and
-    ``difference`` (from the first entry's results)."""
+def sweep(kernel: str, entries: Sequence, band: Dict, precision: str,
+          input_grad: bool, device: str, repeat: int) -> List[Dict]:
+    """One row per entry (a ``LaunchConfig``): ``entry``, ``listed``,
+    ``compile_s``, ``ms`` and ``difference`` (from the first entry's
+    results)."""
+    import torch
+
+    from wgse_mmseg.core.wgse import triton_band_networks as tbn
     run = _runner(kernel, band, precision, input_grad)
     listed = (tbn.FORWARD_CONFIGS if kernel == 'band_forward' else
               tbn.backward_configs())
@@ -162,9 +166,9 @@ def build_parser() -> argparse.ArgumentParser:
                         default=BAND_LENGTH,
                         help=f'the band\'s coefficients (default '
                         f'{BAND_LENGTH}: the longest band at T=129)')
-    parser.add_argument('--hidden', type=Choice(list(tbn.HIDDEN_CHANNELS)),
+    parser.add_argument('--hidden', type=Choice(list(HIDDEN_CHANNELS)),
                         default=32)
-    parser.add_argument('--precision', type=Choice(list(tbn.TOLERANCES)),
+    parser.add_argument('--precision', type=Choice(list(PRECISIONS)),
                         default='tf32')
     parser.add_argument('--pixels', type=Integer(1, 1 << 26),
                         default=4 * 256 * 512)
@@ -198,6 +202,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                for e in getattr(args, option)]
         except ValueError as error:
             parser.error(f'argument --{option}: {error}')
+    import torch
+
+    from wgse_bench.machine import machine_record
+    from wgse_mmseg.core.io import atomic_output
+    from wgse_mmseg.core.wgse import triton_band_networks as tbn
+    entries = {option: [tbn.LaunchConfig(*e) for e in listed]
+               for option, listed in entries.items()}
     reason = tbn.unavailable()
     if reason:
         parser.error(f'the Triton kernels cannot run here: {reason}')
@@ -217,11 +228,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
           f"{args.input_grad}\n")
     print(format_rows(rows))
     if args.out:
-        with open(args.out, 'w') as f:
-            json.dump(dict(machine=machine, arguments=dict(
-                length=args.length, hidden=args.hidden,
-                precision=args.precision, pixels=args.pixels,
-                input_grad=args.input_grad), rows=rows), f, indent=1)
+        record = dict(machine=machine, arguments=dict(
+            length=args.length, hidden=args.hidden,
+            precision=args.precision, pixels=args.pixels,
+            input_grad=args.input_grad), rows=rows)
+        with atomic_output(args.out) as f:
+            f.write(json.dumps(record, indent=1).encode())
     return 0
 
 

@@ -107,7 +107,7 @@ SMOKE = Plan('cpu', correctness_shape=(1, 12, 3, 5),
              repeat=1, warmup=1, isolate=False, check_pixels=1)
 #: Precisions of the correctness section (TF32 off, TF32, bf16 autocast,
 #: fp16 autocast with the loss scaled as AMP scales it).
-PRECISIONS = ('ieee', 'tf32', 'bf16', 'fp16')
+PRECISIONS = wgse_choices.PRECISIONS
 #: The loss scale of the fp16 rows: ``torch.amp.GradScaler``'s initial
 #: scale, the largest it uses before it first meets an overflow.
 LOSS_SCALE = 2.0 ** 16

@@ -1,6 +1,8 @@
-"""The WGSE benchmark's choices (:mod:`.wgse`): its rows and batch shapes,
-importable without torch, so that its command line answers ``--help`` and
-argument errors at once."""
+"""The choices of WGSE's benchmarks: the rows and batch shapes of
+:mod:`.wgse`, the precisions and hidden widths of the band kernels that
+:mod:`.gpu_report` and ``dev/sweep_band_kernels.py`` run, importable without
+torch, so that their command lines answer ``--help`` and argument errors at
+once (tests/bench/test_wgse_choices.py holds them equal to the kernels')."""
 from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, SequenceOf
 from wgse_mmseg.core.limits import MAX_BATCH_SIZE
 
@@ -17,3 +19,8 @@ DEFAULT_SHAPES = ['4x41x128x128', '1x129x128x256']
 #: a batch's shape, ``BxTxHxW`` on a command line
 SHAPE = SequenceOf((Integer(1, MAX_BATCH_SIZE), NUM_STEPS, SIDE, SIDE),
                    names=('B', 'T', 'H', 'W'), separator='x')
+#: the band kernels' precisions (TF32 off, TF32, bf16 autocast, fp16
+#: autocast), each with its tolerance in the first-use check
+PRECISIONS = ('ieee', 'tf32', 'bf16', 'fp16')
+#: the hidden widths the band kernels are built for
+HIDDEN_CHANNELS = (16, 32)

@@ -555,8 +555,8 @@ def test_a_run_another_process_runs_is_not_run_twice(tmp_path, capsys,
     run, = runner.plan(runner.select(entries, ['segformer_b0_tfp']),
                        settings, grid)
     started = []
-    monkeypatch.setattr(cli, 'run_one', lambda *args: started.append(args))
-    monkeypatch.setattr(cli, 'report', lambda *args: None)
+    monkeypatch.setattr(runner, 'run_one', lambda *args: started.append(args))
+    monkeypatch.setattr(runner, 'report', lambda *args: None)
     with own_folder(run.run_dir):
         code = cli.main([GRID_CPU, '--data-root', str(tmp_path / 'data'),
                          '--work-dir', str(tmp_path / 'work'), '--seeds',

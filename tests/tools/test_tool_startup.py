@@ -4,13 +4,6 @@ them (what makes them answer at once: the figures are
 ``dev/benchmark_startup.py``'s, not a test's)."""
 import pytest
 
-#: the measurement tools whose parsers still read declarations of modules
-#: that import torch (the band kernels' launch entries, the grid's
-#: schedule)
-TORCH_AT_PARSE = {'dev/sweep_band_kernels.py',
-                  'tools/analysis_tools/run_experiments.py'}
-
-
 @pytest.fixture(scope='module')
 def startup(load_tool):
     return load_tool('dev/benchmark_startup.py')
@@ -19,9 +12,10 @@ def startup(load_tool):
 def test_every_tool_answers_before_the_heavy_imports(startup):
     tools = startup.tools()
     assert 'tools/train.py' in tools and len(tools) >= 16
-    assert TORCH_AT_PARSE <= set(tools)
+    assert {'dev/sweep_band_kernels.py',
+            'tools/analysis_tools/run_experiments.py'} <= set(tools)
     heavy = {}
-    for tool in sorted(set(tools) - TORCH_AT_PARSE):
+    for tool in sorted(tools):
         for argument in ('--help', '--no-such-option'):
             imported = startup.heavy_imports([tool, argument])
             if imported:

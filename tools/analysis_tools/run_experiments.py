@@ -33,20 +33,10 @@ import shlex
 import sys
 import time
 
-import wgse_mmseg
-wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up, before its import
-from wgse_bench.experiments import (ExperimentSettings, RunFailed,
-                                    StaleRunError, benchmark_entry,
-                                    describe, finished, load_grid, plan,
-                                    report, run_one, schedule_options,
-                                    select)
-from wgse_mmseg.core.arguments import SEED, Path, Text
+from wgse_mmseg.core.arguments import EPOCHS, ITERATIONS, SEED, Path, Text
 from wgse_mmseg.core.output_folder import (OutputFolderError,
                                            check_tool_outputs, keeps_inputs,
                                            own_folder)
-
-#: the declarations of the training length
-SCHEDULE = schedule_options.declaration.arguments
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -60,9 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--seeds', type=SEED, nargs='+',
                         help="seeds (default: the grid's)")
     schedule = parser.add_mutually_exclusive_group()
-    schedule.add_argument('--epochs', type=SCHEDULE['epochs'],
+    schedule.add_argument('--epochs', type=EPOCHS,
                           help="training epochs (default: the grid's)")
-    schedule.add_argument('--max-iters', type=SCHEDULE['max_iters'],
+    schedule.add_argument('--max-iters', type=ITERATIONS,
                           help='train for this many iterations instead')
     parser.add_argument('--only', nargs='+', metavar='NAME',
                         type=Text(empty=False),
@@ -98,10 +88,11 @@ def parse_args(argv=None):
 def settings_from(args, grid):
     """The checked settings of the parsed command line, the grid's seeds
     and epochs filling what it leaves out."""
+    from wgse_bench import experiments
     epochs = args.epochs
     if args.max_iters is None and args.epochs is None:
         epochs = grid.epochs
-    return ExperimentSettings(
+    return experiments.ExperimentSettings(
         grid=args.grid, data_root=args.data_root, work_dir=args.work_dir,
         seeds=args.seeds or list(grid.seeds), epochs=epochs,
         max_iters=args.max_iters, only=args.only,
@@ -113,17 +104,18 @@ def settings_from(args, grid):
 def measure_entries(runs, grid, work_dir):
     """Benchmark each entry that has a finished run; the names that
     failed."""
+    from wgse_bench import experiments
     timing = grid.get('benchmark', dict(repeat=5, warmup=2))
     failures, seen = [], set()
     for run in runs:
-        if run.entry.name in seen or not finished(run):
+        if run.entry.name in seen or not experiments.finished(run):
             continue
         seen.add(run.entry.name)
         print(f'benchmark {run.entry.name} ...', flush=True)
         try:
-            measured = benchmark_entry(run.entry, run.model_options,
-                                       work_dir, **timing)
-        except RunFailed as error:
+            measured = experiments.benchmark_entry(
+                run.entry, run.model_options, work_dir, **timing)
+        except experiments.RunFailed as error:
             print(f'benchmark {run.entry.name}: FAILED: {error}', flush=True)
             failures.append(f'benchmark of {run.entry.name}')
             continue
@@ -137,18 +129,22 @@ def measure_entries(runs, grid, work_dir):
 def main(argv=None):
     args = parse_args(argv)
     check_tool_outputs(args, 'work_dir')
+    import wgse_mmseg
+    wgse_mmseg.register_all_modules()  # the MMSeg layer's set-up first
+    from wgse_bench import experiments
     command = shlex.join(['python', osp.relpath(__file__, os.getcwd())] +
                          list(sys.argv[1:] if argv is None else argv))
-    grid, entries = load_grid(args.grid)
+    grid, entries = experiments.load_grid(args.grid)
     try:
         settings = settings_from(args, grid)
     except ValueError as error:  # ArgumentError included
         raise SystemExit(f'run_experiments.py: {error}') from None
-    entries = select(entries, settings.only)
+    entries = experiments.select(entries, settings.only)
     if args.list:
         for entry in entries:
-            print(f'{entry.name:32s} '
-                  f'{describe(entry.enhancer, entry.variant_options)}')
+            variant = experiments.describe(entry.enhancer,
+                                           entry.variant_options)
+            print(f'{entry.name:32s} {variant}')
         return 0
     if not settings.report_only and not osp.isdir(
             osp.join(settings.data_root, 'spike', 'train')):
@@ -156,10 +152,11 @@ def main(argv=None):
             f'{args.data_root}/spike/train does not exist. Make the embedded '
             f'dataset with: python tools/dataset_converters/make_synthetic_dataset.py '
             f'{args.data_root} --num-steps {grid.cfg_options["num_steps"]}')
-    runs = plan(entries, settings, grid)
+    runs = experiments.plan(entries, settings, grid)
     try:
-        done = [finished(run) for run in runs]  # checks every result first
-    except StaleRunError as error:
+        # every result is checked before any run starts
+        done = [experiments.finished(run) for run in runs]
+    except experiments.StaleRunError as error:
         raise SystemExit(str(error)) from None
     failures = []
     for index, (run, skip) in enumerate(zip(runs, done), 1):
@@ -174,9 +171,9 @@ def main(argv=None):
         start = time.perf_counter()
         try:
             with own_folder(run.run_dir):
-                result = run_one(run, settings.keep_checkpoints,
-                                 grid.latency)
-        except (RunFailed, OutputFolderError) as error:
+                result = experiments.run_one(
+                    run, settings.keep_checkpoints, grid.latency)
+        except (experiments.RunFailed, OutputFolderError) as error:
             print(f'{prefix} FAILED: {error}', flush=True)
             failures.append(f'{run.entry.name} seed {run.seed}')
             continue
@@ -185,7 +182,7 @@ def main(argv=None):
               f'{time.perf_counter() - start:.0f} s', flush=True)
     if settings.benchmark:
         failures += measure_entries(runs, grid, settings.work_dir)
-    report(entries, settings, grid, command)
+    experiments.report(entries, settings, grid, command)
     if failures:
         print(f'{len(failures)} runs failed: {", ".join(failures)}')
         return 1

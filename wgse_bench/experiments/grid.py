@@ -14,11 +14,11 @@ from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
 from mmengine.config import Config
 
 import wgse_mmseg
-from wgse_mmseg.core.arguments import declare
+from wgse_mmseg.core.arguments import EPOCHS, ITERATIONS, declare
 from wgse_mmseg.core.limits import excerpt
 from wgse_mmseg.utils.config import parse_option_value
 
-from .settings import EPOCHS, ITERATIONS, check_schedule
+from .settings import check_schedule
 
 _PACKAGE = osp.dirname(osp.abspath(wgse_mmseg.__file__))
 #: where the package keeps its ``configs/`` and ``tools/``: ``wgse_mmseg/.mim``

@@ -10,19 +10,14 @@ import os
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
-from wgse_mmseg.core.arguments import (SEED, Flag, Integer, Path, SequenceOf,
-                                       Text, declare_fields)
-from wgse_mmseg.core.limits import MAX_EPOCHS, MAX_ITERS
-
-#: epochs of one run
-EPOCHS = Integer(1, MAX_EPOCHS)
-#: iterations of one run
-ITERATIONS = Integer(1, MAX_ITERS)
+from wgse_mmseg.core.arguments import (EPOCHS, ITERATIONS, SEED, Flag, Path,
+                                       SequenceOf, Text, declare_fields)
 
 
 def check_schedule(epochs: Optional[int], max_iters: Optional[int]) -> int:
     """The length of a schedule given by exactly one of ``epochs`` and
-    ``max_iters`` (each declared: :data:`EPOCHS`, :data:`ITERATIONS`); a
+    ``max_iters`` (their ranges are checked where they
+    are declared); a
     ``ValueError`` otherwise."""
     if (epochs is None) == (max_iters is None):
         raise ValueError('give exactly one of epochs and max_iters')

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 from numbers import Integral, Real
 from typing import Any, Callable, Dict, Optional, Sequence
 
-from .limits import (MAX_CLASSES, MAX_IMAGE_SIDE, MAX_NUM_STEPS,
-                     MAX_PARAMETERS, MAX_SEED, excerpt)
+from .limits import (MAX_CLASSES, MAX_EPOCHS, MAX_IMAGE_SIDE, MAX_ITERS,
+                     MAX_NUM_STEPS, MAX_PARAMETERS, MAX_SEED, excerpt)
 
 __all__ = ['ArgumentError']
 
@@ -434,6 +434,10 @@ SIDE = Integer(1, MAX_IMAGE_SIDE)
 FRAME_SIZE = SequenceOf(SIDE, names=('h', 'w'))
 #: a seed of a random generator
 SEED = Integer(0, MAX_SEED)
+#: the epochs of a training run
+EPOCHS = Integer(1, MAX_EPOCHS)
+#: the iterations of a training run
+ITERATIONS = Integer(1, MAX_ITERS)
 #: the number of classes of a label map
 NUM_CLASSES = Integer(1, MAX_CLASSES)
 #: a probability
