@@ -68,14 +68,6 @@ html_title = f'wgse_mmseg {release}'
 
 #: the packages whose names the API pages hold
 OURS = ('wgse_mmseg', 'wgse_bench')
-#: internal names that docstrings of ``wgse_mmseg.core.wgse`` still show,
-#: left to that package's owner (its kernels were being rewritten when this
-#: check came): each goes once its docstring says it in words
-SHOWN_FROM_CORE_WGSE = {'wgse_mmseg.core.wavelets.SUPPORTED_MODES',
-                        'wgse_mmseg.core.wgse.band_network_backends',
-                        'wgse_mmseg.core.wgse.first_use_check.CheckResult'}
-
-
 def _existing(target: str, scopes):
     """``(object, dotted name)`` of what ``target`` names, read as Python
     would from one of ``scopes`` (dotted names of modules, classes,
@@ -165,10 +157,7 @@ def _internal_reference(app, env, node, contnode):
         return None
     obj, dotted = found
     home = _home(obj, dotted)
-    waived = home in SHOWN_FROM_CORE_WGSE and \
-        scopes[0].startswith('wgse_mmseg.core.wgse.')
-    if home.startswith(OURS) and not waived and \
-            not _on_the_api_pages(obj, env):
+    if home.startswith(OURS) and not _on_the_api_pages(obj, env):
         _LOG.warning('names %s (%s), which is not on the API pages '
                      '(docs/api.rst, docs/api_bench.rst): say it in words, '
                      'or name an API object', target, home,

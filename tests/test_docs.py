@@ -12,7 +12,6 @@ built page shows in code (``wgse_mmseg.x.y``, ``wgse_bench.x``) must be on
 the API pages (Sphinx's inventory of them, ``objects.inv``): an object
 there, a member of one, or a module holding some.
 """
-import ast
 import glob
 import os.path as osp
 import re
@@ -32,17 +31,6 @@ for _requirement in ('sphinx', 'myst_parser', 'furo'):
 #: not names)
 NAME = re.compile(r'(?<![\w/.-])((?:wgse_mmseg|wgse_bench)(?:\.[A-Za-z_]\w*)+)'
                   r'(?![\w/])')
-
-
-def _waived():
-    """``conf.py``'s internal names that the API page may still show, from
-    docstrings left to the owner of ``wgse_mmseg.core.wgse``."""
-    tree = ast.parse(open(osp.join(ROOT, 'docs', 'conf.py')).read())
-    for node in tree.body:
-        if isinstance(node, ast.Assign) and \
-                node.targets[0].id == 'SHOWN_FROM_CORE_WGSE':
-            return ast.literal_eval(node.value)
-    raise AssertionError('docs/conf.py: SHOWN_FROM_CORE_WGSE not found')
 
 
 class _CodeText(HTMLParser):
@@ -110,7 +98,6 @@ def test_pages_show_only_api_names(built):
            if kind.startswith('py:') for name in entries}
     assert 'wgse_mmseg.register_all_modules' in api
     assert 'wgse_bench.timing.time_calls' in api
-    waived = _waived()
     shown = {}
     for page in sorted(glob.glob(str(html / '**' / '*.html'),
                                  recursive=True)):
@@ -119,8 +106,6 @@ def test_pages_show_only_api_names(built):
             continue
         wrong = not_api(shown_names(open(page, encoding='utf-8').read()),
                         api)
-        if name == 'api.html':
-            wrong = [n for n in wrong if n not in waived]
         if wrong:
             shown[name] = wrong
     assert not shown, f'pages show names not on the API pages: {shown}'

@@ -179,14 +179,15 @@ class WGSE(nn.Module):
             stream).
         level: number of DWT levels; ``level + 1`` band networks. Levels
             above ``pywt.dwt_max_level`` are allowed, as in the paper.
-        mode: DWT boundary mode (see :data:`wgse_mmseg.core.wavelets.SUPPORTED_MODES`).
+        mode: DWT boundary mode, one of PyWavelets' (``'zero'``,
+            ``'constant'``, ``'symmetric'``, ``'reflect'``, ``'periodic'``,
+            ``'antisymmetric'``, ``'periodization'``).
         kernel_size: odd kernel size of every convolution.
         hidden_channels: width of the band networks.
         num_blocks: residual layers (and output convolutions) per band;
             2 is the paper's "long" variant.
         backend: what runs the band networks: ``'auto'``, ``'torch'``,
-            ``'compiled'``, ``'triton'`` or ``'reference'``
-            (:mod:`~wgse_mmseg.core.wgse.band_network_backends`). ``'auto'``
+            ``'compiled'``, ``'triton'`` or ``'reference'``. ``'auto'``
             picks the Triton kernel for CUDA inputs (once it passed its
             first-use check on the device: ``backend_check``) and the
             compiled kernel for CPU inputs where they can run, else
@@ -204,8 +205,9 @@ class WGSE(nn.Module):
     Attributes:
         backend_in_use: the backend that ran the last forward pass
             (``None`` before the first).
-        backend_check: the first-use check behind it
-            (:class:`~wgse_mmseg.core.wgse.first_use_check.CheckResult`):
+        backend_check: the first-use check behind it (its backend,
+            device, variant, ``passed``, ``max_error``, ``tolerance``,
+            ``failure`` and ``seconds``, and ``message()``, the log line):
             the one the backend passed, or the one ``'auto'`` fell back
             from to ``'torch'``; ``None`` where no check applies (the CPU
             backends, the Triton interpreter) and before the first pass.
