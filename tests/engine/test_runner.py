@@ -1,5 +1,6 @@
 """SpikeRunner loads checkpoints as data: config text in one is never
 executed; a training owns its work dir."""
+import copy
 import os
 import os.path as osp
 import sys
@@ -171,3 +172,32 @@ def test_a_training_writes_no_file_of_the_users_through_a_link(tmp_path):
     assert (work / 'last_checkpoint').read_text().endswith('iter_1.pth')
     assert (work / 'iter_1.pth').is_file()
     assert not (work / '.tmp-iter_1.pth').exists()
+
+
+def test_the_config_text_is_mmengines_formatted_once_per_content(
+        runner, monkeypatch):
+    """The runner's ``pretty_text`` is mmengine's own text; yapf formats it
+    once however often a run asks, and again once the config changes."""
+    import yapf.yapflib.yapf_api as yapf_api
+    from mmengine.config import Config
+    import mmengine.config.config as config_module
+    plain = Config(runner.cfg.to_dict())
+    expected = plain.pretty_text
+    formatted = []
+    original = yapf_api.FormatCode
+
+    def counted(*args, **kwargs):
+        formatted.append(args[0])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(yapf_api, 'FormatCode', counted)
+    if hasattr(config_module, 'FormatCode'):  # bound at import (0.10.7)
+        monkeypatch.setattr(config_module, 'FormatCode', counted)
+    cfg = copy.deepcopy(runner.cfg)  # the fixture is shared
+    assert type(cfg) is type(runner.cfg) is not Config
+    cfg.__dict__.pop('_formatted', None)
+    assert [cfg.pretty_text for _ in range(3)] == [expected] * 3
+    assert len(formatted) == 1
+    cfg.randomness = dict(seed=123)
+    assert 'seed=123' in cfg.pretty_text and len(formatted) == 2
+    assert cfg.pretty_text == Config(cfg.to_dict()).pretty_text

@@ -3,7 +3,10 @@ config's spike settings (``num_steps``, ``data_root``, ``crop_size``) to
 the fields that carry them
 (:func:`wgse_mmseg.utils.spike_settings.apply_spike_settings`), trains in a
 work dir no other training writes, writes each checkpoint whole or not at
-all, and never executes config text a checkpoint carries.
+all, never executes config text a checkpoint carries, and formats its
+config's text once (mmengine formats it with yapf, about 0.5 s on a CPU,
+each time a run logs, dumps or checkpoints it: four times or more a
+training).
 
 The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 ``tools/train.py``, which builds ``RUNNERS.build(cfg)`` when a config has a
@@ -14,6 +17,7 @@ import os
 import os.path as osp
 import pickle
 
+from mmengine.config import Config
 from mmengine.dist import broadcast_object_list, is_main_process, master_only
 from mmengine.logging import print_log
 # mmengine's root registry: RUNNERS.build(cfg) looks the runner up there
@@ -31,15 +35,46 @@ from ..utils.spike_settings import apply_spike_settings
 __all__ = ['SpikeRunner']
 
 
+class _FormattedOnce(Config):
+    """A :class:`~mmengine.config.Config` whose ``pretty_text`` is
+    mmengine's, formatted once for each content: the unformatted text
+    (mmengine's own, without yapf; milliseconds) is the key, so a config
+    changed after its text was formatted is formatted again."""
+
+    @property
+    def pretty_text(self) -> str:
+        formatting = self._format_python_code
+        if not formatting:
+            return Config.pretty_text.fget(self)
+        object.__setattr__(self, '_format_python_code', False)
+        try:
+            unformatted = Config.pretty_text.fget(self)
+        finally:
+            object.__setattr__(self, '_format_python_code', formatting)
+        cached = self.__dict__.get('_formatted')
+        if cached is None or cached[0] != unformatted:
+            cached = (unformatted, Config.pretty_text.fget(self))
+            object.__setattr__(self, '_formatted', cached)
+        return cached[1]
+
+    @classmethod
+    def of(cls, cfg: Config) -> '_FormattedOnce':
+        """A shallow copy of ``cfg`` (as ``copy.copy``) of this class."""
+        formatted = cls.__new__(cls)
+        formatted.__dict__.update(cfg.__dict__)
+        return formatted
+
+
 @RUNNERS.register_module()
 class SpikeRunner(Runner):
     """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` sets up the
     MMSeg layer (as :func:`wgse_mmseg.register_all_modules` does, once per
     process) and applies the config's spike settings first (also those
-    ``--cfg-options`` of MMSeg's own tools merged in), whose :meth:`train`
-    first checks that the crop and the batch fit the model
-    (:class:`~wgse_mmseg.utils.cross_checks.ModelFitError` where not) and owns the work dir while it
-    trains, whose :meth:`save_checkpoint` is atomic on local disks and
+    ``--cfg-options`` of MMSeg's own tools merged in) and formats the
+    config's text once for all its uses, whose :meth:`train` first checks
+    that the crop and the batch fit the model
+    (:class:`~wgse_mmseg.utils.cross_checks.ModelFitError` where not) and
+    owns the work dir while it trains, whose :meth:`save_checkpoint` is atomic on local disks and
     whose :meth:`load_checkpoint` refuses config text that mmengine would
     execute; otherwise the same."""
 
@@ -52,6 +87,8 @@ class SpikeRunner(Runner):
                       "config's values): " + ', '.join(
                           f'{path} (was {old!r})' for path, old in
                           sorted(changed.items())), logger='current')
+        if isinstance(cfg, Config):
+            cfg = _FormattedOnce.of(cfg)
         return super().from_cfg(cfg)
 
     def train(self):
