@@ -16,8 +16,7 @@ from wgse_mmseg.core.arguments import (EPOCHS, ITERATIONS, SEED, Flag, Path,
 
 def check_schedule(epochs: Optional[int], max_iters: Optional[int]) -> int:
     """The length of a schedule given by exactly one of ``epochs`` and
-    ``max_iters`` (their ranges are checked where they
-    are declared); a
+    ``max_iters`` (their ranges are checked where they are declared); a
     ``ValueError`` otherwise."""
     if (epochs is None) == (max_iters is None):
         raise ValueError('give exactly one of epochs and max_iters')

@@ -13,6 +13,7 @@ The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 ``runner_type``, uses it as this package's tools do.
 """
 import contextlib
+import copy
 import os
 import os.path as osp
 import pickle
@@ -59,9 +60,9 @@ class _FormattedOnce(Config):
 
     @classmethod
     def of(cls, cfg: Config) -> '_FormattedOnce':
-        """A shallow copy of ``cfg`` (as ``copy.copy``) of this class."""
+        """``copy.copy(cfg)`` (mmengine's copy) as this class."""
         formatted = cls.__new__(cls)
-        formatted.__dict__.update(cfg.__dict__)
+        formatted.__dict__.update(copy.copy(cfg).__dict__)
         return formatted
 
 
@@ -74,9 +75,9 @@ class SpikeRunner(Runner):
     config's text once for all its uses, whose :meth:`train` first checks
     that the crop and the batch fit the model
     (:class:`~wgse_mmseg.utils.cross_checks.ModelFitError` where not) and
-    owns the work dir while it trains, whose :meth:`save_checkpoint` is atomic on local disks and
-    whose :meth:`load_checkpoint` refuses config text that mmengine would
-    execute; otherwise the same."""
+    owns the work dir while it trains, whose :meth:`save_checkpoint` is
+    atomic on local disks and whose :meth:`load_checkpoint` refuses config
+    text that mmengine would execute; otherwise the same."""
 
     @classmethod
     def from_cfg(cls, cfg) -> 'SpikeRunner':
