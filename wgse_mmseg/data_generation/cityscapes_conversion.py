@@ -467,7 +467,10 @@ def convert_cityscapes(root: str, out_dir: str,
         out_dir: output root.
         settings: output size, ``T``, threshold, time span, effects, seed.
         splits: Cityscapes splits to convert.
-        nproc: worker processes (1: in this process).
+        nproc: worker processes (1: in this process). They are started
+            fresh (``spawn``), never forked from this process: a fork of a
+            process with other threads (a notebook's, a progress bar's
+            monitor) can deadlock or crash in the child.
         limit: convert at most this many samples per split (first by name).
         progress: show a progress bar.
         shard: ``Shard(K, N)``: only the samples at positions ``K - 1``,
@@ -497,7 +500,8 @@ def convert_cityscapes(root: str, out_dir: str,
             outcomes = map(convert, samples)
         else:
             pool = stack.enter_context(
-                multiprocessing.Pool(nproc, _init_worker))
+                multiprocessing.get_context('spawn').Pool(
+                    nproc, _init_worker))
             outcomes = pool.imap_unordered(convert, samples)
         for outcome in tqdm(outcomes, total=len(samples),
                             desc=f'Spike-Cityscapes {Shard(*shard)}',
