@@ -2,11 +2,9 @@
 import json
 import os
 import os.path as osp
-import runpy
-import signal
+import multiprocessing
 import subprocess
 import sys
-import traceback
 
 import cv2
 import numpy as np
@@ -24,6 +22,8 @@ from wgse_mmseg.core.seeding import derive_seed
 from wgse_mmseg.data_generation.shards import WHOLE, Shard
 from wgse_mmseg.core import simulation  # the converter calls it there
 from wgse_mmseg.core.simulation import simulate_spikes
+
+import killed_converter_run  # beside this file
 
 REPO_ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 SIZE = (64, 128)  # source frames, H x W
@@ -443,51 +443,31 @@ def test_an_empty_dataset_folder_is_named(tmp_path):
                              seg_map_path='gtFine/train'), pipeline=[])
 
 
-CONVERTER = osp.join(osp.dirname(osp.dirname(osp.dirname(
-    osp.abspath(__file__)))), 'tools', 'dataset_converters',
-    'spike_cityscapes.py')
+#: what the converter imports when it runs (the module imports them lazily)
+_CONVERTER_IMPORTS = ('cv2', 'torch', simulation.__name__)
 
 
 def _converter_killed_at(step, when, args):
-    """The converter's command line with ``args``, in a forked child of this
-    process that SIGKILLs itself just ``before`` or ``after`` its ``step``-th
-    file-system step (1-based; every ``os.replace``, an atomic write
-    landing, and every ``os.remove``): before a replace, the temporary file
-    is written but not in place, as when the kill lands mid-write. Returns
-    the child's exit code: -9 when killed, 0 when it finished first. A fork
-    rather than a fresh interpreter: the same kill, without importing torch
-    for every run."""
-    pid = os.fork()
-    if pid:
-        return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
-    code = 1
-    try:
-        count = 0
-
-        def counted(function):
-            def wrapper(*a, **k):
-                nonlocal count
-                count += 1
-                if count == step and when == 'before':
-                    os.kill(os.getpid(), signal.SIGKILL)
-                result = function(*a, **k)
-                if count == step and when == 'after':
-                    os.kill(os.getpid(), signal.SIGKILL)
-                return result
-            return wrapper
-
-        os.replace, os.remove = counted(os.replace), counted(os.remove)
-        sys.argv = [CONVERTER, *args]
-        runpy.run_path(CONVERTER, run_name='__main__')
-        code = 0
-    except SystemExit as exit:
-        code = exit.code if isinstance(exit.code, int) else 1
-    except BaseException:
-        traceback.print_exc()
-    finally:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
+    """:func:`killed_converter_run.run_killed_at` (the converter with
+    ``args``, SIGKILLed just ``when`` its ``step``-th file-system step) in a
+    child forked by multiprocessing's fork server, which imported the
+    converter's modules once. Returns the child's exit code: -9 when
+    killed, 0 when it finished first."""
+    context = multiprocessing.get_context('forkserver')
+    # The package's modules, not the helper beside this file: Python 3.11's
+    # fork server imports its preloads without the test's sys.path (each
+    # child then imports the helper, whose imports are loaded by then).
+    context.set_forkserver_preload([conversion.__name__,
+                                    *_CONVERTER_IMPORTS])
+    child = context.Process(target=killed_converter_run.run_killed_at,
+                            args=(step, when, args))
+    child.start()
+    child.join(120)
+    if child.exitcode is None:
+        child.kill()
+        child.join()
+        pytest.fail(f'the converter ({args}) ran for 120 s')
+    return child.exitcode
 
 
 @pytest.mark.long(15)

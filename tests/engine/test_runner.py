@@ -85,6 +85,13 @@ def test_a_checkpoint_that_pickles_code_is_refused(runner, tmp_path, how):
     assert not marker.exists()
 
 
+#: The training's samples are loaded in the test process: a loader worker
+#: would be a fork of it, and a fork of a process with other threads (the
+#: test runner's) can deadlock or crash in the child.
+IN_PROCESS_LOADING = {'train_dataloader.num_workers': 0,
+                      'train_dataloader.persistent_workers': False}
+
+
 def _training_runner(work_dir, **settings):
     """The CPU reconstruction config's runner (synthetic data made on the
     fly) for one iteration, nothing validated."""
@@ -92,7 +99,8 @@ def _training_runner(work_dir, **settings):
                                'wgse_resnet_cpu.py'),
                       {'model.channels': 4, 'model.mid_channels': 4,
                        'train_cfg.max_iters': 1, 'train_cfg.val_interval': 2,
-                       'default_hooks.checkpoint.interval': 2, **settings})
+                       'default_hooks.checkpoint.interval': 2,
+                       **IN_PROCESS_LOADING, **settings})
     cfg.work_dir = str(work_dir)
     return build_runner(cfg)
 
@@ -123,7 +131,8 @@ def test_the_train_tool_stops_naming_the_owner_or_waits_with_wait(
                                  'wgse_resnet_cpu.py'),
             '--work-dir', str(work), '--cfg-options', 'model.channels=4',
             'model.mid_channels=4', 'train_cfg.max_iters=1',
-            'train_cfg.val_interval=2', 'default_hooks.checkpoint.interval=2']
+            'train_cfg.val_interval=2', 'default_hooks.checkpoint.interval=2',
+            *(f'{key}={value}' for key, value in IN_PROCESS_LOADING.items())]
     train = load_tool('tools/train.py')
     monkeypatch.setattr(sys, 'argv', argv)
     with own_folder(str(work), job='train'), \
