@@ -78,6 +78,26 @@ def single_thread():
     torch.set_num_threads(threads)
 
 
+#: one entry per fork of this process (``os.fork``, multiprocessing's
+#: ``fork`` start, a DataLoader's workers); a subprocess or a spawned
+#: process starts without one
+_FORKS = []
+os.register_at_fork(before=lambda: _FORKS.append(None))
+
+
+@pytest.fixture(autouse=True)
+def forks_nothing():
+    """No test forks the test process: its other threads (pytest-xdist's,
+    pytest-timeout's, a progress bar's monitor) may hold a lock at the
+    moment of the fork that the child then waits for forever (a CI run
+    hung so) or finds corrupt (a child crashed so). Start a subprocess, a
+    spawned process or multiprocessing's fork server instead, and load a
+    training's samples in the process (``num_workers=0``)."""
+    before = len(_FORKS)
+    yield
+    assert len(_FORKS) == before, 'the test forked the test process'
+
+
 @pytest.fixture(scope='session', autouse=True)
 def interpreter_bfloat16_dot():
     """triton 3.6's interpreter multiplies bfloat16 ``tl.dot`` operands as
