@@ -18,8 +18,6 @@ import sys
 
 import torch
 
-import wgse_mmseg.data_generation.cityscapes_conversion  # noqa: F401
-
 CONVERTER = osp.join(osp.dirname(osp.dirname(osp.dirname(
     osp.abspath(__file__)))), 'tools', 'dataset_converters',
     'spike_cityscapes.py')
