@@ -106,13 +106,13 @@ class Resources(NamedTuple):
     step_tensor_core: int  # of which HMMA/HGMMA
 
 
-def variants(arch: str) -> List[Variant]:
-    """Every kernel variant the dispatcher can launch on ``arch``."""
+def variants() -> List[Variant]:
+    """Every kernel variant the dispatcher can launch (the same on every
+    target)."""
     from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
                                                            HIDDEN_CHANNELS,
                                                            TOLERANCES,
                                                            backward_configs)
-    capability = ARCHITECTURES[arch][0]
     found = []
     for hidden in HIDDEN_CHANNELS:
         for precision in TOLERANCES:
@@ -120,14 +120,13 @@ def variants(arch: str) -> List[Variant]:
                       for grad in (False, True) for c in FORWARD_CONFIGS]
             found += [Variant('band_backward', hidden, precision, grad, *c)
                       for grad in (False, True)
-                      for c in backward_configs(capability, grad,
-                                                precision)]
+                      for c in backward_configs(grad)]
     return found
 
 
 def jobs_for(archs: Sequence[str]) -> List[tuple]:
     """``(variant, arch)``: every variant of each target of ``archs``."""
-    return [(v, a) for a in archs for v in variants(a)]
+    return [(v, a) for a in archs for v in variants()]
 
 
 def programs_per_sm(registers: int, num_warps: int, shared_bytes: int,

@@ -152,12 +152,21 @@ def _tile_rows(tile, band, pixels, columns, tiles_per_sample, offsets_ptr,
 
 
 @triton.jit
+def _bias_at(t, length, bias):
+    """A layer's bias ``(1, H)`` at coefficient ``t``: ``bias`` inside the
+    band, ``-inf`` outside it, so that the ReLU after the layer gives zero
+    there. The choice is made once on the bias, not per element of the
+    ``(BLOCK, H)`` tile (a select fewer per element; the pre-activation
+    is finite wherever the inputs are)."""
+    return tl.where((t >= 0) & (t < length), bias, float('-inf'))
+
+
+@triton.jit
 def _h1(t, x_p, x_c, x_n, w1_0, w1_1, w1_2, b1, length):
     """``h1[t]`` ``(BLOCK, H)`` from ``x[t - 1]``, ``x[t]``, ``x[t + 1]``;
     zero outside the band."""
-    h1 = tl.maximum(b1 + w1_0 * x_p[:, None] + w1_1 * x_c[:, None] +
-                    w1_2 * x_n[:, None], 0.0)
-    return tl.where((t >= 0) & (t < length), h1, 0.0)
+    return tl.maximum(_bias_at(t, length, b1) + w1_0 * x_p[:, None] +
+                      w1_1 * x_c[:, None] + w1_2 * x_n[:, None], 0.0)
 
 
 @triton.jit
@@ -196,11 +205,11 @@ def band_forward(x_ptr, gy_ptr, out_ptr, pixels, columns, tiles_per_sample,
         x_n = tl.load(x_ptr + first + (s + 1) * row + cols,
                       mask=valid & (s + 1 < length), other=0.0)
         h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, length)
-        h2_1 = (b2 + _dot(h1_2, w2_0, PRECISION) +
+        h2_1 = (_bias_at(s - 1, length, b2) +
+                _dot(h1_2, w2_0, PRECISION) +
                 _dot(h1_1, w2_1, PRECISION) + _dot(h1_0, w2_2, PRECISION) +
                 x_1[:, None])
-        h2_1 = tl.where((s >= 1) & (s <= length), tl.maximum(h2_1, 0.0),
-                        0.0)
+        h2_1 = tl.maximum(h2_1, 0.0)
         # y[s - 2] before its ReLU
         a3 = b3 + tl.sum(h2_3 * w3_0 + h2_2 * w3_1 + h2_1 * w3_2, axis=1)
         at = first + (s - 2) * row + cols
@@ -295,11 +304,11 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
             h1_2 = _h1(s - 2, x_3, x_2, x_1, w1_0, w1_1, w1_2, b1, length)
             h1_1 = _h1(s - 1, x_2, x_1, x_0, w1_0, w1_1, w1_2, b1, length)
             h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, length)
-            h2_1 = (b2 + _dot(h1_2, w2_0, PRECISION) +
+            h2_1 = (_bias_at(s - 1, length, b2) +
+                    _dot(h1_2, w2_0, PRECISION) +
                     _dot(h1_1, w2_1, PRECISION) +
                     _dot(h1_0, w2_2, PRECISION) + x_1[:, None])
-            h2_1 = tl.where((s >= 1) & (s <= length), tl.maximum(h2_1, 0.0),
-                            0.0)
+            h2_1 = tl.maximum(h2_1, 0.0)
             # dW3[k] += h2[u]^T d3[u + 1 - k], u = s - 1; db3
             g_3 += _activation_dot(
                 _rows(r, d3_0, d3_1, d3_2, tl.zeros_like(d3_2)), h2_1,

@@ -309,9 +309,7 @@ class TritonBackend(BandNetworkBackend):
 
     def check_launches(self):
         forward = triton_band_networks.FORWARD_CONFIGS
-        backward = triton_band_networks.backward_configs(
-            None if triton_band_networks.interpreting() else
-            triton_band_networks.capability(torch.device('cuda')))
+        backward = triton_band_networks.backward_configs()
         # every entry of each list at least once
         return [dict(forward_config=forward[min(i, len(forward) - 1)],
                      backward_config=backward[min(i, len(backward) - 1)])

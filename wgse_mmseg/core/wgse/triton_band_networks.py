@@ -77,12 +77,10 @@ FORWARD_CONFIGS = (LaunchConfig(64, 4), )
 #: programs an SM at TF32, fp16 and bf16 on sm_80, sm_89 and sm_90 (the
 #: resources tool's table, docs/wgse_speed.md, "Compiled for GPUs"): 32
 #: pixels (48 KB of shared memory at TF32: two programs share sm_89's
-#: 100 KB), 16 where that spills: bf16 on sm_90 (16 bytes a thread) and
-#: wherever the input gradient is computed (WGSE's coefficients need none
-#: in training: they come from the data; it carries three more vectors).
-#: 64 pixels spill 16 bytes even on sm_90 at TF32.
+#: 100 KB), 16 wherever the input gradient is computed (WGSE's coefficients
+#: need none in training: they come from the data; it carries three more
+#: vectors, and 32 pixels spill). 64 pixels spill even on sm_90 at TF32.
 BACKWARD_CONFIGS = dict(default=(LaunchConfig(32, 4), ),
-                        sm_90_bf16=(LaunchConfig(16, 4), ),
                         input_grad=(LaunchConfig(16, 4), ))
 #: Programs of the backward kernel per SM the work is divided for: what
 #: every entry above fits at once.
@@ -99,26 +97,13 @@ HIDDEN_CHANNELS = (16, 32)
 TOLERANCES = {'ieee': 1e-4, 'tf32': 3e-2, 'fp16': 3e-2, 'bf16': 2.5e-1}
 
 
-def backward_configs(capability: Optional[int] = None,
-                     input_grad: Optional[bool] = None,
-                     precision: Optional[str] = None
+def backward_configs(input_grad: Optional[bool] = None
                      ) -> Tuple[LaunchConfig, ...]:
-    """The backward entries (:data:`BACKWARD_CONFIGS`) for a GPU of
-    ``capability`` (``90`` for sm_90), computing the input gradient or not,
-    at a :func:`dot_precision`; ``None`` admits every value, and the entries
-    of all that it admits are returned."""
-    if input_grad:
-        return BACKWARD_CONFIGS['input_grad']
-    sm_90_bf16 = (capability is None or capability >= 90) and \
-        precision in (None, 'bf16')
-    only_sm_90_bf16 = sm_90_bf16 and capability is not None and \
-        precision is not None
-    found = [] if only_sm_90_bf16 else list(BACKWARD_CONFIGS['default'])
-    if sm_90_bf16:
-        found += BACKWARD_CONFIGS['sm_90_bf16']
+    """The backward entries (:data:`BACKWARD_CONFIGS`) computing the input
+    gradient or not; ``None``: every entry."""
     if input_grad is None:
-        found += BACKWARD_CONFIGS['input_grad']
-    return tuple(dict.fromkeys(found))
+        return BACKWARD_CONFIGS['default'] + BACKWARD_CONFIGS['input_grad']
+    return BACKWARD_CONFIGS['input_grad' if input_grad else 'default']
 
 
 def interpreting() -> bool:
@@ -278,14 +263,6 @@ def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
     return _TUNED[full_key].config
 
 
-def capability(device: torch.device) -> Optional[int]:
-    """``90`` for an sm_90 GPU; ``None`` under the interpreter."""
-    if interpreting():
-        return None
-    major, minor = torch.cuda.get_device_capability(device)
-    return 10 * major + minor
-
-
 def launch_forward(config: LaunchConfig, coeffs: Tensor, out: Tensor,
                    inputs: BandKernelInputs, precision: str,
                    grad_out: Optional[Tensor] = None) -> None:
@@ -394,8 +371,7 @@ class _TritonBandNetworks(torch.autograd.Function):
                                    grad_coeffs=grad_coeffs, inputs=inputs,
                                    precision=ctx.precision, slots=slots)
         config = backward_config or _choose(
-            backward_configs(capability(coeffs.device), input_grad,
-                             ctx.precision),
+            backward_configs(input_grad),
             ('band_backward', ctx.lengths, inputs.hidden, ctx.precision,
              input_grad, coeffs.shape[0] * coeffs.shape[2]),
             coeffs.device, launch)
