@@ -15,10 +15,13 @@ reads or writes ``BLOCK`` neighbouring floats. One launch runs every band:
 the band's length and first row come from two small tensors, its
 parameters from the bands' stacked parameters.
 
-A program streams along its band: step ``s`` loads ``x[s + 1]`` and
-computes ``h1[s]``, ``h2[s - 1]`` and ``y[s - 2]`` from the last values of
-the layer below, so only a sliding window of ``(BLOCK, H)`` tiles per layer
-lives in registers and nothing but ``y`` is written. The ``H x H`` layer is
+A program streams along its band: step ``s`` loads ``x[s + 1]``, computes
+``h1[s]`` and passes it on at once: its products with conv2's three taps
+complete ``h2[s - 1]`` and go into the partial sums of ``h2[s]`` and
+``h2[s + 1]``; ``h2[s - 1]`` through conv3's taps likewise completes
+``y[s - 2]``. So a step hands one ``h1`` tile to the tensor cores (not a
+window of three), two ``(BLOCK, H)`` partial sums are all the registers
+carry between steps, and nothing but ``y`` is written. The ``H x H`` layer is
 ``tl.dot`` products over the ``BLOCK`` pixels of a tile (tensor cores:
 TF32, or fp16/bf16 operands with float32 accumulation, as ``PRECISION``
 says); the rest is element-wise.
@@ -191,27 +194,32 @@ def band_forward(x_ptr, gy_ptr, out_ptr, pixels, columns, tiles_per_sample,
      b3) = _band_weights(band, w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr,
                          b3_ptr, HIDDEN)
 
-    # Each window value starts as its own tensor: triton carries a variable
-    # into the next iteration only if the loop body changes its value, so
-    # two names starting as one tensor (h1_2 = h1_1 = zeros) would leave
-    # h1_2 = h1_1 looking unchanged and h1[s - 2] zero in every step.
+    # Each value starts as its own tensor: triton carries a variable into
+    # the next iteration only if the loop body changes its value, so two
+    # names starting as one tensor (p_1 = p_0 = zeros) would leave p_1 = p_0
+    # looking unchanged and the loop computing with its first value.
     x_1 = tl.zeros((BLOCK, ), tl.float32)  # x[s - 1]
     x_0 = tl.load(x_ptr + first + cols, mask=valid, other=0.0)  # x[s]
-    h1_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # h1[s - 2]
-    h1_1 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # h1[s - 1]
-    h2_3 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # h2[s - 3]
-    h2_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # h2[s - 2]
+    # conv2's pre-activation of h2[s - 1] and h2[s] without the taps of the
+    # h1 values still to come (h2[-1] lies outside the band: -inf)
+    p_1 = tl.full((BLOCK, HIDDEN), float('-inf'), tl.float32)
+    p_0 = b2 + x_0[:, None]
+    # conv3's of y[s - 1] and y[s], likewise
+    q_1 = tl.zeros((BLOCK, ), tl.float32)
+    q_0 = tl.zeros((BLOCK, ), tl.float32)
     for s in range(0, length + 2):
         x_n = tl.load(x_ptr + first + (s + 1) * row + cols,
                       mask=valid & (s + 1 < length), other=0.0)
+        # h1[s] through conv2's three taps: the last one h2[s - 1] needed
         h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, length)
-        h2_1 = (_bias_at(s - 1, length, b2) +
-                _dot(h1_2, w2_0, PRECISION) +
-                _dot(h1_1, w2_1, PRECISION) + _dot(h1_0, w2_2, PRECISION) +
-                x_1[:, None])
-        h2_1 = tl.maximum(h2_1, 0.0)
-        # y[s - 2] before its ReLU
-        a3 = b3 + tl.sum(h2_3 * w3_0 + h2_2 * w3_1 + h2_1 * w3_2, axis=1)
+        h2_1 = tl.maximum(p_1 + _dot(h1_0, w2_2, PRECISION), 0.0)
+        p_1 = p_0 + _dot(h1_0, w2_1, PRECISION)
+        p_0 = (_bias_at(s + 1, length, b2) + x_n[:, None] +
+               _dot(h1_0, w2_0, PRECISION))
+        # h2[s - 1] through conv3's: y[s - 2] before its ReLU
+        a3 = q_1 + tl.sum(h2_1 * w3_2, axis=1)
+        q_1 = q_0 + tl.sum(h2_1 * w3_1, axis=1)
+        q_0 = b3 + tl.sum(h2_1 * w3_0, axis=1)
         at = first + (s - 2) * row + cols
         if OUTPUT_GRAD:
             out = tl.where(a3 > 0, tl.load(gy_ptr + at, mask=valid & (s >= 2),
@@ -220,8 +228,6 @@ def band_forward(x_ptr, gy_ptr, out_ptr, pixels, columns, tiles_per_sample,
             out = tl.maximum(a3, 0.0)
         tl.store(out_ptr + at, out, mask=valid & (s >= 2))
         x_1, x_0 = x_0, x_n
-        h1_2, h1_1 = h1_1, h1_0
-        h2_3, h2_2 = h2_2, h2_1
 
 
 @triton.jit

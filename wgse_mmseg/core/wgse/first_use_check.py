@@ -31,12 +31,12 @@ way (0.18; docs/wgse_speed.md, "The first-use check").
 
 Cost (once per variant and process): the problem is the call's band
 lengths at :attr:`~.band_network_backends.BandNetworkBackend.check_pixels`
-pixels (131 for Triton: two tiles of its largest launch entry, 64 pixels,
-and a partial third); every launch entry the backend can choose is run
+pixels (259 for Triton: two tiles of its largest launch entry, 128
+pixels, and a partial third); every launch entry the backend can choose is run
 forward and backward twice, with and without the coefficients' gradient
 (Triton: one launch of each kernel each way, all bands at once), plus one
 float64 forward+backward of the ``torch`` backend. Its arithmetic is negligible on
-a GPU (131 pixels against the 524288 of a 4x129x256x512 batch); the time is
+a GPU (259 pixels against the 524288 of a 4x129x256x512 batch); the time is
 the compiles of the variants the check meets first, which the training step
 would have paid anyway, but for the entries autotuning would not have
 picked (measured with the former kernels, which compiled one variant per

@@ -67,11 +67,13 @@ class LaunchConfig(NamedTuple):
             '' if self.maxnreg is None else f'r{self.maxnreg}')
 
 
-#: The forward kernel's one launch entry: 64-pixel tiles, 4 warps (one
-#: warp group: warp-group tensor-core instructions on sm_90), 240-247
-#: registers without spilling on sm_80, sm_89 and sm_90 at TF32, two
-#: programs an SM.
-FORWARD_CONFIGS = (LaunchConfig(64, 4), )
+#: The forward kernel's one launch entry: 128-pixel tiles, 4 warps (one
+#: warp group: warp-group tensor-core instructions on sm_90), 221-255
+#: registers without spilling on sm_80, sm_89 and sm_90 at TF32, fp16 and
+#: bf16, two programs an SM (at 32 channels; 16 take fewer). 256 pixels
+#: spill; 64 cost 26-33 warp instructions a coefficient position, 128
+#: pixels 17-19 (the resources tool's table).
+FORWARD_CONFIGS = (LaunchConfig(128, 4), )
 #: The backward kernel's entries (:func:`backward_configs`), the first of a
 #: list running untuned. Each compiles without spilling to at least two
 #: programs an SM at TF32, fp16 and bf16 on sm_80, sm_89 and sm_90 (the
