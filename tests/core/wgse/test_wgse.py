@@ -1,6 +1,8 @@
 """The WGSE module: shapes, variants, an independent PyWavelets reference,
 numerical stability and error handling."""
+import contextlib
 import warnings
+import weakref
 
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ import wgse_mmseg
 from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
     torch_band_networks
 from wgse_mmseg.core.representations import TFP
+from wgse_mmseg.core.wgse import wgse as wgse_module
 from wgse_mmseg.core.wgse.wgse import LOWPASS_DETAIL_BIAS, BandNetwork
 
 
@@ -545,6 +548,56 @@ def test_integer_input_equals_float_input():
     y_uint8 = model(x.to(torch.uint8))
     assert y_uint8.dtype == torch.float32
     assert torch.equal(y_uint8, model(x.float()))
+
+
+# ------------------------------------ what lives between the two passes
+needs_triton = pytest.mark.skipif('triton' not in BACKENDS,
+                                  reason='triton does not import here')
+
+
+@needs_triton
+@pytest.mark.parametrize('spike_dtype', [torch.float32, torch.uint8])
+def test_the_coefficients_are_computed_again_not_kept(monkeypatch,
+                                                      spike_dtype):
+    """The Triton kernel saves the wavelet coefficients ``(B, C, P)`` (1.57x
+    the float32 spikes at T = 129) for its backward pass; WGSE keeps the
+    spikes instead and computes them again there, so nothing
+    coefficient-sized lives from its forward pass to its backward (through
+    a whole segmentor's), and the gradients are bit for bit those of
+    keeping them."""
+    passed = []
+    run = band_network_backends.TritonBackend.run
+
+    def spy(self, networks, coeffs, *args, **kwargs):
+        passed.append(weakref.ref(coeffs))
+        return run(self, networks, coeffs, *args, **kwargs)
+
+    monkeypatch.setattr(band_network_backends.TritonBackend, 'run', spy)
+    spikes = (torch.rand(2, 41, 2, 5, generator=torch.Generator().manual_seed(
+        3)) < 0.4).to(spike_dtype)
+    grads = []
+    for hooks in (wgse_module._saved_as_recomputation,
+                  lambda *args: contextlib.nullcontext()):
+        monkeypatch.setattr(wgse_module, '_saved_as_recomputation', hooks)
+        model = _seeded(backend='triton')
+        out = model(spikes)
+        grads.append(passed[-1]() is None)
+        out.square().sum().backward()
+        grads += [p.grad for p in model.parameters()]
+    recomputed, kept = grads[:len(grads) // 2], grads[len(grads) // 2:]
+    assert recomputed[0] and not kept[0]  # freed after the forward pass
+    assert all(torch.equal(a, b) for a, b in zip(recomputed[1:], kept[1:]))
+
+
+@needs_triton
+def test_spikes_changed_in_place_before_the_backward_pass_are_refused():
+    """The backward pass computes the coefficients again from the spikes:
+    changed in between, they would give other gradients silently."""
+    spikes = (torch.rand(1, 41, 2, 3) < 0.4).float()
+    out = _seeded(backend='triton')(spikes)
+    spikes[0, 0, 0, 0] += 1
+    with pytest.raises(RuntimeError, match='spikes were modified in place'):
+        out.sum().backward()
 
 
 # ------------------------------------------------- options of the recipe

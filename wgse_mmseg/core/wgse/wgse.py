@@ -20,7 +20,7 @@ Options of the training recipe (``docs/wgse_vs_tfp.md`` ablates them):
 the stream, a long window average like TFP's, instead of at random;
 ``output_norm=True`` standardises the output.
 """
-from typing import List, Optional, Tuple
+from typing import Callable, List, Optional, Tuple
 
 import pywt
 import torch
@@ -37,6 +37,55 @@ from ..wavelets import (SUPPORTED_MODES, analysis_matrix, band_lengths,
                         synthesis_matrix)
 
 __all__ = ['WGSE']
+
+
+def _saved_as_recomputation(tensor: torch.Tensor, source: torch.Tensor,
+                            recompute: Callable[[torch.Tensor], torch.Tensor]):
+    """Autograd hooks under which a saved ``tensor`` (the same storage,
+    offset, shape and strides) is kept as ``source`` and made again by
+    ``recompute(source)`` when the backward pass needs it; every other saved
+    tensor is kept as usual. WGSE's wavelet coefficients ``(B, C, P)`` are
+    1.57 times the float32 spikes at T = 129 (C = 202); a band-network
+    backend that saves them for its backward pass would hold them from the
+    forward pass until WGSE's backward, through the whole segmentor's.
+    ``source`` (the spikes) is held anyway; changed in place before the
+    backward pass, it is refused as autograd refuses a changed saved
+    tensor."""
+    version = source._version
+    # what identifies the tensor, not the tensor: torch keeps the hooks as
+    # long as what they saved, which must not keep ``tensor`` alive
+    identity = _identity(tensor)
+
+    def pack(saved):
+        return _Recomputed(source) if _identity(saved) == identity else saved
+
+    def unpack(packed):
+        if not isinstance(packed, _Recomputed):
+            return packed
+        if source._version != version:
+            raise RuntimeError(
+                'WGSE: the spikes were modified in place after the forward '
+                'pass; its backward pass computes the wavelet coefficients '
+                'from them again. Pass a copy, or modify them after '
+                'backward()')
+        return recompute(source)
+
+    return torch.autograd.graph.saved_tensors_hooks(pack, unpack)
+
+
+def _identity(tensor: torch.Tensor) -> tuple:
+    """Where ``tensor``'s elements are: two tensors with the same identity
+    are views of the same elements in the same order."""
+    return (tensor.data_ptr(), tuple(tensor.shape), tensor.stride(),
+            tensor.dtype, tensor.device)
+
+
+class _Recomputed:
+    """What a saved tensor under :func:`_saved_as_recomputation` is kept
+    as: its source."""
+
+    def __init__(self, source: torch.Tensor):
+        self.source = source
 
 #: ``WGSE(init=...)``: ``'default'`` (PyTorch's initialisation of every
 #: convolution) or ``'lowpass'`` (see :meth:`WGSE.init_lowpass`)
@@ -310,23 +359,31 @@ class WGSE(nn.Module):
                 f'pass float32 (or integer) spikes, or convert the module '
                 f'with .double()')
         device_type = spikes.device.type
-        with torch.autocast(device_type, enabled=False):
-            # (B, T, P), P = H*W: one row of pixels per time step
-            signal = spikes.to(dtype).reshape(batch, num_steps,
-                                              height * width)
-            if self.wavelet is None:
-                coeffs, lengths = signal, [num_steps]
-            else:
-                # int(): under a tracer (the FLOP count) a shape is a
-                # tensor; the matrices are constants of T either way
-                analysis, synthesis, lengths = self._matrices(
-                    int(num_steps), spikes.device, dtype)
-                coeffs = torch.matmul(analysis, signal)  # (B, C, P)
+        if self.wavelet is None:
+            analysis = None
+            lengths = [num_steps]
+        else:
+            # int(): under a tracer (the FLOP count) a shape is a tensor;
+            # the matrices are constants of T either way
+            analysis, synthesis, lengths = self._matrices(
+                int(num_steps), spikes.device, dtype)
+
+        def coefficients(spikes):
+            """``(B, C, P)``, ``P = H*W``: a row of pixels per coefficient
+            (per time step without wavelets)."""
+            with torch.autocast(device_type, enabled=False):
+                signal = spikes.to(dtype).reshape(batch, num_steps,
+                                                  height * width)
+                return signal if analysis is None else \
+                    torch.matmul(analysis, signal)
+
+        coeffs = coefficients(spikes)
         backend, self.backend_check = resolve_backend(
             self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
-        enhanced = backend.run(self.band_networks, coeffs, lengths,
-                               (height, width))
+        with _saved_as_recomputation(coeffs, spikes, coefficients):
+            enhanced = backend.run(self.band_networks, coeffs, lengths,
+                                   (height, width))
         with torch.autocast(device_type, enabled=False):
             if self.wavelet is not None:
                 enhanced = torch.matmul(synthesis, enhanced)  # (B, T, P)
