@@ -683,8 +683,9 @@ def format_report(report: Dict[str, Any], command: str) -> str:
     section = sections['first_use']
     out += ['## First-use check', '',
             "What `backend='auto'` checks before it first runs the Triton "
-            'kernel on the device: every launch entry, with and without the '
-            'input gradient, against the `torch` backend in float64 '
+            'kernel on the device: every launch entry, with or without the '
+            'input gradient as the calls that choose it compute it, against '
+            'the `torch` backend in float64 '
             '(`wgse_mmseg/core/wgse/first_use_check.py`); where it fails, '
             "'auto' runs `torch`.", '']
     if section.get('rows'):

@@ -38,7 +38,8 @@ class _StandIn(band_network_backends.TorchBackend):
         self.fault, self.broken, self.calls = fault, broken, 0
 
     def check_launches(self):
-        return [dict(entry=0), dict(entry=1)]
+        return [(dict(entry=entry), input_grad) for entry in (0, 1)
+                for input_grad in (True, False)]
 
     def run(self, networks, coeffs, lengths, spatial, entry=0):
         self.calls += 1
@@ -132,6 +133,21 @@ def test_every_launch_entry_is_checked(monkeypatch, log):
     model(_spikes())
     assert model.backend_in_use == 'torch'
     assert '(entry=1, input gradient True)' in model.backend_check.failure
+
+
+def test_the_triton_check_runs_what_calls_launch():
+    """Each backward entry with the input gradient it is chosen for, every
+    forward entry: no compile of a variant no call runs (the check's
+    compiles are a machine's first wait)."""
+    launches = band_network_backends.TritonBackend().check_launches()
+    for input_grad in (True, False):
+        assert {launch['backward_config'] for launch, grad in launches
+                if grad == input_grad} == set(
+                    triton_band_networks.backward_configs(input_grad))
+    assert {launch['forward_config'] for launch, _ in launches} == set(
+        triton_band_networks.FORWARD_CONFIGS)
+    assert len(launches) == len(set(
+        (tuple(launch.items()), grad) for launch, grad in launches))
 
 
 def test_a_gradient_wrong_only_without_the_input_gradient(monkeypatch, log):

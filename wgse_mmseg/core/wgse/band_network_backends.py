@@ -121,9 +121,11 @@ class BandNetworkBackend:
         """The arithmetic precision of a call on ``coeffs`` made now."""
         return str(coeffs.dtype).replace('torch.', '')
 
-    def check_launches(self) -> Sequence[Dict[str, object]]:
-        """The launch settings a call may use, each run by the check."""
-        return ({}, )
+    def check_launches(self) -> Sequence[Tuple[Dict[str, object], bool]]:
+        """The launch settings a call may use, each with whether the
+        coefficients' gradient is computed there: the check runs each
+        pair."""
+        return (({}, True), ({}, False))
 
 
 class TorchBackend(BandNetworkBackend):
@@ -308,12 +310,19 @@ class TritonBackend(BandNetworkBackend):
         return triton_band_networks.dot_precision(coeffs.device.type)
 
     def check_launches(self):
+        # every entry of each list at least once, each backward entry with
+        # the input gradient it is chosen for (what a call can launch; no
+        # compile of a variant that never runs)
         forward = triton_band_networks.FORWARD_CONFIGS
-        backward = triton_band_networks.backward_configs()
-        # every entry of each list at least once
-        return [dict(forward_config=forward[min(i, len(forward) - 1)],
-                     backward_config=backward[min(i, len(backward) - 1)])
+        launches = []
+        for input_grad in (True, False):
+            backward = triton_band_networks.backward_configs(input_grad)
+            launches += [
+                (dict(forward_config=forward[min(i, len(forward) - 1)],
+                      backward_config=backward[min(i, len(backward) - 1)]),
+                 input_grad)
                 for i in range(max(len(forward), len(backward)))]
+        return launches
 
 
 class _FirstOrderOnly(torch.autograd.Function):
