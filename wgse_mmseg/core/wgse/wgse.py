@@ -20,6 +20,7 @@ Options of the training recipe (``docs/wgse_vs_tfp.md`` ablates them):
 the stream, a long window average like TFP's, instead of at random;
 ``output_norm=True`` standardises the output.
 """
+import contextlib
 from typing import Callable, List, Optional, Tuple
 
 import pywt
@@ -62,15 +63,23 @@ def _saved_as_recomputation(tensor: torch.Tensor, source: torch.Tensor,
     def unpack(packed):
         if not isinstance(packed, _Recomputed):
             return packed
-        if source._version != version:
+        if packed.source._version != version:
             raise RuntimeError(
                 'WGSE: the spikes were modified in place after the forward '
                 'pass; its backward pass computes the wavelet coefficients '
                 'from them again. Pass a copy, or modify them after '
                 'backward()')
-        return recompute(source)
+        return recompute(packed.source)
 
     return torch.autograd.graph.saved_tensors_hooks(pack, unpack)
+
+
+def _records_autograd() -> bool:
+    """Whether this call builds an autograd graph of real tensors: not under
+    ``no_grad``, nor traced or exported (``torch.export``'s fake tensors
+    have no data pointer for :func:`_identity`)."""
+    return torch.is_grad_enabled() and not (
+        torch.jit.is_tracing() or torch.compiler.is_compiling())
 
 
 def _identity(tensor: torch.Tensor) -> tuple:
@@ -86,6 +95,7 @@ class _Recomputed:
 
     def __init__(self, source: torch.Tensor):
         self.source = source
+
 
 #: ``WGSE(init=...)``: ``'default'`` (PyTorch's initialisation of every
 #: convolution) or ``'lowpass'`` (see :meth:`WGSE.init_lowpass`)
@@ -381,7 +391,8 @@ class WGSE(nn.Module):
         backend, self.backend_check = resolve_backend(
             self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
-        with _saved_as_recomputation(coeffs, spikes, coefficients):
+        with _saved_as_recomputation(coeffs, spikes, coefficients) \
+                if _records_autograd() else contextlib.nullcontext():
             enhanced = backend.run(self.band_networks, coeffs, lengths,
                                    (height, width))
         with torch.autocast(device_type, enabled=False):
