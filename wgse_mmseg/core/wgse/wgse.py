@@ -51,7 +51,10 @@ def _saved_as_recomputation(tensor: torch.Tensor, source: torch.Tensor,
     forward pass until WGSE's backward, through the whole segmentor's.
     ``source`` (the spikes) is held anyway; changed in place before the
     backward pass, it is refused as autograd refuses a changed saved
-    tensor."""
+    tensor. No hooks where no autograd graph of real tensors is built
+    (:func:`_records_autograd`)."""
+    if not _records_autograd():
+        return contextlib.nullcontext()
     version = source._version
     # what identifies the tensor, not the tensor: torch keeps the hooks as
     # long as what they saved, which must not keep ``tensor`` alive
@@ -391,8 +394,7 @@ class WGSE(nn.Module):
         backend, self.backend_check = resolve_backend(
             self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
-        with _saved_as_recomputation(coeffs, spikes, coefficients) \
-                if _records_autograd() else contextlib.nullcontext():
+        with _saved_as_recomputation(coeffs, spikes, coefficients):
             enhanced = backend.run(self.band_networks, coeffs, lengths,
                                    (height, width))
         with torch.autocast(device_type, enabled=False):
