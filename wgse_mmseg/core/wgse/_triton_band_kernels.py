@@ -75,30 +75,6 @@ def _grad_dot(a, b, PRECISION: tl.constexpr):
 
 
 @triton.jit
-def _activation_dot(a, b, PRECISION: tl.constexpr):
-    """``a @ b`` for a gradient ``a`` and an activation ``b`` that carries
-    more significant bits than bf16 (8) or TF32 (11) hold (``h2``, in
-    conv3's weight gradient, even on the first-use check's exact problem):
-    ``b`` split into a high part of the operands' precision and the rest,
-    two products on tensor cores, about twice the significant bits of
-    ``b``. TF32 keeps ``b``'s top 11 bits by truncation (the rest is then
-    exact in float32); bf16 and fp16 take bf16 parts (``a`` rounded to
-    bf16, as the other gradient products take it)."""
-    if PRECISION == 'ieee':
-        return tl.dot(a, b, input_precision='ieee')
-    elif PRECISION == 'tf32':
-        high = (b.to(tl.uint32, bitcast=True) & 0xFFFFE000).to(
-            tl.float32, bitcast=True)
-        return (tl.dot(a, high, input_precision='tf32') +
-                tl.dot(a, b - high, input_precision='tf32'))
-    else:
-        high = b.to(tl.bfloat16)
-        low = (b - high.to(tl.float32)).to(tl.bfloat16)
-        a = a.to(tl.bfloat16)
-        return tl.dot(a, high) + tl.dot(a, low)
-
-
-@triton.jit
 def _taps(ptr, HIDDEN: tl.constexpr):
     """The three taps of a 1-channel side's ``(H, 1, 3)`` or ``(1, H, 3)``
     weight, each ``(1, H)``."""
@@ -231,12 +207,23 @@ def band_forward(x_ptr, gy_ptr, out_ptr, pixels, columns, tiles_per_sample,
 
 
 @triton.jit
-def _rows(r, v0, v1, v2, v3):
-    """``(16, BLOCK)``: rows 0-3 the ``(BLOCK,)`` vectors ``v0``-``v3``,
-    the rest zero (``r``: the row numbers ``(16, 1)``)."""
-    return tl.where(r == 0, v0[None, :], tl.where(
-        r == 1, v1[None, :], tl.where(r == 2, v2[None, :], tl.where(
-            r == 3, v3[None, :], 0.0))))
+def _conv1_taps(r, shift, w1_0, w1_1, w1_2):
+    """``(16, H)``: conv1's taps ``(1, H)`` in rows ``shift`` to ``shift +
+    2``, the rest zero (``r``: the row numbers ``(16, 1)``). The product of
+    :func:`_window` with it is conv1 at coefficient ``s + shift - 2``."""
+    return tl.where(r == shift, w1_0, tl.where(
+        r == shift + 1, w1_1, tl.where(r == shift + 2, w1_2, 0.0)))
+
+
+@triton.jit
+def _window(c, x_3, x_2, x_1, x_0, x_n):
+    """``(BLOCK, 16)``: columns 0-4 the ``(BLOCK,)`` window ``x[s - 3]`` to
+    ``x[s + 1]``, column 5 ones, the rest zero (``c``: the column numbers
+    ``(1, 16)``)."""
+    return tl.where(c == 0, x_3[:, None], tl.where(
+        c == 1, x_2[:, None], tl.where(c == 2, x_1[:, None], tl.where(
+            c == 3, x_0[:, None], tl.where(c == 4, x_n[:, None],
+                                           tl.where(c == 5, 1.0, 0.0))))))
 
 
 @triton.jit
@@ -249,20 +236,27 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
     ``OUTPUT_GRAD``; ``x``, ``d3``, ``gx``: ``(B, C, P)``): the input's into
     ``gx`` (when ``INPUT_GRAD``), and this program's parameter sums into row
     ``program_id`` of ``partial_ptr``, laid out as ``[dW1 (H, 1, 3), db1,
-    dW2 (H, H, 3), db2, dW3 (1, H, 3), db3]`` of its band. ``work_ptr``
+    dW2 (H, H, 3), db2, dW3 (1, H, 3)]`` of its band (conv3's bias
+    gradient is the sum of ``d3``, which the caller takes). ``work_ptr``
     ``(programs, 3)`` int32: per program its band, its first tile and the
     step between its tiles (of ``tiles`` in all).
 
-    Step ``s`` recomputes ``h1[s - 2]``, ``h1[s - 1]``, ``h1[s]`` from the
-    window of ``x`` (three multiply-adds a value) and from them ``h2[s -
-    1]``; ``d2[s - 1]`` follows from three values of ``d3``; the
-    ``H x H`` layer's transposed products scatter ``d2[s - 1]`` into its
-    three neighbours' partial sums (``e_*``), completing ``d1[s - 2]``, so
-    the only ``(BLOCK, H)`` tiles carried between steps are two partial
-    sums. The sums over pixels of conv1's and conv3's taps and conv1's bias
-    are products with ``(16, BLOCK)`` tiles whose rows are the vectors they
-    pair with, so they run on tensor cores too (as sums over pixels,
-    ``tl.sum``, they cost more instructions and spilled registers)."""
+    Step ``s`` recomputes ``h1[s - 2]``, ``h1[s - 1]``, ``h1[s]`` and from
+    them ``h2[s - 1]``; ``d2[s - 1]`` follows from three values of ``d3``;
+    the ``H x H`` layer's transposed products scatter ``d2[s - 1]`` into
+    its three neighbours' partial sums (``e_*``), completing ``d1[s - 2]``,
+    so the only ``(BLOCK, H)`` tiles carried between steps are two partial
+    sums. conv1 runs on tensor cores: the step's window of ``x`` is one
+    ``(BLOCK, 16)`` tile (:func:`_window`), and each ``h1`` its product with
+    conv1's taps placed at that ``h1``'s rows (:func:`_conv1_taps`), which
+    leaves it in the layout of the products it feeds; the transposed window
+    times ``d1`` sums conv1's weight and bias gradients over the pixels.
+    conv3's weight gradient is summed element-wise in float32, in three
+    ``(BLOCK, H)`` sums over the program's steps reduced over the pixels at
+    the end: three multiply-adds a value, fewer instructions than a product
+    on tensor cores, which would need ``h2`` split into two parts of the
+    operands' precision (``h2`` carries more significant bits than bf16 or
+    TF32 hold)."""
     pid = tl.program_id(0)
     band = tl.load(work_ptr + pid * 3)
     length = tl.load(lengths_ptr + band)
@@ -274,17 +268,24 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
     w2t_1 = tl.trans(w2_1)
     w2t_2 = tl.trans(w2_2)
     r = tl.arange(0, 16)[:, None]
+    # h1[s - k] is _window(...) @ v_k
+    v_2 = _conv1_taps(r, 0, w1_0, w1_1, w1_2)
+    v_1 = _conv1_taps(r, 1, w1_0, w1_1, w1_2)
+    v_0 = _conv1_taps(r, 2, w1_0, w1_1, w1_2)
+    c = tl.arange(0, 16)[None, :]
 
     # sums over this program's tiles: conv2's weight transposed, (H_out,
-    # H_in) per tap; (16, H) tiles whose rows 0-2 are conv1's taps and row
-    # 3 its bias (g_1), and conv3's taps (g_3); conv2's and conv3's biases
+    # H_in) per tap; a (16, H) tile whose rows 0-2 are conv1's taps and row
+    # 5 its bias (g_1); conv3's taps, one (BLOCK, H) sum each (g_3_k), and
+    # conv2's bias
     g_w2t_0 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
     g_w2t_1 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
     g_w2t_2 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
     g_1 = tl.zeros((16, HIDDEN), tl.float32)
-    g_3 = tl.zeros((16, HIDDEN), tl.float32)
+    g_3_0 = tl.zeros((BLOCK, HIDDEN), tl.float32)
+    g_3_1 = tl.zeros((BLOCK, HIDDEN), tl.float32)
+    g_3_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)
     g_b2 = tl.zeros((HIDDEN, ), tl.float32)
-    g_b3 = tl.zeros((BLOCK, ), tl.float32)
     for tile in range(tl.load(work_ptr + pid * 3 + 1), tiles,
                       tl.load(work_ptr + pid * 3 + 2)):
         first, cols, valid = _tile_rows(tile, band, pixels, columns,
@@ -307,19 +308,22 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
             d3_0 = tl.load(d3_ptr + first + s * row + cols,
                            mask=valid & (s < length), other=0.0)
             # forward: h1[s - 2 .. s], h2[s - 1]
-            h1_2 = _h1(s - 2, x_3, x_2, x_1, w1_0, w1_1, w1_2, b1, length)
-            h1_1 = _h1(s - 1, x_2, x_1, x_0, w1_0, w1_1, w1_2, b1, length)
-            h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, length)
+            xs = _window(c, x_3, x_2, x_1, x_0, x_n)
+            h1_2 = tl.maximum(_bias_at(s - 2, length, b1) +
+                              _dot(xs, v_2, PRECISION), 0.0)
+            h1_1 = tl.maximum(_bias_at(s - 1, length, b1) +
+                              _dot(xs, v_1, PRECISION), 0.0)
+            h1_0 = tl.maximum(_bias_at(s, length, b1) +
+                              _dot(xs, v_0, PRECISION), 0.0)
             h2_1 = (_bias_at(s - 1, length, b2) +
                     _dot(h1_2, w2_0, PRECISION) +
                     _dot(h1_1, w2_1, PRECISION) +
                     _dot(h1_0, w2_2, PRECISION) + x_1[:, None])
             h2_1 = tl.maximum(h2_1, 0.0)
-            # dW3[k] += h2[u]^T d3[u + 1 - k], u = s - 1; db3
-            g_3 += _activation_dot(
-                _rows(r, d3_0, d3_1, d3_2, tl.zeros_like(d3_2)), h2_1,
-                PRECISION)
-            g_b3 += d3_0
+            # dW3[k] += h2[u]^T d3[u + 1 - k], u = s - 1
+            g_3_0 += h2_1 * d3_0[:, None]
+            g_3_1 += h2_1 * d3_1[:, None]
+            g_3_2 += h2_1 * d3_2[:, None]
             # d2[s - 1]
             d2 = tl.where(h2_1 > 0, d3_0[:, None] * w3_0 +
                           d3_1[:, None] * w3_1 + d3_2[:, None] * w3_2, 0.0)
@@ -334,9 +338,13 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
                           0.0)
             e_2 = e_1 + _grad_dot(d2, w2t_1, PRECISION)
             e_1 = _grad_dot(d2, w2t_2, PRECISION)
-            # dW1[k] += x[v - 1 + k] d1[v], v = s - 2; db1
-            g_1 += _grad_dot(_rows(r, x_3, x_2, x_1,
-                                   tl.zeros_like(x_1) + 1.0), d1, PRECISION)
+            # dW1[k] += x[v - 1 + k] d1[v], v = s - 2 (window columns 0-2);
+            # db1 (column 5). Under fp16, TF32 operands: d1 is a scaled
+            # gradient (see _grad_dot) and x carries fp16's bits, which bf16
+            # would cut; TF32 keeps both (and fewer registers hold one
+            # rounding of xs than two)
+            g_1 += _dot(tl.trans(xs), d1,
+                        'tf32' if PRECISION == 'fp16' else PRECISION)
             if INPUT_GRAD:
                 # gx[s - 3]: x[t] reaches h1[t + 1 - k] through conv1's
                 # tap k and h2[t] through the residual
@@ -350,12 +358,12 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
 
     channels = tl.arange(0, HIDDEN)
     part = partial_ptr + pid.to(tl.int64) * (8 * HIDDEN +
-                                             3 * HIDDEN * HIDDEN + 1)
+                                             3 * HIDDEN * HIDDEN)
     for k in tl.static_range(3):
         tl.store(part + channels * 3 + k, tl.sum(tl.where(r == k, g_1, 0.0),
                                                  axis=0))
     part += 3 * HIDDEN
-    tl.store(part + channels, tl.sum(tl.where(r == 3, g_1, 0.0), axis=0))
+    tl.store(part + channels, tl.sum(tl.where(r == 5, g_1, 0.0), axis=0))
     part += HIDDEN
     wide = _transposed_wide_offsets(HIDDEN)
     tl.store(part + wide, g_w2t_0)
@@ -364,8 +372,6 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
     part += 3 * HIDDEN * HIDDEN
     tl.store(part + channels, g_b2)
     part += HIDDEN
-    for k in tl.static_range(3):
-        tl.store(part + channels * 3 + k, tl.sum(tl.where(r == k, g_3, 0.0),
-                                                 axis=0))
-    part += 3 * HIDDEN
-    tl.store(part, tl.sum(g_b3, axis=0))
+    tl.store(part + channels * 3, tl.sum(g_3_0, axis=0))
+    tl.store(part + channels * 3 + 1, tl.sum(g_3_1, axis=0))
+    tl.store(part + channels * 3 + 2, tl.sum(g_3_2, axis=0))

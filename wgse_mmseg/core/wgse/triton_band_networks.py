@@ -303,13 +303,14 @@ def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
     from ``d3`` (:func:`launch_forward` with ``grad_out``): the input
     gradient into ``grad_coeffs`` (none if ``None``). Returns each band's
     parameter gradient, flattened and concatenated ``(P_band,)``: the sum
-    of its programs' rows (``slots``: programs in all, about)."""
+    of its programs' rows (``slots``: programs in all, about), then conv3's
+    bias gradient, the sum of ``d3`` over the band's rows."""
     batch, columns, pixels = coeffs.shape
     tiles = batch * triton.cdiv(pixels, config.block)
     division = work_division(inputs.band_lengths, tiles, slots)
     work = torch.tensor(division, dtype=torch.int32, device=coeffs.device)
     partial = coeffs.new_empty(len(division),
-                               sum(p[0].numel() for p in inputs.params))
+                               sum(p[0].numel() for p in inputs.params[:5]))
     kernels.band_backward[(len(division), )](
         coeffs, d3, coeffs if grad_coeffs is None else grad_coeffs,
         partial, work, pixels, columns, triton.cdiv(pixels, config.block),
@@ -318,7 +319,9 @@ def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
         INPUT_GRAD=grad_coeffs is not None, num_warps=config.num_warps,
         maxnreg=config.maxnreg)
     counts = [step for _, first, step in division if first == 0]
-    return [rows.sum(0) for rows in partial.split(counts)]
+    bias3 = d3.sum(dim=(0, 2)).split(list(inputs.band_lengths))
+    return [torch.cat([rows.sum(0), rows3.sum().view(1)])
+            for rows, rows3 in zip(partial.split(counts), bias3)]
 
 
 def backward_slots(device: torch.device, bands: int) -> int:
