@@ -1,7 +1,8 @@
 r"""Time WGSE's Triton band kernels at any launch entry, one band at a time:
 how the library's ``FORWARD_CONFIGS`` and ``BACKWARD_CONFIGS`` are chosen.
-The backward entry times the backward kernel alone, after the forward
-kernel has written its output gradient.
+The backward entry times the backward kernel alone, from the gradient
+at the last convolution's pre-activation that the forward kernel's mask
+gives.
 
 A maintainers' tool. For one band (``--length`` coefficients, ``--hidden``
 channels, ``--precision`` of the ``H x H`` products) over ``--pixels``
@@ -89,17 +90,20 @@ def _runner(kernel: str, band: Dict, precision: str, input_grad: bool):
     from wgse_mmseg.core.wgse import triton_band_networks as tbn
     coeffs, length = band['coeffs'], band['coeffs'].shape[1]
     inputs = tbn.band_kernel_inputs([length], band['params'])
-    d3 = torch.empty_like(coeffs)
+    positive = torch.empty_like(coeffs, dtype=torch.uint8)
     if kernel == 'band_backward':  # the backward kernel's input
-        tbn.launch_forward(tbn.FORWARD_CONFIGS[0], coeffs, d3, inputs,
-                           precision, grad_out=band['grad_out'])
+        tbn.launch_forward(tbn.FORWARD_CONFIGS[0], coeffs,
+                           torch.empty_like(coeffs), positive, inputs,
+                           precision)
+        d3 = tbn.relu_gradient(band['grad_out'], positive)
     slots = tbn.backward_slots(coeffs.device, 1)
 
     def run(config):
         if kernel == 'band_forward':
             out = torch.empty_like(coeffs)
-            tbn.launch_forward(config, coeffs, out, inputs, precision)
-            return [out]
+            tbn.launch_forward(config, coeffs, out, positive, inputs,
+                               precision)
+            return [out, positive.float()]
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
         grads = tbn.launch_backward(config, coeffs, d3, grad_coeffs, inputs,
                                     precision, slots)

@@ -11,9 +11,8 @@ loop carries from one step to the next in triton's IR
 (:func:`loop_carried`): triton carries a name only if one pass over the
 loop body changes its value, which the interpreter does not model.
 
-Every variant the dispatcher can launch is compiled: forward (which also
-writes the backward pass's output gradient) and backward (with and without
-the input gradient), each precision of
+Every variant the dispatcher can launch is compiled: forward and backward
+(with and without the input gradient), each precision of
 :data:`~wgse_mmseg.core.wgse.triton_band_networks.TOLERANCES`, each width of
 ``HIDDEN_CHANNELS`` and each launch entry of the target, for sm_80 (A100),
 sm_89 (L40, RTX 4090) and sm_90 (H100). Band lengths are run-time values
@@ -61,7 +60,7 @@ _RESERVED_SHARED = 1024
 
 _POINTERS = ['w1_ptr', 'b1_ptr', 'w2_ptr', 'b2_ptr', 'w3_ptr', 'b3_ptr']
 _SIGNATURES = {
-    'band_forward': dict(x_ptr='*fp32', gy_ptr='*fp32', out_ptr='*fp32',
+    'band_forward': dict(x_ptr='*fp32', out_ptr='*fp32', mask_ptr='*u8',
                          pixels='i32', columns='i32',
                          tiles_per_sample='i32', lengths_ptr='*i32',
                          offsets_ptr='*i32'),
@@ -75,8 +74,8 @@ _SIGNATURES = {
 
 class Variant(NamedTuple):
     """One compiled kernel: name, hidden width, precision, whether it
-    computes the input gradient (the forward: whether it writes the output
-    gradient), the launch entry's ``block``, ``num_warps`` and
+    computes the input gradient (the forward: never), the launch entry's
+    ``block``, ``num_warps`` and
     ``maxnreg``."""
     kernel: str
     hidden: int
@@ -116,8 +115,8 @@ def variants() -> List[Variant]:
     found = []
     for hidden in HIDDEN_CHANNELS:
         for precision in TOLERANCES:
-            found += [Variant('band_forward', hidden, precision, grad, *c)
-                      for grad in (False, True) for c in FORWARD_CONFIGS]
+            found += [Variant('band_forward', hidden, precision, False, *c)
+                      for c in FORWARD_CONFIGS]
             found += [Variant('band_backward', hidden, precision, grad, *c)
                       for grad in (False, True)
                       for c in backward_configs(grad)]
@@ -219,8 +218,8 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     signature.update({name: '*fp32' for name in _POINTERS})
     constants = dict(HIDDEN=variant.hidden, BLOCK=variant.block,
                      PRECISION=variant.precision)
-    constants['INPUT_GRAD' if variant.kernel == 'band_backward' else
-              'OUTPUT_GRAD'] = variant.input_grad
+    if variant.kernel == 'band_backward':
+        constants['INPUT_GRAD'] = variant.input_grad
     signature.update({name: 'constexpr' for name in constants})
     source = ASTSource(fn=getattr(kernels, variant.kernel),
                        signature=signature, constexprs=constants)

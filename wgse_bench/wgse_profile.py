@@ -12,8 +12,7 @@ The band kernels' arithmetic (:func:`band_kernel_flops`) counts the
 ``H x H`` products, the work of the tensor cores: per coefficient position
 ``2 * 3 * H * H`` FLOPs for each of the layer's products, three in the
 backward kernel (the recomputed forward, the weight gradient and the
-gradient of ``h1``), one in the forward kernel, which the backward pass
-runs again to write the output gradient.
+gradient of ``h1``), one in the forward kernel.
 """
 from typing import Dict, List, NamedTuple, Optional, Sequence
 

@@ -34,9 +34,9 @@ def rows(built_once):
 
 
 def test_every_launchable_variant_compiles_for_every_target(rows):
-    """Forward (writing the output or the output gradient) and backward
-    (with and without the input gradient) at every width, precision and
-    launch entry of each target, for sm_80, sm_89 and sm_90."""
+    """Forward and backward (with and without the input gradient) at every
+    width, precision and launch entry of each target, for sm_80, sm_89 and
+    sm_90."""
     compiled = [(r['arch'], r['kernel'], r['hidden'], r['precision'],
                  r['input_grad'], r['block'], r['num_warps'], r['maxnreg'])
                 for r in rows]

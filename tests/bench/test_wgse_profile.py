@@ -11,7 +11,7 @@ def test_shares_gaps_and_band_kernel_throughput_by_hand():
     intervals = [
         Interval('gemm', 0, 1000),                  # the analysis product
         Interval('band_forward_0d1d2d', 1500, 3500),
-        Interval('band_forward_0d1d2d', 4000, 6000),   # writing d3
+        Interval('band_forward_0d1d2d', 4000, 6000),   # a second launch
         Interval('band_backward_0d1d2d', 5500, 10000),  # overlaps 500 us
     ]
     summary = wgse_profile.summarize(intervals, positions=10**8, hidden=32,

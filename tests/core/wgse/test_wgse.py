@@ -590,6 +590,52 @@ def test_the_coefficients_are_computed_again_not_kept(monkeypatch,
 
 
 @needs_triton
+def test_the_relu_mask_is_dropped_before_the_coefficients_are_made_again(
+        monkeypatch):
+    """The Triton forward pass keeps where the last ReLU passes (a byte a
+    coefficient) for the backward pass, which forms its gradient from it
+    and drops it before the coefficients are computed again: the two never
+    take memory together."""
+    masks, alive = [], []
+    launch = triton_band_networks.launch_forward
+
+    def spy(config, coeffs, out, positive, *args):
+        masks.append(weakref.ref(positive))
+        return launch(config, coeffs, out, positive, *args)
+
+    hooks = wgse_module._saved_as_recomputation
+
+    def recording(tensor, source, recompute):
+        def again(spikes):
+            alive.append(masks[0]() is not None)
+            return recompute(spikes)
+        return hooks(tensor, source, again)
+
+    monkeypatch.setattr(triton_band_networks, 'launch_forward', spy)
+    monkeypatch.setattr(wgse_module, '_saved_as_recomputation', recording)
+    out = _seeded(backend='triton')((torch.rand(1, 41, 2, 3) < 0.4).float())
+    assert masks[0]() is not None  # kept from the forward pass
+    out.square().sum().backward()
+    assert alive == [False]
+    assert len(masks) == 1  # the backward pass ran no forward kernel
+
+
+@needs_triton
+def test_a_second_backward_pass_of_one_graph_makes_the_mask_again():
+    """``retain_graph=True``: the first backward pass dropped the mask; the
+    second runs the forward kernel for it and gets the same gradients."""
+    model = _seeded(backend='triton')
+    spikes = (torch.rand(2, 41, 2, 3, generator=torch.Generator().manual_seed(
+        5)) < 0.4).float().requires_grad_()
+    loss = model(spikes).square().sum()
+    wrt = [spikes] + list(model.parameters())
+    first = torch.autograd.grad(loss, wrt, retain_graph=True)
+    second = torch.autograd.grad(loss, wrt)
+    assert all(torch.equal(a, b) for a, b in zip(first, second))
+    assert any(g.abs().sum() > 0 for g in first[1:])
+
+
+@needs_triton
 def test_spikes_changed_in_place_before_the_backward_pass_are_refused():
     """The backward pass computes the coefficients again from the spikes:
     changed in between, they would give other gradients silently."""

@@ -21,14 +21,15 @@ complete ``h2[s - 1]`` and go into the partial sums of ``h2[s]`` and
 ``h2[s + 1]``; ``h2[s - 1]`` through conv3's taps likewise completes
 ``y[s - 2]``. So a step hands one ``h1`` tile to the tensor cores (not a
 window of three), two ``(BLOCK, H)`` partial sums are all the registers
-carry between steps, and nothing but ``y`` is written. The ``H x H`` layer is
+carry between steps, and nothing but ``y`` and where it is positive (one
+byte a coefficient) is written. The ``H x H`` layer is
 ``tl.dot`` products over the ``BLOCK`` pixels of a tile (tensor cores:
 TF32, or fp16/bf16 operands with float32 accumulation, as ``PRECISION``
 says); the rest is element-wise.
 
-The backward pass is two launches. ``band_forward`` with ``OUTPUT_GRAD``
-recomputes the forward and writes ``d3``, the gradient at the last
-convolution's pre-activation (one float a coefficient, like ``y``). Then
+The backward pass starts from ``d3``, the gradient at the last
+convolution's pre-activation: ``y``'s gradient where the forward's mask
+says ``y > 0``, else zero (one element-wise pass, by the caller). Then
 ``band_backward``, persistent: a fixed number of programs, each given one
 band and every ``step``-th tile of it (``work``: band, first tile, step),
 streams each tile, recomputing ``h1`` and ``h2`` and running the gradient
@@ -37,9 +38,10 @@ to ``s - 2``, the input gradient up to ``s - 3``), and keeps its band's
 parameter-gradient sums in registers across its tiles: one row of a
 ``(programs, P_band)`` buffer per program (a few MB), written once. The
 caller adds the rows of each band (no atomics: the same bits every run).
-Writing ``d3`` (a pass over memory the size of the coefficients) is what
-lets the second kernel carry two ``(BLOCK, H)`` tiles between steps instead
-of six, so that it runs 32-pixel tiles without spilling.
+Reading ``d3`` whole, one float a coefficient, is what lets it carry two
+``(BLOCK, H)`` tiles between steps instead of six, so that it runs 32-pixel
+tiles without spilling (forming it from ``y``'s gradient and the mask in
+the kernel costs 6-14 more warp instructions a position and spills).
 
 Parameters are float32, each kind stacked over the bands, contiguous:
 ``conv1`` ``(bands, H, 1, 3)``, ``conv2`` ``(bands, H, H, 3)``, ``conv3``
@@ -149,17 +151,17 @@ def _h1(t, x_p, x_c, x_n, w1_0, w1_1, w1_2, b1, length):
 
 
 @triton.jit
-def band_forward(x_ptr, gy_ptr, out_ptr, pixels, columns, tiles_per_sample,
+def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
                  lengths_ptr, offsets_ptr,
                  w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
                  HIDDEN: tl.constexpr, BLOCK: tl.constexpr,
-                 PRECISION: tl.constexpr, OUTPUT_GRAD: tl.constexpr):
+                 PRECISION: tl.constexpr):
     """The network on ``x`` ``(B, C, P)``: program ``(tile, band)`` runs
     band ``band`` on the ``BLOCK`` pixels of tile ``tile`` (tiles numbered
     sample by sample, ``tiles_per_sample`` each). Writes ``y`` into
-    ``out``; with ``OUTPUT_GRAD``, ``d3`` instead, the gradient at the last
-    convolution's output before its ReLU: ``gy`` where ``y > 0``, else 0
-    (``gy``, ``out``: ``(B, C, P)``)."""
+    ``out`` and where ``y > 0`` (1, else 0) into ``mask`` (uint8; both
+    ``(B, C, P)``): the backward pass's gradient at the last convolution's
+    pre-activation is ``y``'s gradient there and zero elsewhere."""
     tile = tl.program_id(0)
     band = tl.program_id(1)
     length = tl.load(lengths_ptr + band)
@@ -197,12 +199,8 @@ def band_forward(x_ptr, gy_ptr, out_ptr, pixels, columns, tiles_per_sample,
         q_1 = q_0 + tl.sum(h2_1 * w3_1, axis=1)
         q_0 = b3 + tl.sum(h2_1 * w3_0, axis=1)
         at = first + (s - 2) * row + cols
-        if OUTPUT_GRAD:
-            out = tl.where(a3 > 0, tl.load(gy_ptr + at, mask=valid & (s >= 2),
-                                           other=0.0), 0.0)
-        else:
-            out = tl.maximum(a3, 0.0)
-        tl.store(out_ptr + at, out, mask=valid & (s >= 2))
+        tl.store(out_ptr + at, tl.maximum(a3, 0.0), mask=valid & (s >= 2))
+        tl.store(mask_ptr + at, (a3 > 0).to(tl.uint8), mask=valid & (s >= 2))
         x_1, x_0 = x_0, x_n
 
 
@@ -232,14 +230,14 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
                   w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
                   HIDDEN: tl.constexpr, BLOCK: tl.constexpr,
                   PRECISION: tl.constexpr, INPUT_GRAD: tl.constexpr):
-    """Gradients of ``sum(y * gy)`` from ``d3`` (``band_forward`` with
-    ``OUTPUT_GRAD``; ``x``, ``d3``, ``gx``: ``(B, C, P)``): the input's into
-    ``gx`` (when ``INPUT_GRAD``), and this program's parameter sums into row
-    ``program_id`` of ``partial_ptr``, laid out as ``[dW1 (H, 1, 3), db1,
-    dW2 (H, H, 3), db2, dW3 (1, H, 3)]`` of its band (conv3's bias
-    gradient is the sum of ``d3``, which the caller takes). ``work_ptr``
-    ``(programs, 3)`` int32: per program its band, its first tile and the
-    step between its tiles (of ``tiles`` in all).
+    """Gradients of ``sum(y * gy)`` from ``d3`` (``gy`` where
+    ``band_forward``'s mask is set, else 0; ``x``, ``d3``, ``gx``: ``(B, C,
+    P)``): the input's into ``gx`` (when ``INPUT_GRAD``), and this program's
+    parameter sums into row ``program_id`` of ``partial_ptr``, laid out as
+    ``[dW1 (H, 1, 3), db1, dW2 (H, H, 3), db2, dW3 (1, H, 3)]`` of its
+    band (conv3's bias gradient is the sum of ``d3``, which the caller
+    takes). ``work_ptr`` ``(programs, 3)`` int32: per program its band, its
+    first tile and the step between its tiles (of ``tiles`` in all).
 
     Step ``s`` recomputes ``h1[s - 2]``, ``h1[s - 1]``, ``h1[s]`` and from
     them ``h2[s - 1]``; ``d2[s - 1]`` follows from three values of ``d3``;

@@ -43,7 +43,8 @@ would have paid anyway, but for the entries autotuning would not have
 picked (measured with the former kernels, which compiled one variant per
 band length, on an H100 or H200: 30-60 s per precision in the first
 process on a machine, 0.2-0.9 s in later ones, which find triton's cache;
-the present kernels compile four variants a precision for any T).
+the present kernels compile three variants a precision for any T:
+the forward and the backward's two entries).
 """
 import copy
 import logging

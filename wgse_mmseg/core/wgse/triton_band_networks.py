@@ -266,20 +266,26 @@ def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
 
 
 def launch_forward(config: LaunchConfig, coeffs: Tensor, out: Tensor,
-                   inputs: BandKernelInputs, precision: str,
-                   grad_out: Optional[Tensor] = None) -> None:
+                   positive: Tensor, inputs: BandKernelInputs,
+                   precision: str) -> None:
     """One launch of ``band_forward`` over every band of ``coeffs``
-    ``(B, C, P)``: the networks' output into ``out`` (same shape); given
-    ``grad_out`` (same shape), the gradient at the last convolution's
-    pre-activation instead (``grad_out`` where the output is positive)."""
+    ``(B, C, P)``: the networks' output into ``out`` (same shape), and
+    where it is positive into ``positive`` (same shape, uint8 0 or 1)."""
     batch, columns, pixels = coeffs.shape
     tiles = triton.cdiv(pixels, config.block)
     kernels.band_forward[(batch * tiles, len(inputs.lengths))](
-        coeffs, coeffs if grad_out is None else grad_out, out, pixels,
-        columns, tiles, inputs.lengths, inputs.offsets, *inputs.params,
-        HIDDEN=inputs.hidden, BLOCK=config.block, PRECISION=precision,
-        OUTPUT_GRAD=grad_out is not None, num_warps=config.num_warps,
+        coeffs, out, positive, pixels, columns, tiles, inputs.lengths,
+        inputs.offsets, *inputs.params, HIDDEN=inputs.hidden,
+        BLOCK=config.block, PRECISION=precision, num_warps=config.num_warps,
         maxnreg=config.maxnreg)
+
+
+def relu_gradient(grad_out: Tensor, positive: Tensor) -> Tensor:
+    """``d3`` ``(B, C, P)``: the gradient at the last convolution's
+    pre-activation, ``grad_out`` where :func:`launch_forward`'s
+    ``positive`` is set, else 0 (both ``(B, C, P)``)."""
+    return torch.where(positive.view(torch.bool), grad_out,
+                       0.0).contiguous()
 
 
 def work_division(lengths: Sequence[int], tiles: int, slots: int
@@ -300,8 +306,8 @@ def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
                     grad_coeffs: Optional[Tensor], inputs: BandKernelInputs,
                     precision: str, slots: int) -> List[Tensor]:
     """One launch of ``band_backward`` for :func:`launch_forward`'s bands,
-    from ``d3`` (:func:`launch_forward` with ``grad_out``): the input
-    gradient into ``grad_coeffs`` (none if ``None``). Returns each band's
+    from ``d3`` (:func:`relu_gradient`): the input gradient into
+    ``grad_coeffs`` (none if ``None``). Returns each band's
     parameter gradient, flattened and concatenated ``(P_band,)``: the sum
     of its programs' rows (``slots``: programs in all, about), then conv3's
     bias gradient, the sum of ``d3`` over the band's rows."""
@@ -343,11 +349,16 @@ class _TritonBandNetworks(torch.autograd.Function):
                 *params: Tensor) -> Tensor:
         inputs = band_kernel_inputs(lengths, params)
         out = torch.empty_like(coeffs)
+        positive = torch.empty_like(coeffs, dtype=torch.uint8)
         if coeffs.numel():
             launch_forward(configs[0] or FORWARD_CONFIGS[0], coeffs, out,
-                           inputs, precision)
+                           positive, inputs, precision)
         ctx.lengths, ctx.precision = lengths, precision
         ctx.configs, ctx.inputs = configs, inputs
+        # kept outside the saved tensors so that the backward pass can drop
+        # it before the coefficients are made again (WGSE's hooks): the two
+        # are never alive together
+        ctx.positive = positive
         ctx.save_for_backward(coeffs, *params)
         return out
 
@@ -358,6 +369,9 @@ class _TritonBandNetworks(torch.autograd.Function):
                 "WGSE's 'triton' band-network backend has no second-order "
                 "gradients (create_graph=True); the 'torch' backend has "
                 "them: WGSE(backend='torch')")
+        positive, ctx.positive = ctx.positive, None
+        d3 = None if positive is None else relu_gradient(grad_out, positive)
+        del positive
         coeffs, *params = ctx.saved_tensors
         input_grad = ctx.needs_input_grad[0]
         sizes = [p.numel() for p in params[:6]]
@@ -366,10 +380,15 @@ class _TritonBandNetworks(torch.autograd.Function):
                     None, None, *[torch.zeros_like(p) for p in params])
         inputs = ctx.inputs  # the forward's stacked parameters
         forward_config, backward_config = ctx.configs
-        d3 = torch.empty_like(coeffs)
-        launch_forward(forward_config or FORWARD_CONFIGS[0], coeffs, d3,
-                       inputs, ctx.precision,
-                       grad_out=grad_out.contiguous())
+        if d3 is None:
+            # a second backward pass of the graph (retain_graph=True): the
+            # first dropped the mask; the forward makes it again
+            positive = torch.empty_like(coeffs, dtype=torch.uint8)
+            launch_forward(forward_config or FORWARD_CONFIGS[0], coeffs,
+                           torch.empty_like(coeffs), positive, inputs,
+                           ctx.precision)
+            d3 = relu_gradient(grad_out, positive)
+            del positive
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
         slots = backward_slots(coeffs.device, len(ctx.lengths))
         launch = functools.partial(launch_backward, coeffs=coeffs, d3=d3,
