@@ -90,19 +90,16 @@ def _runner(kernel: str, band: Dict, precision: str, input_grad: bool):
     from wgse_mmseg.core.wgse import triton_band_networks as tbn
     coeffs, length = band['coeffs'], band['coeffs'].shape[1]
     inputs = tbn.band_kernel_inputs([length], band['params'])
-    positive = torch.empty_like(coeffs, dtype=torch.uint8)
     if kernel == 'band_backward':  # the backward kernel's input
-        tbn.launch_forward(tbn.FORWARD_CONFIGS[0], coeffs,
-                           torch.empty_like(coeffs), positive, inputs,
-                           precision)
+        _, positive = tbn.launch_forward(tbn.FORWARD_CONFIGS[0], coeffs,
+                                         inputs, precision)
         d3 = tbn.relu_gradient(band['grad_out'], positive)
     slots = tbn.backward_slots(coeffs.device, 1)
 
     def run(config):
         if kernel == 'band_forward':
-            out = torch.empty_like(coeffs)
-            tbn.launch_forward(config, coeffs, out, positive, inputs,
-                               precision)
+            out, positive = tbn.launch_forward(config, coeffs, inputs,
+                                               precision)
             return [out, positive.float()]
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
         grads = tbn.launch_backward(config, coeffs, d3, grad_coeffs, inputs,

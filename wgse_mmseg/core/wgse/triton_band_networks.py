@@ -265,25 +265,29 @@ def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
     return _TUNED[full_key].config
 
 
-def launch_forward(config: LaunchConfig, coeffs: Tensor, out: Tensor,
-                   positive: Tensor, inputs: BandKernelInputs,
-                   precision: str) -> None:
+def launch_forward(config: LaunchConfig, coeffs: Tensor,
+                   inputs: BandKernelInputs, precision: str
+                   ) -> Tuple[Tensor, Tensor]:
     """One launch of ``band_forward`` over every band of ``coeffs``
-    ``(B, C, P)``: the networks' output into ``out`` (same shape), and
-    where it is positive into ``positive`` (same shape, uint8 0 or 1)."""
-    batch, columns, pixels = coeffs.shape
-    tiles = triton.cdiv(pixels, config.block)
-    kernels.band_forward[(batch * tiles, len(inputs.lengths))](
-        coeffs, out, positive, pixels, columns, tiles, inputs.lengths,
-        inputs.offsets, *inputs.params, HIDDEN=inputs.hidden,
-        BLOCK=config.block, PRECISION=precision, num_warps=config.num_warps,
-        maxnreg=config.maxnreg)
+    ``(B, C, P)`` (none for an empty one): the networks' output and where
+    it is positive (uint8 0 or 1), both ``(B, C, P)``."""
+    out = torch.empty_like(coeffs)
+    positive = torch.empty_like(coeffs, dtype=torch.uint8)
+    if coeffs.numel():
+        batch, columns, pixels = coeffs.shape
+        tiles = triton.cdiv(pixels, config.block)
+        kernels.band_forward[(batch * tiles, len(inputs.lengths))](
+            coeffs, out, positive, pixels, columns, tiles, inputs.lengths,
+            inputs.offsets, *inputs.params, HIDDEN=inputs.hidden,
+            BLOCK=config.block, PRECISION=precision,
+            num_warps=config.num_warps, maxnreg=config.maxnreg)
+    return out, positive
 
 
 def relu_gradient(grad_out: Tensor, positive: Tensor) -> Tensor:
     """``d3`` ``(B, C, P)``: the gradient at the last convolution's
-    pre-activation, ``grad_out`` where :func:`launch_forward`'s
-    ``positive`` is set, else 0 (both ``(B, C, P)``)."""
+    pre-activation, ``grad_out`` where ``positive`` (from
+    :func:`launch_forward`) is set, else 0 (both ``(B, C, P)``)."""
     return torch.where(positive.view(torch.bool), grad_out,
                        0.0).contiguous()
 
@@ -348,11 +352,8 @@ class _TritonBandNetworks(torch.autograd.Function):
                 precision: str, configs: Tuple[Optional[LaunchConfig], ...],
                 *params: Tensor) -> Tensor:
         inputs = band_kernel_inputs(lengths, params)
-        out = torch.empty_like(coeffs)
-        positive = torch.empty_like(coeffs, dtype=torch.uint8)
-        if coeffs.numel():
-            launch_forward(configs[0] or FORWARD_CONFIGS[0], coeffs, out,
-                           positive, inputs, precision)
+        out, positive = launch_forward(configs[0] or FORWARD_CONFIGS[0],
+                                       coeffs, inputs, precision)
         ctx.lengths, ctx.precision = lengths, precision
         ctx.configs, ctx.inputs = configs, inputs
         # kept outside the saved tensors so that the backward pass can drop
@@ -383,10 +384,9 @@ class _TritonBandNetworks(torch.autograd.Function):
         if d3 is None:
             # a second backward pass of the graph (retain_graph=True): the
             # first dropped the mask; the forward makes it again
-            positive = torch.empty_like(coeffs, dtype=torch.uint8)
-            launch_forward(forward_config or FORWARD_CONFIGS[0], coeffs,
-                           torch.empty_like(coeffs), positive, inputs,
-                           ctx.precision)
+            _, positive = launch_forward(
+                forward_config or FORWARD_CONFIGS[0], coeffs, inputs,
+                ctx.precision)
             d3 = relu_gradient(grad_out, positive)
             del positive
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
