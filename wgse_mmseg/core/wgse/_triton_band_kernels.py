@@ -225,6 +225,15 @@ def _window(c, x_3, x_2, x_1, x_0, x_n):
 
 
 @triton.jit
+def _h1_of_window(t, xs, taps, b1, length, PRECISION: tl.constexpr):
+    """``h1[t]`` ``(BLOCK, H)``, :func:`_h1` on tensor cores: the product of
+    the window ``xs`` (:func:`_window`) with conv1's ``taps`` at ``t``'s
+    rows (:func:`_conv1_taps`); zero outside the band."""
+    return tl.maximum(_bias_at(t, length, b1) + _dot(xs, taps, PRECISION),
+                      0.0)
+
+
+@triton.jit
 def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
                   columns, tiles_per_sample, tiles, lengths_ptr, offsets_ptr,
                   w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
@@ -307,12 +316,9 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
                            mask=valid & (s < length), other=0.0)
             # forward: h1[s - 2 .. s], h2[s - 1]
             xs = _window(c, x_3, x_2, x_1, x_0, x_n)
-            h1_2 = tl.maximum(_bias_at(s - 2, length, b1) +
-                              _dot(xs, v_2, PRECISION), 0.0)
-            h1_1 = tl.maximum(_bias_at(s - 1, length, b1) +
-                              _dot(xs, v_1, PRECISION), 0.0)
-            h1_0 = tl.maximum(_bias_at(s, length, b1) +
-                              _dot(xs, v_0, PRECISION), 0.0)
+            h1_2 = _h1_of_window(s - 2, xs, v_2, b1, length, PRECISION)
+            h1_1 = _h1_of_window(s - 1, xs, v_1, b1, length, PRECISION)
+            h1_0 = _h1_of_window(s, xs, v_0, b1, length, PRECISION)
             h2_1 = (_bias_at(s - 1, length, b2) +
                     _dot(h1_2, w2_0, PRECISION) +
                     _dot(h1_1, w2_1, PRECISION) +
