@@ -238,8 +238,8 @@ def test_every_triton_backward_entry_computes_the_same(monkeypatch, entry):
 @needs_triton
 def test_the_work_division_shares_programs_by_band_length():
     """About the slots, in proportion to a band's steps, one at least and
-    no more than its tiles; each band's programs start at tiles 0 .. n-1
-    and step by n, so together they run every tile once."""
+    no more than half its tiles; each band's programs start at tiles 0 ..
+    n-1 and step by n, so together they run every tile once."""
     division = triton_band_networks.work_division([18, 18, 72], 100, 40)
     counts = {band: step for band, first, step in division if first == 0}
     assert counts == {0: 7, 1: 7, 2: 26}
@@ -247,8 +247,27 @@ def test_the_work_division_shares_programs_by_band_length():
         tiles = sorted(t for b, first, step in division if b == band
                        for t in range(first, 100, step))
         assert tiles == list(range(100))
-    assert triton_band_networks.work_division([5, 500], 3, 8) == [
+    assert triton_band_networks.work_division([5, 500], 7, 8) == [
         (0, 0, 1), (1, 0, 3), (1, 1, 3), (1, 2, 3)]
+    assert triton_band_networks.work_division([5, 500], 3, 8) == [
+        (0, 0, 1), (1, 0, 1)]
+
+
+@needs_triton
+@pytest.mark.parametrize('programs', [2 * 108, 2 * 132, 2 * 144])
+def test_the_first_use_check_runs_every_program_over_several_tiles(programs):
+    """On a GPU (two programs on each of an A100's, H100's or B200's SMs)
+    the check's problem still gives every backward program two tiles or
+    more: the sums carried from tile to tile run on the device before
+    training relies on them."""
+    pixels = band_network_backends.TritonBackend.check_pixels
+    for lengths in ([18, 18, 22, 29, 43, 72], [129]):
+        for config in (triton_band_networks.backward_configs(False) +
+                       triton_band_networks.backward_configs(True)):
+            tiles = -(-pixels // config.block)
+            for band, first, step in triton_band_networks.work_division(
+                    lengths, tiles, programs):
+                assert len(range(first, tiles, step)) >= 2
 
 
 @needs_triton

@@ -296,11 +296,15 @@ def work_division(lengths: Sequence[int], tiles: int, slots: int
                   ) -> List[Tuple[int, int, int]]:
     """The backward kernel's programs, ``(band, first tile, step)`` each:
     about ``slots`` programs shared among the bands in proportion to their
-    work (a tile of a band of ``L`` coefficients takes ``L + 3`` steps), at
-    least one and at most ``tiles`` a band, so that programs of every band
-    finish together."""
+    work (a tile of a band of ``L`` coefficients takes ``L + 3`` steps), so
+    that programs of every band finish together; at least one a band, and
+    at most half its tiles, so that every program runs two tiles or more
+    (where the band has two). Training sizes give each program hundreds of
+    tiles; the cap binds on small problems, where it makes the first-use
+    check run the kernel's sums over several tiles as training does
+    (given every SM's programs, the check's would run one tile each)."""
     work = [length + 3 for length in lengths]
-    counts = [min(tiles, max(1, round(slots * w / sum(work))))
+    counts = [min(max(1, tiles // 2), max(1, round(slots * w / sum(work))))
               for w in work]
     return [(band, first, count) for band, count in enumerate(counts)
             for first in range(count)]
