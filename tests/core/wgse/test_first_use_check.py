@@ -243,23 +243,30 @@ def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
 @pytest.mark.parametrize('hidden, steps', [(32, 129), (16, 41)])
 def test_the_problem_is_exact_at_every_precision(hidden, steps):
     """What the check's one tolerance rests on: on its problem, every
-    operand of the H x H products (that layer's input and weight, and the
-    gradient at its output) is exact in bf16 and fp16 (so in TF32 too),
-    and no pre-activation is zero, so rounding moves no ReLU decision."""
+    operand of the kernels' tensor-core products is exact in the precision
+    it is rounded to: the H x H layer's input, weight and output gradient
+    and conv1's input and weight in bf16 and fp16 (so in TF32 too), the
+    gradient at conv1's output (the backward's sums for conv1's weight, on
+    TF32 operands at every tensor-core precision) in TF32; and no
+    pre-activation is zero, so rounding moves no ReLU decision."""
     from wgse_mmseg.core.wavelets import band_lengths
     model = WGSE(hidden_channels=hidden)
     lengths = band_lengths(steps, model.wavelet, model.level, model.mode)
     nets, coeffs, weights = first_use_check._problem(
         model.band_networks, lengths,
         band_network_backends.TritonBackend.check_pixels, torch.device('cpu'))
-    seen = {'operands': [], 'pre-activations': []}
+    seen = {'operands': [], 'tf32 operands': [], 'pre-activations': []}
     for net in nets:
         layer = net.residual_layers[0]
-        layer.conv_b.register_forward_hook(
-            lambda m, args, out: seen['operands'].extend([args[0],
-                                                          m.weight]))
+        for conv in (layer.conv_a, layer.conv_b):
+            conv.register_forward_hook(
+                lambda m, args, out: seen['operands'].extend([args[0],
+                                                              m.weight]))
         layer.conv_b.register_full_backward_hook(
             lambda m, grad_in, grad_out: seen['operands'].append(
+                grad_out[0]))
+        layer.conv_a.register_full_backward_hook(
+            lambda m, grad_in, grad_out: seen['tf32 operands'].append(
                 grad_out[0]))
         for conv in (layer.conv_a, net.output_convs[0]):
             conv.register_forward_hook(
@@ -274,10 +281,16 @@ def test_the_problem_is_exact_at_every_precision(hidden, steps):
     out = band_network_backends.BACKENDS['reference'].run(
         nets, coeffs, lengths, (1, 67))
     (out * weights).sum().backward()
-    assert len(seen['operands']) == 3 * len(nets)
+    assert len(seen['operands']) == 5 * len(nets)
     for tensor in seen['operands']:
         for dtype in (torch.bfloat16, torch.float16):
             assert torch.equal(tensor.to(dtype).double(), tensor)
+    assert len(seen['tf32 operands']) == len(nets)
+    for tensor in seen['tf32 operands']:
+        # TF32 keeps 11 significant bits: 2^11 times the mantissa in [0.5,
+        # 1) is an integer
+        mantissa, _ = torch.frexp(tensor)
+        assert torch.equal(mantissa * 2 ** 11, (mantissa * 2 ** 11).round())
     for tensor in seen['pre-activations']:
         assert (tensor != 0).all()
     # both sides of every ReLU are visited, in every band

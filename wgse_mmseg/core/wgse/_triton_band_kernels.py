@@ -343,12 +343,13 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
             e_2 = e_1 + _grad_dot(d2, w2t_1, PRECISION)
             e_1 = _grad_dot(d2, w2t_2, PRECISION)
             # dW1[k] += x[v - 1 + k] d1[v], v = s - 2 (window columns 0-2);
-            # db1 (column 5). Under fp16, TF32 operands: d1 is a scaled
-            # gradient (see _grad_dot) and x carries fp16's bits, which bf16
-            # would cut; TF32 keeps both (and fewer registers hold one
-            # rounding of xs than two)
+            # db1 (column 5). TF32 operands under fp16 and bf16 too: d1 is
+            # a sum of 3H products and carries more bits than bf16 holds (10
+            # on the first-use check's exact problem, whose bf16 check it
+            # would fail), under fp16 a scaled gradient (see _grad_dot), and
+            # x carries fp16's bits, which bf16 would cut; TF32 keeps them
             g_1 += _dot(tl.trans(xs), d1,
-                        'tf32' if PRECISION == 'fp16' else PRECISION)
+                        'tf32' if PRECISION != 'ieee' else PRECISION)
             if INPUT_GRAD:
                 # gx[s - 3]: x[t] reaches h1[t + 1 - k] through conv1's
                 # tap k and h2[t] through the residual
