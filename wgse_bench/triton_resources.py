@@ -214,12 +214,17 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     from triton.compiler import ASTSource
 
     from wgse_mmseg.core.wgse import _triton_band_kernels as kernels
+    from wgse_mmseg.core.wgse.triton_band_networks import \
+        conv1_on_tensor_cores
     signature = dict(_SIGNATURES[variant.kernel])
     signature.update({name: '*fp32' for name in _POINTERS})
     constants = dict(HIDDEN=variant.hidden, BLOCK=variant.block,
                      PRECISION=variant.precision)
     if variant.kernel == 'band_backward':
         constants['INPUT_GRAD'] = variant.input_grad
+    else:
+        constants['CONV1_DOT'] = conv1_on_tensor_cores(
+            variant.precision, ARCHITECTURES[arch][0] // 10)
     signature.update({name: 'constexpr' for name in constants})
     source = ASTSource(fn=getattr(kernels, variant.kernel),
                        signature=signature, constexprs=constants)

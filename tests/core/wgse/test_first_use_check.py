@@ -210,12 +210,15 @@ def test_relative_errors():
 @pytest.mark.skipif(triton_band_networks.unavailable() is not None,
                     reason=str(triton_band_networks.unavailable()))
 @pytest.mark.parametrize('autocast', [None, torch.float16, torch.bfloat16])
+@pytest.mark.parametrize('major', [8, 10])
 def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
-                                                          autocast):
+                                                          autocast, major):
     """The check around the real kernel: every launch entry, with and
-    without the input gradient, against float64, at full float32 and with
-    fp16 and bf16 operands (under autocast; the check's problem is exact
-    in both, so a right kernel agrees to float32's accumulation)."""
+    without the input gradient, against float64, at TF32 and with fp16 and
+    bf16 operands (under autocast; the check's problem is exact in both,
+    so a right kernel agrees to float32's accumulation), with the forward's
+    conv1 as a GPU of compute capability ``major`` computes it (at TF32 on
+    tensor cores on a B200, 10, with multiply-adds before)."""
 
     class CheckedTriton(band_network_backends.TritonBackend):
         first_use_check = True
@@ -223,6 +226,15 @@ def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
 
     assert not band_network_backends.TritonBackend().first_use_check
     _install(monkeypatch, CheckedTriton())
+    choice = triton_band_networks.conv1_on_tensor_cores
+    chosen = []
+
+    def on_this_gpu(precision, interpreter_major):
+        chosen.append(choice(precision, major))
+        return chosen[-1]
+
+    monkeypatch.setattr(triton_band_networks, 'conv1_on_tensor_cores',
+                        on_this_gpu)
     model = WGSE(wavelet='haar', level=1)
     spikes = _spikes(steps=6)[:1, :, :1]
     with torch.autocast('cpu', dtype=autocast or torch.bfloat16,
@@ -235,6 +247,7 @@ def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
         None: 'tf32', torch.float16: 'fp16',
         torch.bfloat16: 'bf16'}[autocast])
     assert check.max_error <= first_use_check.TOLERANCE
+    assert set(chosen) == {autocast is not None or major == 10}
     if autocast is None:
         torch.testing.assert_close(out, _torch_result(model, spikes),
                                    rtol=1e-5, atol=1e-5)

@@ -151,66 +151,22 @@ def _h1(t, x_p, x_c, x_n, w1_0, w1_1, w1_2, b1, length):
 
 
 @triton.jit
-def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
-                 lengths_ptr, offsets_ptr,
-                 w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
-                 HIDDEN: tl.constexpr, BLOCK: tl.constexpr,
-                 PRECISION: tl.constexpr):
-    """The network on ``x`` ``(B, C, P)``: program ``(tile, band)`` runs
-    band ``band`` on the ``BLOCK`` pixels of tile ``tile`` (tiles numbered
-    sample by sample, ``tiles_per_sample`` each). Writes ``y`` into
-    ``out`` and where ``y > 0`` (1, else 0) into ``mask`` (uint8; both
-    ``(B, C, P)``): the backward pass's gradient at the last convolution's
-    pre-activation is ``y``'s gradient there and zero elsewhere."""
-    tile = tl.program_id(0)
-    band = tl.program_id(1)
-    length = tl.load(lengths_ptr + band)
-    first, cols, valid = _tile_rows(tile, band, pixels, columns,
-                                    tiles_per_sample, offsets_ptr, BLOCK)
-    row = pixels.to(tl.int64)
-    (w1_0, w1_1, w1_2, b1, w2_0, w2_1, w2_2, b2, w3_0, w3_1, w3_2,
-     b3) = _band_weights(band, w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr,
-                         b3_ptr, HIDDEN)
-
-    # Each value starts as its own tensor: triton carries a variable into
-    # the next iteration only if the loop body changes its value, so two
-    # names starting as one tensor (p_1 = p_0 = zeros) would leave p_1 = p_0
-    # looking unchanged and the loop computing with its first value.
-    x_1 = tl.zeros((BLOCK, ), tl.float32)  # x[s - 1]
-    x_0 = tl.load(x_ptr + first + cols, mask=valid, other=0.0)  # x[s]
-    # conv2's pre-activation of h2[s - 1] and h2[s] without the taps of the
-    # h1 values still to come (h2[-1] lies outside the band: -inf)
-    p_1 = tl.full((BLOCK, HIDDEN), float('-inf'), tl.float32)
-    p_0 = b2 + x_0[:, None]
-    # conv3's of y[s - 1] and y[s], likewise
-    q_1 = tl.zeros((BLOCK, ), tl.float32)
-    q_0 = tl.zeros((BLOCK, ), tl.float32)
-    for s in range(0, length + 2):
-        x_n = tl.load(x_ptr + first + (s + 1) * row + cols,
-                      mask=valid & (s + 1 < length), other=0.0)
-        # h1[s] through conv2's three taps: the last one h2[s - 1] needed
-        h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, length)
-        h2_1 = tl.maximum(p_1 + _dot(h1_0, w2_2, PRECISION), 0.0)
-        p_1 = p_0 + _dot(h1_0, w2_1, PRECISION)
-        p_0 = (_bias_at(s + 1, length, b2) + x_n[:, None] +
-               _dot(h1_0, w2_0, PRECISION))
-        # h2[s - 1] through conv3's: y[s - 2] before its ReLU
-        a3 = q_1 + tl.sum(h2_1 * w3_2, axis=1)
-        q_1 = q_0 + tl.sum(h2_1 * w3_1, axis=1)
-        q_0 = b3 + tl.sum(h2_1 * w3_0, axis=1)
-        at = first + (s - 2) * row + cols
-        tl.store(out_ptr + at, tl.maximum(a3, 0.0), mask=valid & (s >= 2))
-        tl.store(mask_ptr + at, (a3 > 0).to(tl.uint8), mask=valid & (s >= 2))
-        x_1, x_0 = x_0, x_n
-
-
-@triton.jit
 def _conv1_taps(r, shift, w1_0, w1_1, w1_2):
     """``(16, H)``: conv1's taps ``(1, H)`` in rows ``shift`` to ``shift +
     2``, the rest zero (``r``: the row numbers ``(16, 1)``). The product of
     :func:`_window` with it is conv1 at coefficient ``s + shift - 2``."""
     return tl.where(r == shift, w1_0, tl.where(
         r == shift + 1, w1_1, tl.where(r == shift + 2, w1_2, 0.0)))
+
+
+@triton.jit
+def _step_window(c, x_p, x_c, x_n):
+    """``(BLOCK, 16)``: columns 0-2 the ``(BLOCK,)`` window ``x[s - 1]``,
+    ``x[s]``, ``x[s + 1]``, the rest zero (``c``: the column numbers
+    ``(1, 16)``). Its product with :func:`_conv1_taps` at shift 0 is conv1
+    at ``s``."""
+    return tl.where(c == 0, x_p[:, None], tl.where(
+        c == 1, x_c[:, None], tl.where(c == 2, x_n[:, None], 0.0)))
 
 
 @triton.jit
@@ -231,6 +187,71 @@ def _h1_of_window(t, xs, taps, b1, length, PRECISION: tl.constexpr):
     rows (:func:`_conv1_taps`); zero outside the band."""
     return tl.maximum(_bias_at(t, length, b1) + _dot(xs, taps, PRECISION),
                       0.0)
+
+
+@triton.jit
+def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
+                 lengths_ptr, offsets_ptr,
+                 w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
+                 HIDDEN: tl.constexpr, BLOCK: tl.constexpr,
+                 PRECISION: tl.constexpr, CONV1_DOT: tl.constexpr):
+    """The network on ``x`` ``(B, C, P)``: program ``(tile, band)`` runs
+    band ``band`` on the ``BLOCK`` pixels of tile ``tile`` (tiles numbered
+    sample by sample, ``tiles_per_sample`` each). Writes ``y`` into
+    ``out`` and where ``y > 0`` (1, else 0) into ``mask`` (uint8; both
+    ``(B, C, P)``): the backward pass's gradient at the last convolution's
+    pre-activation is ``y``'s gradient there and zero elsewhere.
+    ``CONV1_DOT``: conv1 as a product on tensor cores
+    (:func:`_step_window`, the operands rounded as ``PRECISION`` says),
+    else float32 multiply-adds (:func:`_h1`)."""
+    tile = tl.program_id(0)
+    band = tl.program_id(1)
+    length = tl.load(lengths_ptr + band)
+    first, cols, valid = _tile_rows(tile, band, pixels, columns,
+                                    tiles_per_sample, offsets_ptr, BLOCK)
+    row = pixels.to(tl.int64)
+    (w1_0, w1_1, w1_2, b1, w2_0, w2_1, w2_2, b2, w3_0, w3_1, w3_2,
+     b3) = _band_weights(band, w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr,
+                         b3_ptr, HIDDEN)
+
+    # Each value starts as its own tensor: triton carries a variable into
+    # the next iteration only if the loop body changes its value, so two
+    # names starting as one tensor (p_1 = p_0 = zeros) would leave p_1 = p_0
+    # looking unchanged and the loop computing with its first value.
+    # conv1's taps at rows 0-2 of a (16, H) matrix: a product with the
+    # window x[s - 1], x[s], x[s + 1] (columns 0-2) is conv1 at s
+    c = tl.arange(0, 16)[None, :]
+    taps = _conv1_taps(tl.arange(0, 16)[:, None], 0, w1_0, w1_1, w1_2)
+    x_1 = tl.zeros((BLOCK, ), tl.float32)  # x[s - 1]
+    x_0 = tl.load(x_ptr + first + cols, mask=valid, other=0.0)  # x[s]
+    # conv2's pre-activation of h2[s - 1] and h2[s] without the taps of the
+    # h1 values still to come (h2[-1] lies outside the band: -inf)
+    p_1 = tl.full((BLOCK, HIDDEN), float('-inf'), tl.float32)
+    p_0 = b2 + x_0[:, None]
+    # conv3's of y[s - 1] and y[s], likewise
+    q_1 = tl.zeros((BLOCK, ), tl.float32)
+    q_0 = tl.zeros((BLOCK, ), tl.float32)
+    for s in range(0, length + 2):
+        x_n = tl.load(x_ptr + first + (s + 1) * row + cols,
+                      mask=valid & (s + 1 < length), other=0.0)
+        # h1[s] through conv2's three taps: the last one h2[s - 1] needed
+        if CONV1_DOT:
+            h1_0 = _h1_of_window(s, _step_window(c, x_1, x_0, x_n), taps,
+                                 b1, length, PRECISION)
+        else:
+            h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, length)
+        h2_1 = tl.maximum(p_1 + _dot(h1_0, w2_2, PRECISION), 0.0)
+        p_1 = p_0 + _dot(h1_0, w2_1, PRECISION)
+        p_0 = (_bias_at(s + 1, length, b2) + x_n[:, None] +
+               _dot(h1_0, w2_0, PRECISION))
+        # h2[s - 1] through conv3's: y[s - 2] before its ReLU
+        a3 = q_1 + tl.sum(h2_1 * w3_2, axis=1)
+        q_1 = q_0 + tl.sum(h2_1 * w3_1, axis=1)
+        q_0 = b3 + tl.sum(h2_1 * w3_0, axis=1)
+        at = first + (s - 2) * row + cols
+        tl.store(out_ptr + at, tl.maximum(a3, 0.0), mask=valid & (s >= 2))
+        tl.store(mask_ptr + at, (a3 > 0).to(tl.uint8), mask=valid & (s >= 2))
+        x_1, x_0 = x_0, x_n
 
 
 @triton.jit

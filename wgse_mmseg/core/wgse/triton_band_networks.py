@@ -99,6 +99,26 @@ HIDDEN_CHANNELS = (16, 32)
 TOLERANCES = {'ieee': 1e-4, 'tf32': 3e-2, 'fp16': 3e-2, 'bf16': 2.5e-1}
 
 
+def conv1_on_tensor_cores(precision: str, major: int) -> bool:
+    """Whether the forward kernel computes conv1 as a tensor-core product
+    (its window of three coefficients times the taps), for products of
+    ``precision`` on a GPU of compute capability ``major`` (0: the
+    interpreter): with fp16 or bf16 operands on every target, and at TF32
+    where the products are tcgen05 ones (10: B200). Otherwise float32
+    multiply-adds. By the resources tool's counts (warp instructions a
+    coefficient position at 32 channels, triton 3.6): in bf16 16.2-16.6
+    against 18.3-18.7 on sm_80, sm_89, sm_90 and sm_120, and on sm_100
+    14.2 against 15.8 with 72 bytes a thread spilled; at TF32 the product
+    costs more on those four (19.6-22.1 against 18.1-19.8) and spills 40
+    bytes on sm_89, where on sm_100 the multiply-adds spill 112 (their
+    ``(1, H)`` taps and biases take a register per channel in the rows
+    tcgen05 results come in). Under fp16 and bf16 the forward's conv1 then
+    rounds its operands as the backward's (and as cuDNN's under autocast)
+    does."""
+    return precision in ('fp16', 'bf16') or (precision == 'tf32' and
+                                             major == 10)
+
+
 def backward_configs(input_grad: Optional[bool] = None
                      ) -> Tuple[LaunchConfig, ...]:
     """The backward entries (:data:`BACKWARD_CONFIGS`) computing the input
@@ -276,10 +296,13 @@ def launch_forward(config: LaunchConfig, coeffs: Tensor,
     if coeffs.numel():
         batch, columns, pixels = coeffs.shape
         tiles = triton.cdiv(pixels, config.block)
+        major = 0 if interpreting() else \
+            torch.cuda.get_device_capability(coeffs.device)[0]
         kernels.band_forward[(batch * tiles, len(inputs.lengths))](
             coeffs, out, positive, pixels, columns, tiles, inputs.lengths,
             inputs.offsets, *inputs.params, HIDDEN=inputs.hidden,
             BLOCK=config.block, PRECISION=precision,
+            CONV1_DOT=conv1_on_tensor_cores(precision, major),
             num_warps=config.num_warps, maxnreg=config.maxnreg)
     return out, positive
 
