@@ -15,13 +15,15 @@ Every variant the dispatcher can launch is compiled: forward and backward
 (with and without the input gradient), each precision of
 :data:`~wgse_mmseg.core.wgse.triton_band_networks.TOLERANCES`, each width of
 ``HIDDEN_CHANNELS`` and each launch entry of the target, for sm_80 (A100),
-sm_89 (L40, RTX 4090) and sm_90 (H100). Band lengths are run-time values
-of the kernels, so one compile serves every band.
+sm_89 (L40, RTX 4090), sm_90 (H100, H200), sm_100 (B200) and sm_120 (RTX
+5090, RTX PRO 6000). Band lengths are run-time values of the kernels, so
+one compile serves every band.
 
 The cost model (:func:`step_cost`) reads the compiled code: the
 instructions of the loop over a band's coefficients (the step every
 coefficient of a tile takes), all and tensor-core ones (``HMMA``,
-``HGMMA``), as warp instructions per coefficient position (times the
+``HGMMA``, sm_100's ``UTCHMMA``), as warp instructions per coefficient
+position (times the
 warps, over the pixels of a tile). An SM issues at most one warp
 instruction per scheduler and clock, so :func:`predicted_ms` turns those
 counts into a lower bound on a pass's time at a GPU's clock.
@@ -52,6 +54,8 @@ ARCHITECTURES = {
     'sm_80': (80, 65536, 64, 32, 164 * 1024, 163 * 1024),
     'sm_89': (89, 65536, 48, 24, 100 * 1024, 99 * 1024),
     'sm_90': (90, 65536, 64, 32, 228 * 1024, 227 * 1024),
+    'sm_100': (100, 65536, 64, 32, 228 * 1024, 227 * 1024),
+    'sm_120': (120, 65536, 48, 32, 100 * 1024, 99 * 1024),
 }
 #: registers are allocated per warp in units of this many
 _REGISTER_UNIT = 256
@@ -150,25 +154,33 @@ def loop_carried(ttir: str) -> int:
 
 
 #: SASS opcodes of the tensor cores' matrix products
-TENSOR_CORE_OPCODES = ('HMMA', 'HGMMA')
+TENSOR_CORE_OPCODES = ('HMMA', 'HGMMA', 'UTCHMMA')
 
 
 def step_loop(sass: str) -> List[str]:
-    """The opcodes of the innermost loop of ``cuobjdump -sass`` text: the
-    shortest range that a backward branch closes (the step over a band's
-    coefficients; the backward kernel's loop over tiles encloses it)."""
+    """The opcodes of the step loop of ``cuobjdump -sass`` text: the
+    shortest range that a backward branch closes and that loads from global
+    memory (the step over a band's coefficients, which loads the next ones;
+    the backward kernel's loop over tiles encloses it, and on sm_100 the
+    waits for the tensor cores' barriers are shorter loops that load
+    nothing). A branch's target is its last operand, after a uniform
+    predicate (``BRA.U UP0, 0x...``) where it has one, before the
+    scheduling notes sm_120's code carries (``?trans6``)."""
     code = re.findall(r'/\*([0-9a-f]{4,})\*/\s+(@!?U?P\w+\s+)?([A-Z][\w.]*)'
                       r'\s*([^;]*);', sass)
     addresses = [int(address, 16) for address, *_ in code]
     loops = []
     for index, (address, _, opcode, operands) in enumerate(code):
-        target = re.match(r'\s*(?:`\()?(0x[0-9a-f]+)', operands)
+        target = re.search(r'(0x[0-9a-f]+)\s*\)?\s*(?:[&?].*)?$', operands)
         if opcode.startswith('BRA') and target and \
                 int(target.group(1), 16) < addresses[index]:
             start = addresses.index(int(target.group(1), 16))
-            loops.append(code[start:index + 1])
+            body = code[start:index + 1]
+            if any(op.startswith('LDG') for _, _, op, _ in body):
+                loops.append(body)
     if not loops:
-        raise ValueError('no loop in the compiled kernel')
+        raise ValueError('no loop that loads from global memory in the '
+                         'compiled kernel')
     return [opcode for _, _, opcode, _ in min(loops, key=len)]
 
 

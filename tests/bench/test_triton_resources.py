@@ -1,4 +1,5 @@
-"""WGSE's Triton kernels compile for real GPUs (sm_80, sm_89, sm_90) with no
+"""WGSE's Triton kernels compile for real GPUs (sm_80, sm_89, sm_90, sm_100,
+sm_120) with no
 GPU: every variant the dispatcher can launch, and the tensor-core ones use
 no local memory, leave room for two programs per SM and stay within the
 cost model's instruction budget
@@ -35,15 +36,16 @@ def rows(built_once):
 
 def test_every_launchable_variant_compiles_for_every_target(rows):
     """Forward and backward (with and without the input gradient) at every
-    width, precision and launch entry of each target, for sm_80, sm_89 and
-    sm_90."""
+    width, precision and launch entry of each target, for sm_80, sm_89,
+    sm_90, sm_100 and sm_120."""
     compiled = [(r['arch'], r['kernel'], r['hidden'], r['precision'],
                  r['input_grad'], r['block'], r['num_warps'], r['maxnreg'])
                 for r in rows]
     expected = {(a, *v) for v, a in triton_resources.jobs_for(
         triton_resources.ARCHITECTURES)}
     assert len(compiled) == len(set(compiled)) and set(compiled) == expected
-    assert {a for a, *_ in compiled} == {'sm_80', 'sm_89', 'sm_90'}
+    assert {a for a, *_ in compiled} == {'sm_80', 'sm_89', 'sm_90',
+                                         'sm_100', 'sm_120'}
     backward = {(r['arch'], r['precision'], r['input_grad'], r['block'])
                 for r in rows if r['kernel'] == 'band_backward'}
     # 16 pixels for the input gradient, 32 otherwise, at every precision
@@ -139,10 +141,12 @@ def test_tensor_core_variants_spill_nothing_and_fit_two_programs(rows):
 #: position may cost in a kernel's step loop at TF32, fp16 and bf16, and
 #: the fewest of them on tensor cores, per kernel and tile, on every target.
 #: As compiled by triton 3.6 (docs/wgse_speed.md, "Compiled for GPUs"):
-#: forward 10-20 at 128 pixels, backward 53-85 at 32 and 100-169 at 16; the
-#: kernels these replaced took 140 in the backward on sm_90. A change of
-#: the kernels or of triton that costs more shows here first.
-STEP_BUDGET = {('band_forward', 128): (21, 0.15),
+#: forward 9.7-19.8 at 128 pixels, backward 53-85 at 32 and 96-169 at 16;
+#: the kernels these replaced took 140 in the backward on sm_90. The fewest
+#: tensor-core instructions: 0.12 a position in the forward on sm_100, whose
+#: tcgen05 instructions each run a whole 128-row product. A change of the
+#: kernels or of triton that costs more shows here first.
+STEP_BUDGET = {('band_forward', 128): (21, 0.1),
                ('band_backward', 32): (90, 4.0),
                ('band_backward', 16): (175, 5.0)}
 
@@ -157,27 +161,48 @@ def test_the_step_loop_stays_within_its_instruction_budget(rows):
 
 _SASS = """
         /*0000*/                   MOV R1, c[0x0][0x28] ;
-        /*0010*/                   HMMA.1688.F32.TF32 R4, R8, R12, R4 ;
-        /*0020*/                   IADD3 R2, R2, 0x1, RZ ;
-        /*0030*/                   HGMMA.64x32x8.F32.TF32 R24, gdesc[UR4], R24 ;
-        /*0040*/               @P0 BRA 0x10 ;
-        /*0050*/              @!P1 BRA 0x0 ;
-        /*0060*/                   EXIT ;
+        /*0010*/                   LDG.E R3, desc[UR4][R6.64] ;
+        /*0020*/                   HMMA.1688.F32.TF32 R4, R8, R12, R4 ;
+        /*0030*/                   IADD3 R2, R2, 0x1, RZ ;
+        /*0040*/                   HGMMA.64x32x8.F32.TF32 R24, gdesc[UR4], R24 ;
+        /*0050*/               @P0 BRA 0x10 ;
+        /*0060*/              @!P1 BRA 0x0 ;
+        /*0070*/                   EXIT ;
+"""
+#: sm_100 and sm_120: a branch on a uniform predicate, scheduling notes
+#: after the operands, and a wait for a barrier (a loop that loads nothing)
+#: out of line
+_SASS_BLACKWELL = """
+        /*0000*/                   MOV R1, c[0x0][0x28]  &wr=0x0 ?trans1;
+        /*0010*/                   LDG.E R3, desc[UR4][R6.64]  &wr=0x2 ?trans1;
+        /*0020*/                   UTCHMMA tmem[UR8], gdesc[UR10], tmem[UR12] ;
+        /*0030*/              @!P4 BRA 0x60  ?trans5;
+        /*0040*/                   BRA.U UP0, 0x10  ?trans6;
+        /*0050*/                   EXIT  ?trans5;
+        /*0060*/                   SYNCS.PHASECHK.TRANS64.TRYWAIT P4, [UR4], R5 ;
+        /*0070*/              @!P4 BRA 0x60 ;
+        /*0080*/                   BRA 0x40 ;
 """
 
 
 def test_step_loop_and_cost_by_hand():
-    """The innermost loop is the shortest a backward branch closes."""
+    """The step loop is the shortest a backward branch closes that loads
+    from global memory."""
     opcodes = triton_resources.step_loop(_SASS)
-    assert opcodes == ['HMMA.1688.F32.TF32', 'IADD3',
+    assert opcodes == ['LDG.E', 'HMMA.1688.F32.TF32', 'IADD3',
                        'HGMMA.64x32x8.F32.TF32', 'BRA']
-    assert triton_resources.step_cost(opcodes) == (4, 2)
+    assert triton_resources.step_cost(opcodes) == (5, 2)
+    opcodes = triton_resources.step_loop(_SASS_BLACKWELL)
+    assert opcodes == ['LDG.E', 'UTCHMMA', 'BRA', 'BRA.U']
+    assert triton_resources.step_cost(opcodes) == (4, 1)
     assert triton_resources.per_position(4, 4, 16) == 1.0
     # 1e8 positions at 50 instructions on 132 SMs of 4 schedulers, 1.5 GHz
     assert triton_resources.predicted_ms(1e8, 50, 132, 1.5) == \
         pytest.approx(1e8 * 50 / (132 * 4 * 1.5e9) * 1e3)
     with pytest.raises(ValueError, match='no loop'):
         triton_resources.step_loop(_SASS.replace('BRA', 'NOP'))
+    with pytest.raises(ValueError, match='no loop'):
+        triton_resources.step_loop(_SASS.replace('LDG', 'LDS'))
 
 
 @pytest.mark.parametrize('registers, warps, shared, arch, programs', [
@@ -187,6 +212,8 @@ def test_step_loop_and_cost_by_hand():
     (32, 4, 0, 'sm_89', 12),       # 48 warps at most on sm_89
     (32, 1, 0, 'sm_90', 32),       # 32 programs at most
     (64, 4, 99 * 1024, 'sm_89', 1),  # shared: 100 KB on sm_89
+    (32, 4, 0, 'sm_120', 12),      # 48 warps at most on sm_120 too
+    (64, 4, 112 * 1024, 'sm_100', 2),  # 228 KB as on sm_90
 ])
 def test_programs_per_sm_by_hand(registers, warps, shared, arch, programs):
     assert triton_resources.programs_per_sm(registers, warps, shared,

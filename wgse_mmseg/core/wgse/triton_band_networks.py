@@ -23,7 +23,7 @@ band length, width, precision, input gradient, pixel count rounded up to a
 power of two) times every entry once and keeps the fastest
 (:func:`tuned_configs` lists the choices); under the interpreter, and where
 a caller names one, a given entry runs. Every entry is compiled ahead of
-time for sm_80, sm_89 and sm_90 by
+time for sm_80, sm_89, sm_90, sm_100 and sm_120 by
 :mod:`~wgse_bench.triton_resources` and tested in the
 interpreter.
 
@@ -68,20 +68,21 @@ class LaunchConfig(NamedTuple):
 
 
 #: The forward kernel's one launch entry: 128-pixel tiles, 4 warps (one
-#: warp group: warp-group tensor-core instructions on sm_90), 221-255
-#: registers without spilling on sm_80, sm_89 and sm_90 at TF32, fp16 and
-#: bf16, two programs an SM (at 32 channels; 16 take fewer). 256 pixels
-#: spill; 64 cost 26-33 warp instructions a coefficient position, 128
-#: pixels 17-19 (the resources tool's table).
+#: warp group: warp-group tensor-core instructions on sm_90), 127-255
+#: registers without spilling on sm_80, sm_89, sm_90, sm_100 and sm_120 at
+#: TF32, fp16 and bf16, two programs an SM (at 32 channels; 16 take
+#: fewer). 256 pixels spill; 64 cost 26-33 warp instructions a coefficient
+#: position, 128 pixels 14-20 (the resources tool's table).
 FORWARD_CONFIGS = (LaunchConfig(128, 4), )
 #: The backward kernel's entries (:func:`backward_configs`), the first of a
 #: list running untuned. Each compiles without spilling to at least two
-#: programs an SM at TF32, fp16 and bf16 on sm_80, sm_89 and sm_90 (the
-#: resources tool's table, docs/wgse_speed.md, "Compiled for GPUs"): 32
-#: pixels (48 KB of shared memory at TF32: two programs share sm_89's
-#: 100 KB), 16 wherever the input gradient is computed (WGSE's coefficients
-#: need none in training: they come from the data; it carries three more
-#: vectors, and 32 pixels spill). 64 pixels spill even on sm_90 at TF32.
+#: programs an SM at TF32, fp16 and bf16 on sm_80, sm_89, sm_90, sm_100 and
+#: sm_120 (the resources tool's table, docs/wgse_speed.md, "Compiled for
+#: GPUs"): 32 pixels (48 KB of shared memory at TF32: two programs share
+#: sm_89's and sm_120's 100 KB), 16 wherever the input gradient is computed
+#: (WGSE's coefficients need none in training: they come from the data; it
+#: carries three more vectors, and 32 pixels spill). 64 pixels spill even
+#: on sm_90 at TF32.
 BACKWARD_CONFIGS = dict(default=(LaunchConfig(32, 4), ),
                         input_grad=(LaunchConfig(16, 4), ))
 #: Programs of the backward kernel per SM the work is divided for: what
