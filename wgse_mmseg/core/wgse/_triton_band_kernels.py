@@ -284,7 +284,7 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
     the end: three multiply-adds a value, fewer instructions than a product
     on tensor cores, which would need ``h2`` split into two parts of the
     operands' precision (``h2`` carries more significant bits than bf16 or
-    TF32 hold)."""
+    TF32 hold); so is conv2's bias gradient, the sum of ``d2``."""
     pid = tl.program_id(0)
     band = tl.load(work_ptr + pid * 3)
     length = tl.load(lengths_ptr + band)
@@ -304,8 +304,9 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
 
     # sums over this program's tiles: conv2's weight transposed, (H_out,
     # H_in) per tap; a (16, H) tile whose rows 0-2 are conv1's taps and row
-    # 5 its bias (g_1); conv3's taps, one (BLOCK, H) sum each (g_3_k), and
-    # conv2's bias
+    # 5 its bias (g_1); conv3's taps and conv2's bias, one (BLOCK, H) sum
+    # each (g_3_k, g_b2), reduced over the pixels at the end (a reduction
+    # across the warps each step cost more: 1-12% of the step)
     g_w2t_0 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
     g_w2t_1 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
     g_w2t_2 = tl.zeros((HIDDEN, HIDDEN), tl.float32)
@@ -313,7 +314,7 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
     g_3_0 = tl.zeros((BLOCK, HIDDEN), tl.float32)
     g_3_1 = tl.zeros((BLOCK, HIDDEN), tl.float32)
     g_3_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)
-    g_b2 = tl.zeros((HIDDEN, ), tl.float32)
+    g_b2 = tl.zeros((BLOCK, HIDDEN), tl.float32)
     for tile in range(tl.load(work_ptr + pid * 3 + 1), tiles,
                       tl.load(work_ptr + pid * 3 + 2)):
         first, cols, valid = _tile_rows(tile, band, pixels, columns,
@@ -352,7 +353,7 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
             # d2[s - 1]
             d2 = tl.where(h2_1 > 0, d3_0[:, None] * w3_0 +
                           d3_1[:, None] * w3_1 + d3_2[:, None] * w3_2, 0.0)
-            g_b2 += tl.sum(d2, axis=0)
+            g_b2 += d2
             # dW2[:, :, k]^T += d2[u]^T h1[u - 1 + k]
             d2t = tl.trans(d2)
             g_w2t_0 += _grad_dot(d2t, h1_2, PRECISION)
@@ -396,7 +397,7 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
     tl.store(part + wide + 1, g_w2t_1)
     tl.store(part + wide + 2, g_w2t_2)
     part += 3 * HIDDEN * HIDDEN
-    tl.store(part + channels, g_b2)
+    tl.store(part + channels, tl.sum(g_b2, axis=0))
     part += HIDDEN
     tl.store(part + channels * 3, tl.sum(g_3_0, axis=0))
     tl.store(part + channels * 3 + 1, tl.sum(g_3_1, axis=0))
