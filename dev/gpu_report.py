@@ -1,7 +1,7 @@
 """WGSE on a GPU in one command: correctness against float64, WGSE
 forward+backward per backend, the first-use check 'auto' runs, PSPNet and
 SegFormer-B0 training steps raw and with WGSE, latency at batch 1, the
-paper's shape, the autotune choice and the targets of docs/gpu.md; writes
+paper's shape and the targets of docs/gpu.md; writes
 gpu.md and gpu.json (device, driver, versions).
 
     python dev/gpu_report.py                       # CUDA: docs/gpu.md and gpu.json

@@ -34,10 +34,6 @@ Sections:
   or what failed, the largest error, its seconds, and the backend ``'auto'``
   runs then; the ``wgse`` and ``correctness`` sections have the Triton
   kernel and the ``torch`` fallback side by side.
-* ``autotune``: the launch entries the Triton kernels chose, with the time
-  each entry took when the autotuner measured it
-  (:func:`~wgse_mmseg.core.wgse.triton_band_networks.tuned_configs` of
-  every process).
 * ``targets``: the figures of :data:`FIGURES` against the targets the
   caller gives (``dev/gpu_report.py`` holds docs/gpu.md's).
 
@@ -330,8 +326,7 @@ def segmentation_step(config: str, shape: Shape, repeat: int, warmup: int,
                                             warmup)
     enhancer = getattr(model.data_preprocessor, 'enhancer', None)
     return dict(result, step_ms=train['step_ms'], memory=train['memory'],
-                enhancer_backend=getattr(enhancer, 'backend_in_use', None),
-                tuned_configs=triton_band_networks.tuned_configs())
+                enhancer_backend=getattr(enhancer, 'backend_in_use', None))
 
 
 def _error_message(error: Exception) -> str:
@@ -556,15 +551,6 @@ def run_report(plan: Plan, root: str, targets: Targets,
                        _pspnet(models), root)
     sections['paper'] = dict(status=_status(rows),
                              shape=list(plan.paper_shape), rows=rows)
-    tuned = {}
-    for section in sections.values():
-        for row in section.get('rows', []):
-            tuned.update(row.get('tuned_configs') or {})
-    sections['autotune'] = dict(
-        status='ok', chosen=tuned, forward_entries=[
-            c.name for c in triton_band_networks.FORWARD_CONFIGS],
-        backward_entries=[
-            c.name for c in triton_band_networks.backward_configs()])
     sections['targets'] = dict(status='ok',
                                rows=_targets(sections, targets))
     print(f'[gpu_report {clock.elapsed():6.1f} s] done', flush=True)
@@ -623,25 +609,6 @@ def _model_table(rows: Sequence[Dict], latency: bool) -> str:
                      _num(r.get('added_latency_ms'))]
         table.append(line + [_row_status(r)])
     return markdown_table(headers, table)
-
-
-def _autotune_lines(section: Dict[str, Any]) -> List[str]:
-    """The report's autotune section: the entries, then per variant the
-    one chosen and every entry's measured time."""
-    out = ['## Autotune', '',
-           'Entries (pixels x warps, rR: at most R registers a thread): '
-           f"forward {', '.join(section['forward_entries'])}; backward "
-           f"{', '.join(section['backward_entries'])}.", '']
-    if section['chosen']:
-        out.append(markdown_table(
-            ['variant', 'chosen', 'ms per entry'],
-            [[k, c['entry'], ', '.join(
-                f'{entry}: {ms:.2f}' for entry, ms in c['entry_ms'].items())]
-             for k, c in sorted(section['chosen'].items())]))
-    else:
-        out.append('None chosen: no kernel was tuned in this run (the '
-                   'interpreter runs each first entry).')
-    return out
 
 
 def format_report(report: Dict[str, Any], command: str) -> str:
@@ -764,7 +731,6 @@ def format_report(report: Dict[str, Any], command: str) -> str:
             f"{_shape_text(section['shape'])} (batch x T x H x W), training "
             'step as above.', '', _model_table(section['rows'], False), '']
 
-    out += _autotune_lines(sections['autotune'])
     out += ['', '## Against the targets (issue 43: an H100 or H200)', '',
             markdown_table(
                 ['target', 'this run', 'at most', 'aim', 'met'],

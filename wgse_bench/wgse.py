@@ -22,8 +22,7 @@ from typing import Dict, List, Optional
 import torch
 
 from wgse_mmseg.core.io import atomic_output
-from wgse_mmseg.core.wgse import (WGSE, band_network_backends,
-                                  triton_band_networks)
+from wgse_mmseg.core.wgse import WGSE, band_network_backends
 
 from .machine import machine_record
 from .timing import time_calls
@@ -106,8 +105,7 @@ def worker(impl: str, shape: List[int], repeat: int, device: str) -> Dict:
                 shape=shape, device=device, peak_mib=peak_mib,
                 kib_per_pixel=peak_mib * 1024 / pixels,
                 median_s=statistics.median(times), min_s=min(times),
-                max_s=max(times), repeat=repeat,
-                tuned_configs=triton_band_networks.tuned_configs())
+                max_s=max(times), repeat=repeat)
 
 
 def agreement(shape: List[int], device: str) -> Dict:

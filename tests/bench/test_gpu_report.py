@@ -14,7 +14,7 @@ from wgse_mmseg.core.wgse import first_use_check, triton_band_networks
 pytest.importorskip('pytorch_wavelets')
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 SECTIONS = {'correctness', 'first_use', 'wgse', 'profile', 'segmentation',
-            'latency', 'paper', 'autotune', 'targets'}
+            'latency', 'paper', 'targets'}
 
 
 @pytest.fixture(scope='module')
@@ -110,7 +110,7 @@ def test_smoke_run_writes_every_section(tmp_path, targets, load_tool,
     for heading in ('## Correctness against float64',
                     '## WGSE forward+backward', '## Training steps',
                     '## Latency at batch 1', "## The paper's shape",
-                    '## Autotune', '## Against the targets',
+                    '## Against the targets',
                     '## First-use check'):
         assert heading in markdown
     assert "| WGSE, backend='triton'" in markdown
@@ -250,18 +250,3 @@ def test_targets_not_measured_when_their_jobs_failed(targets):
         paper=dict(rows=[dict(failed, enhancer='WGSE')]))
     assert all(t['value'] is None and t['met'] is None
                for t in gpu_report._targets(sections, targets))
-
-
-def test_autotune_section_lists_each_entrys_time():
-    chosen = {'GPU | band_forward | L=72 H=32 tf32 | <=524288 px': dict(
-        entry='64x4', entry_ms={'16x4': 5.4912, '64x4': 2.8})}
-    lines = gpu_report._autotune_lines(dict(
-        chosen=chosen, forward_entries=['16x4', '64x4'],
-        backward_entries=['16x4', '16x4r168']))
-    assert lines[2] == ('Entries (pixels x warps, rR: at most R registers a '
-                        'thread): forward 16x4, 64x4; backward 16x4, '
-                        '16x4r168.')
-    row = lines[-1].splitlines()[-1]
-    assert [cell.strip() for cell in row.replace(r'\|', '/').split('|')[1:-1]
-            ] == ['GPU / band_forward / L=72 H=32 tf32 / <=524288 px', '64x4',
-                  '16x4: 5.49, 64x4: 2.80']

@@ -283,44 +283,6 @@ def test_triton_rejects_a_launch_config_not_in_its_lists():
 
 
 @needs_triton
-def test_the_autotuner_keeps_the_fastest_entry_and_each_entrys_time(
-        monkeypatch):
-    """On a GPU the first call of a variant times every entry once and
-    keeps the fastest per device and pixel count rounded up to a power of
-    two; the times stay readable (the GPU report prints them). Here the
-    GPU's side is played by a fake device name and scripted timings."""
-    import triton.testing
-    config = triton_band_networks.LaunchConfig
-    times = {config(16, 4): 5.5, config(64, 4): 2.75}
-    launched = []
-
-    def do_bench(fn, warmup, rep):
-        fn()
-        return times[launched[-1]]
-
-    def no_second_timing(entry):
-        raise AssertionError(f'{entry} timed again')
-
-    monkeypatch.setattr(triton_band_networks, 'interpreting', lambda: False)
-    monkeypatch.setattr(triton_band_networks, '_TUNED', {})
-    monkeypatch.setattr(torch.cuda, 'get_device_name',
-                        lambda device=None: 'Test GPU')
-    monkeypatch.setattr(triton.testing, 'do_bench', do_bench)
-    key = ('band_backward', (72, ), 32, 'tf32', False)
-    choose = triton_band_networks._choose  # what both kernels' calls use
-    assert choose(tuple(times), key + (300_000, ), torch.device('cpu'),
-                  launched.append) == config(64, 4)
-    assert launched == list(times)
-    # 524288 px rounds to the same power of two: remembered, not timed
-    assert choose(tuple(times), key + (1 << 19, ), torch.device('cpu'),
-                  no_second_timing) == config(64, 4)
-    assert triton_band_networks.tuned_configs() == {
-        'Test GPU | band_backward | L=(72,) H=32 tf32 input_grad=False | '
-        '<=524288 px': dict(
-            entry='64x4', entry_ms={'16x4': 5.5, '64x4': 2.75})}
-
-
-@needs_triton
 @pytest.mark.parametrize('dtype', [torch.float16, torch.bfloat16],
                          ids=['fp16', 'bf16'])
 def test_triton_under_autocast_within_its_stated_tolerance(dtype):

@@ -39,11 +39,11 @@ its 16-pixel entry with; one launch of each kernel each time, all bands at
 once), plus one float64 forward+backward of the ``torch`` backend. Its arithmetic is negligible on
 a GPU (259 pixels against the 524288 of a 4x129x256x512 batch); the time is
 the compiles of the variants the check meets first, which the training step
-would have paid anyway, but for the entries autotuning would not have
-picked (measured with the former kernels, which compiled one variant per
-band length, on an H100 or H200: 30-60 s per precision in the first
-process on a machine, 0.2-0.9 s in later ones, which find triton's cache;
-the present kernels compile three variants a precision for any T:
+would have paid anyway, but for the backward's input-gradient entry, which
+training does not run (measured with the former kernels, which compiled one
+variant per band length, on an H100 or H200: 30-60 s per precision in the
+first process on a machine, 0.2-0.9 s in later ones, which find triton's
+cache; the present kernels compile three variants a precision for any T:
 the forward and the backward's two entries).
 """
 import copy

@@ -3,44 +3,39 @@
 Runs the paper's band network (``num_blocks=1``: conv ``1 -> H``, conv
 ``H -> H`` plus the input, conv ``H -> 1``, each followed by ReLU; kernel 3)
 for every pixel, a tile of pixels per program (:data:`FORWARD_CONFIGS`,
-:data:`BACKWARD_CONFIGS`: tile and warps, tuned per GPU and shape), the
-weights read once per program and the ``H x H`` layer on tensor cores
-(``tl.dot``). The backward pass recomputes each tile's activations while it
-streams the gradient, so nothing of size ``pixels x H`` is ever kept: the
-only memory beyond the input, output and their gradients is one row of
-parameter-gradient sums per program. Kernels: :mod:`._triton_band_kernels`.
+:data:`BACKWARD_CONFIGS`), the weights read once per program and the ``H x
+H`` layer on tensor cores (``tl.dot``). The backward pass recomputes each
+tile's activations while it streams the gradient, so nothing of size
+``pixels x H`` is ever kept: the only memory beyond the input, output and
+their gradients is the forward's mask of where the output is positive (a
+byte a coefficient) and one row of parameter-gradient sums per program.
+Kernels: :mod:`._triton_band_kernels`.
 
-Precision of the ``H x H`` products (:func:`dot_precision`): under autocast
-their operands are rounded to its dtype (fp16 or bf16); otherwise TF32 where
-``torch.backends.cudnn.allow_tf32`` allows it (the flag torch applies to
-convolutions, on by default), else full float32. Everything else, and every
-accumulation, is float32. The tolerances against float32 that the tests
+Precision of the tensor-core products (:func:`dot_precision`): under
+autocast their operands are rounded to its dtype (fp16 or bf16); otherwise
+TF32 where ``torch.backends.cudnn.allow_tf32`` allows it (the flag torch
+applies to convolutions, on by default), else full float32. Every
+accumulation is float32. The tolerances against float64 that the tests
 hold are :data:`TOLERANCES`.
 
-Launch configurations: each kernel has a short list of ``(block,
-num_warps)`` entries. On a GPU the first call of a kernel variant (device,
-band length, width, precision, input gradient, pixel count rounded up to a
-power of two) times every entry once and keeps the fastest
-(:func:`tuned_configs` lists the choices); under the interpreter, and where
-a caller names one, a given entry runs. Every entry is compiled ahead of
-time for sm_80, sm_89, sm_90, sm_100 and sm_120 by
-:mod:`~wgse_bench.triton_resources` and tested in the
+Launch configurations: each kernel has a list of ``(block, num_warps)``
+entries, one a list today; a call runs the first unless its caller names
+another. Every entry is compiled ahead of time for sm_80, sm_89, sm_90,
+sm_100 and sm_120 by :mod:`~wgse_bench.triton_resources` and tested in the
 interpreter.
 
 Triton's interpreter (``TRITON_INTERPRET=1`` in the environment before
 triton is first imported) runs the same kernels on CPU tensors; the tests
 use it, since CI has no GPU.
 """
-import functools
 import os
-from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
+from typing import List, NamedTuple, Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
 
 try:
     import triton
-    import triton.testing
 
     from . import _triton_band_kernels as kernels
     _IMPORT_ERROR = None
@@ -75,14 +70,14 @@ class LaunchConfig(NamedTuple):
 #: position, 128 pixels 14-20 (the resources tool's table).
 FORWARD_CONFIGS = (LaunchConfig(128, 4), )
 #: The backward kernel's entries (:func:`backward_configs`), the first of a
-#: list running untuned. Each compiles without spilling to at least two
-#: programs an SM at TF32, fp16 and bf16 on sm_80, sm_89, sm_90, sm_100 and
-#: sm_120 (the resources tool's table, docs/wgse_speed.md, "Compiled for
-#: GPUs"): 32 pixels (48 KB of shared memory at TF32: two programs share
-#: sm_89's and sm_120's 100 KB), 16 wherever the input gradient is computed
-#: (WGSE's coefficients need none in training: they come from the data; it
-#: carries three more vectors, and 32 pixels spill). 64 pixels spill even
-#: on sm_90 at TF32.
+#: list running unless a caller names another. Each compiles without
+#: spilling to at least two programs an SM at TF32, fp16 and bf16 on sm_80,
+#: sm_89, sm_90, sm_100 and sm_120 (the resources tool's table,
+#: docs/wgse_speed.md, "Compiled for GPUs"): 32 pixels (48 KB of shared
+#: memory at TF32: two programs share sm_89's and sm_120's 100 KB), 16
+#: wherever the input gradient is computed (WGSE's coefficients need none
+#: in training: they come from the data; it carries three more vectors, and
+#: 32 pixels spill). 64 pixels spill even on sm_90 at TF32.
 BACKWARD_CONFIGS = dict(default=(LaunchConfig(32, 4), ),
                         input_grad=(LaunchConfig(16, 4), ))
 #: Programs of the backward kernel per SM the work is divided for: what
@@ -242,50 +237,6 @@ def band_kernel_inputs(lengths: Sequence[int], params: Sequence[Tensor]
         tuple(lengths))
 
 
-class _Tuned(NamedTuple):
-    """What the autotuner chose for one variant, and the time in
-    milliseconds it measured for each entry it chose from."""
-    config: LaunchConfig
-    entry_ms: Tuple[Tuple[LaunchConfig, float], ...]
-
-
-#: (device name, kernel, band lengths, width, precision, input gradient,
-#: pixels rounded up to a power of two) -> the choice
-_TUNED: Dict[tuple, _Tuned] = {}
-
-
-def tuned_configs() -> Dict[str, Dict[str, object]]:
-    """The entries chosen so far in this process, by a readable key
-    (``'NVIDIA H100 | band_backward | L=(18, 18, 22, 29, 43, 72) H=32 tf32
-    input_grad=False | <=524288 px'``): ``{'entry', 'entry_ms'}``, the
-    chosen entry's :attr:`LaunchConfig.name` and each entry's name mapped to
-    its measured milliseconds."""
-    return {f'{device} | {kernel} | L={lengths} H={hidden} {precision}'
-            f'{"" if grad is None else f" input_grad={grad}"} | <={px} px':
-            dict(entry=tuned.config.name, entry_ms={
-                entry.name: ms for entry, ms in tuned.entry_ms})
-            for (device, kernel, lengths, hidden, precision, grad, px),
-            tuned in _TUNED.items()}
-
-
-def _choose(configs: Sequence[LaunchConfig], key: tuple, device: torch.device,
-            launch: Callable[[LaunchConfig], None]) -> LaunchConfig:
-    """The entry of ``configs`` for this call: the only or first one under
-    the interpreter; on a GPU the fastest of one timing of each (after a
-    compiling run), remembered per ``key`` and device."""
-    if interpreting() or len(configs) == 1:
-        return configs[0]
-    pixels = key[-1]
-    full_key = (torch.cuda.get_device_name(device), *key[:-1],
-                1 << max(pixels - 1, 0).bit_length())
-    if full_key not in _TUNED:
-        times = [triton.testing.do_bench(lambda c=c: launch(c), warmup=1,
-                                         rep=5) for c in configs]
-        _TUNED[full_key] = _Tuned(configs[times.index(min(times))],
-                                  tuple(zip(configs, times)))
-    return _TUNED[full_key].config
-
-
 def launch_forward(config: LaunchConfig, coeffs: Tensor,
                    inputs: BandKernelInputs, precision: str
                    ) -> Tuple[Tensor, Tensor]:
@@ -418,18 +369,12 @@ class _TritonBandNetworks(torch.autograd.Function):
             d3 = relu_gradient(grad_out, positive)
             del positive
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
-        slots = backward_slots(coeffs.device, len(ctx.lengths))
-        launch = functools.partial(launch_backward, coeffs=coeffs, d3=d3,
-                                   grad_coeffs=grad_coeffs, inputs=inputs,
-                                   precision=ctx.precision, slots=slots)
-        config = backward_config or _choose(
-            backward_configs(input_grad),
-            ('band_backward', ctx.lengths, inputs.hidden, ctx.precision,
-             input_grad, coeffs.shape[0] * coeffs.shape[2]),
-            coeffs.device, launch)
+        totals = launch_backward(
+            backward_config or backward_configs(input_grad)[0], coeffs, d3,
+            grad_coeffs, inputs, ctx.precision,
+            backward_slots(coeffs.device, len(ctx.lengths)))
         grads = []
-        for total, band_params in zip(launch(config),
-                                      zip(*[iter(params)] * 6)):
+        for total, band_params in zip(totals, zip(*[iter(params)] * 6)):
             grads += [g.view_as(p) for g, p in
                       zip(total.split(sizes), band_params)]
         return (grad_coeffs, None, None, None, *grads)
@@ -451,11 +396,10 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
         weights: per band, the three convolutions' ``(weight, bias)``:
             ``(H, 1, 3)``, ``(H, H, 3)``, ``(1, H, 3)`` and ``(H,)``,
             ``(H,)``, ``(1,)``, float32.
-        precision: of the ``H x H`` products (:func:`dot_precision`).
+        precision: of the tensor-core products (:func:`dot_precision`).
         forward_config, backward_config: the launch of each kernel; by
-            default :data:`FORWARD_CONFIGS`' entry and the tuned choice
-            among the GPU's :func:`backward_configs` (the first under the
-            interpreter).
+            default the first entry of :data:`FORWARD_CONFIGS` and of
+            :func:`backward_configs` for the input gradient's choice.
 
     Returns:
         ``(B, C, P)``: each band's network output in place of its input.
