@@ -295,6 +295,16 @@ def wrong_file_kinds(tmp_path_factory):
                 missing=str(root / 'missing.npy'))
 
 
+def pytest_runtest_setup(item):
+    """Tests marked ``needs_triton`` skip where triton does not import,
+    saying why."""
+    if item.get_closest_marker('needs_triton'):
+        from wgse_mmseg.core.wgse import triton_band_networks
+        reason = triton_band_networks.unavailable()
+        if reason is not None:
+            pytest.skip(reason)
+
+
 def pytest_collection_modifyitems(items):
     """The tests marked ``long`` first, longest first: pytest-xdist's work
     stealing takes the end of a worker's queue, so the short tests fill the

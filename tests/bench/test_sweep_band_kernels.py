@@ -5,11 +5,7 @@ import json
 
 import pytest
 
-from wgse_mmseg.core.wgse import triton_band_networks
-
-pytestmark = pytest.mark.skipif(
-    triton_band_networks.unavailable() is not None,
-    reason=str(triton_band_networks.unavailable()))
+pytestmark = pytest.mark.needs_triton
 TOOL = 'dev/sweep_band_kernels.py'
 
 

@@ -18,9 +18,7 @@ from wgse_mmseg.core.wgse import triton_band_networks
 _triton_band_kernels = pytest.importorskip(
     'wgse_mmseg.core.wgse._triton_band_kernels')
 
-pytestmark = pytest.mark.skipif(
-    triton_band_networks.unavailable() is not None,
-    reason=str(triton_band_networks.unavailable()))
+pytestmark = pytest.mark.needs_triton
 
 
 @pytest.fixture(scope='session')

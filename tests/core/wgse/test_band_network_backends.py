@@ -18,9 +18,6 @@ from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
 wgse_mmseg.register_all_modules()  # MODELS.build(dict(type='WGSE'))
 pytestmark = pytest.mark.usefixtures('single_thread')
 
-needs_triton = pytest.mark.skipif(
-    triton_band_networks.unavailable() is not None,
-    reason=str(triton_band_networks.unavailable()))
 needs_compiled = pytest.mark.skipif(
     compiled_band_networks.unavailable() is not None,
     reason=str(compiled_band_networks.unavailable()))
@@ -112,7 +109,7 @@ def test_an_unavailable_backend_says_why(monkeypatch):
     assert WGSE(backend='auto').backend == 'auto'
 
 
-@needs_triton
+@pytest.mark.needs_triton
 def test_triton_on_a_cpu_tensor_outside_the_interpreter(monkeypatch):
     model = WGSE(backend='triton')
     monkeypatch.setenv('TRITON_INTERPRET', '0')
@@ -185,7 +182,7 @@ def test_every_backend_without_pixels(backend):
         assert torch.equal(p.grad, torch.zeros_like(p))
 
 
-@needs_triton
+@pytest.mark.needs_triton
 @pytest.mark.parametrize('hidden', triton_band_networks.HIDDEN_CHANNELS)
 def test_triton_widths_and_no_wavelet(hidden):
     """Every width the kernel takes, and the TRCNN-only variant (one band
@@ -198,7 +195,7 @@ def test_triton_widths_and_no_wavelet(hidden):
                       _reference(model, spikes, True), 1e-4, str(kwargs))
 
 
-@needs_triton
+@pytest.mark.needs_triton
 @pytest.mark.parametrize('steps', [1, 2])
 def test_triton_on_bands_shorter_than_its_kernel(steps):
     """A band of one or two coefficients (the TRCNN-only variant at T = 1
@@ -214,7 +211,7 @@ def test_triton_on_bands_shorter_than_its_kernel(steps):
                       f'T={steps}, input_grad={input_grad}')
 
 
-@needs_triton
+@pytest.mark.needs_triton
 @pytest.mark.parametrize('entry', triton_band_networks.backward_configs(),
                          ids=lambda c: c.name)
 def test_every_triton_backward_entry_computes_the_same(monkeypatch, entry):
@@ -235,7 +232,7 @@ def test_every_triton_backward_entry_computes_the_same(monkeypatch, entry):
                       f'{entry}, input gradient {input_grad}')
 
 
-@needs_triton
+@pytest.mark.needs_triton
 def test_the_work_division_shares_programs_by_band_length():
     """About the slots, in proportion to a band's steps, one at least and
     no more than half its tiles; each band's programs start at tiles 0 ..
@@ -253,7 +250,7 @@ def test_the_work_division_shares_programs_by_band_length():
         (0, 0, 1), (1, 0, 1)]
 
 
-@needs_triton
+@pytest.mark.needs_triton
 @pytest.mark.parametrize('programs', [2 * 108, 2 * 132, 2 * 144])
 def test_the_first_use_check_runs_every_program_over_several_tiles(programs):
     """On a GPU (two programs on each of an A100's, H100's or B200's SMs)
@@ -270,7 +267,7 @@ def test_the_first_use_check_runs_every_program_over_several_tiles(programs):
                 assert len(range(first, tiles, step)) >= 2
 
 
-@needs_triton
+@pytest.mark.needs_triton
 def test_triton_rejects_a_launch_config_not_in_its_lists():
     coeffs = torch.zeros(1, 5, 4)
     model = _model(backend='triton')
@@ -282,7 +279,7 @@ def test_triton_rejects_a_launch_config_not_in_its_lists():
                 triton_band_networks.LaunchConfig(128, 2)))
 
 
-@needs_triton
+@pytest.mark.needs_triton
 @pytest.mark.parametrize('dtype', [torch.float16, torch.bfloat16],
                          ids=['fp16', 'bf16'])
 def test_triton_under_autocast_within_its_stated_tolerance(dtype):
@@ -308,7 +305,7 @@ def test_dot_precision_follows_torch_flags(monkeypatch):
     assert triton_band_networks.dot_precision('cpu') == 'ieee'
 
 
-@needs_triton
+@pytest.mark.needs_triton
 @pytest.mark.parametrize('call, match', [
     (lambda w: triton_band_networks.triton_band_networks(
         torch.zeros(2, 5), [2, 2], w), 'do not fit'),

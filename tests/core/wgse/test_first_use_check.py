@@ -207,8 +207,7 @@ def test_relative_errors():
     assert first_use_check.relative_errors(got, want)[1] == float('inf')
 
 
-@pytest.mark.skipif(triton_band_networks.unavailable() is not None,
-                    reason=str(triton_band_networks.unavailable()))
+@pytest.mark.needs_triton
 @pytest.mark.parametrize('autocast', [None, torch.float16, torch.bfloat16])
 @pytest.mark.parametrize('major', [8, 10])
 def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,

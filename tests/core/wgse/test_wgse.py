@@ -551,12 +551,9 @@ def test_integer_input_equals_float_input():
 
 
 # ------------------------------------ what lives between the two passes
-needs_triton = pytest.mark.skipif(
-    triton_band_networks.unavailable() is not None,
-    reason=str(triton_band_networks.unavailable()))
 
 
-@needs_triton
+@pytest.mark.needs_triton
 @pytest.mark.parametrize('spike_dtype', [torch.float32, torch.uint8])
 def test_the_coefficients_are_computed_again_not_kept(monkeypatch,
                                                       spike_dtype):
@@ -589,7 +586,7 @@ def test_the_coefficients_are_computed_again_not_kept(monkeypatch,
     assert all(torch.equal(a, b) for a, b in zip(*grads))
 
 
-@needs_triton
+@pytest.mark.needs_triton
 def test_the_relu_mask_is_dropped_before_the_coefficients_are_made_again(
         monkeypatch):
     """The Triton forward pass keeps where the last ReLU passes (a byte a
@@ -621,7 +618,7 @@ def test_the_relu_mask_is_dropped_before_the_coefficients_are_made_again(
     assert len(masks) == 1  # the backward pass ran no forward kernel
 
 
-@needs_triton
+@pytest.mark.needs_triton
 def test_a_second_backward_pass_of_one_graph_makes_the_mask_again():
     """``retain_graph=True``: the first backward pass dropped the mask; the
     second runs the forward kernel for it and gets the same gradients."""
@@ -636,7 +633,7 @@ def test_a_second_backward_pass_of_one_graph_makes_the_mask_again():
     assert any(g.abs().sum() > 0 for g in first[1:])
 
 
-@needs_triton
+@pytest.mark.needs_triton
 def test_spikes_changed_in_place_before_the_backward_pass_are_refused():
     """The backward pass computes the coefficients again from the spikes:
     changed in between, they would give other gradients silently."""
