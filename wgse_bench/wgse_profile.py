@@ -1,7 +1,7 @@
 """Where one WGSE forward+backward pass spends its time on a GPU.
 
-:func:`profile_pass` runs one pass (after a warm-up that compiles and
-tunes) under ``torch.profiler`` and keeps the device's kernels as intervals;
+:func:`profile_pass` runs one pass (after a warm-up that compiles the
+kernels) under ``torch.profiler`` and keeps the device's kernels as intervals;
 :func:`summarize` turns them into each kernel's share of the pass and the
 gaps between kernels (the span from the first kernel's start to the last
 one's end that no kernel covers), so that every millisecond of the pass is
@@ -113,7 +113,7 @@ def profile_pass(shape: Sequence[int], device: str,
     saved = torch.backends.cudnn.allow_tf32
     torch.backends.cudnn.allow_tf32 = precision != 'ieee'
     try:
-        one_pass()  # compiles, tunes, checks
+        one_pass()  # compiles and checks
         torch.cuda.synchronize()
         activities = [torch.profiler.ProfilerActivity.CUDA]
         with torch.profiler.profile(activities=activities) as profiler:
