@@ -218,10 +218,11 @@ def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
     # the next iteration only if the loop body changes its value, so two
     # names starting as one tensor (p_1 = p_0 = zeros) would leave p_1 = p_0
     # looking unchanged and the loop computing with its first value.
-    # conv1's taps at rows 0-2 of a (16, H) matrix: a product with the
-    # window x[s - 1], x[s], x[s + 1] (columns 0-2) is conv1 at s
-    c = tl.arange(0, 16)[None, :]
-    taps = _conv1_taps(tl.arange(0, 16)[:, None], 0, w1_0, w1_1, w1_2)
+    if CONV1_DOT:
+        # conv1's taps at rows 0-2 of a (16, H) matrix: a product with the
+        # window x[s - 1], x[s], x[s + 1] (columns 0-2) is conv1 at s
+        c = tl.arange(0, 16)[None, :]
+        taps = _conv1_taps(tl.arange(0, 16)[:, None], 0, w1_0, w1_1, w1_2)
     x_1 = tl.zeros((BLOCK, ), tl.float32)  # x[s - 1]
     x_0 = tl.load(x_ptr + first + cols, mask=valid, other=0.0)  # x[s]
     # conv2's pre-activation of h2[s - 1] and h2[s] without the taps of the
