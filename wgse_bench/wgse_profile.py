@@ -20,13 +20,25 @@ import torch
 
 __all__ = []
 
-#: Dense tensor-core peak in TFLOP/s by device name and precision (the
-#: vendor's figures without sparsity; SXM boards).
-PEAK_TFLOPS = {
-    'H100': dict(tf32=494.7, bf16=989.4, fp16=989.4),
-    'H200': dict(tf32=494.7, bf16=989.4, fp16=989.4),
-    'A100': dict(tf32=156.0, bf16=312.0, fp16=312.0),
-}
+#: Dense tensor-core peak in TFLOP/s (without sparsity; float32
+#: accumulation) of data-centre GPUs, by a part of the name the driver
+#: reports and precision, the first entry whose key the name contains
+#: applying: a board's variants before the name they share ('NVIDIA H100
+#: PCIe' is not an 'H100' SXM board). The vendor's datasheets give these
+#: figures with sparsity, twice the dense ones; TF32 runs at half the 16-bit
+#: rate on all of them. GeForce boards halve the 16-bit rate with float32
+#: accumulation and are not listed: no fraction of peak is printed there.
+PEAK_TFLOPS = (
+    ('H100 NVL', dict(tf32=417.5, bf16=835.0, fp16=835.0)),
+    ('H100 PCIe', dict(tf32=378.0, bf16=756.0, fp16=756.0)),
+    ('H200 NVL', dict(tf32=417.5, bf16=835.0, fp16=835.0)),
+    ('H100', dict(tf32=494.7, bf16=989.4, fp16=989.4)),
+    ('H200', dict(tf32=494.7, bf16=989.4, fp16=989.4)),  # and GH200
+    ('GB200', dict(tf32=1250.0, bf16=2500.0, fp16=2500.0)),
+    ('B200', dict(tf32=1125.0, bf16=2250.0, fp16=2250.0)),
+    ('A100', dict(tf32=156.0, bf16=312.0, fp16=312.0)),
+    ('L40S', dict(tf32=183.0, bf16=362.05, fp16=362.05)),
+)
 #: the Triton band kernels' names, as the profiler reports them
 BAND_KERNELS = ('band_forward', 'band_backward')
 
@@ -40,9 +52,10 @@ class Interval(NamedTuple):
 
 
 def peak_tflops(device_name: str, precision: str) -> Optional[float]:
-    """The dense peak of a device whose name contains a key of
-    :data:`PEAK_TFLOPS`, at ``precision``; ``None`` when unknown."""
-    for key, peaks in PEAK_TFLOPS.items():
+    """The dense peak of a device from :data:`PEAK_TFLOPS` (the first
+    entry whose key ``device_name`` contains), at ``precision``; ``None``
+    when unknown."""
+    for key, peaks in PEAK_TFLOPS:
         if key in device_name:
             return peaks.get(precision)
     return None

@@ -43,11 +43,26 @@ def test_no_kernels_and_unknown_devices():
     summary = wgse_profile.summarize([Interval('band_backward', 0, 10)],
                                      10, 32, None)
     assert summary['rows'][0]['of_peak'] is None
-    assert wgse_profile.peak_tflops('NVIDIA H100 80GB HBM3', 'tf32') == \
-        494.7
-    assert wgse_profile.peak_tflops('NVIDIA H200', 'bf16') == 989.4
     assert wgse_profile.peak_tflops('NVIDIA GeForce RTX 4090', 'tf32') \
         is None
+
+
+@pytest.mark.parametrize('name, precision, peak', [
+    ('NVIDIA H100 80GB HBM3', 'tf32', 494.7),
+    ('NVIDIA H200', 'bf16', 989.4),
+    ('NVIDIA GH200 480GB', 'bf16', 989.4),
+    # variants of a name: the PCIe and NVL boards run slower clocks
+    ('NVIDIA H100 PCIe', 'tf32', 378.0),
+    ('NVIDIA H100 PCIe', 'bf16', 756.0),
+    ('NVIDIA H100 NVL', 'fp16', 835.0),
+    ('NVIDIA H200 NVL', 'tf32', 417.5),
+    ('NVIDIA B200', 'tf32', 1125.0),
+    ('NVIDIA GB200', 'bf16', 2500.0),
+    ('NVIDIA A100-SXM4-80GB', 'tf32', 156.0),
+    ('NVIDIA A100 80GB PCIe', 'bf16', 312.0),
+])
+def test_peaks_of_board_variants(name, precision, peak):
+    assert wgse_profile.peak_tflops(name, precision) == peak
 
 
 def test_profiling_needs_a_gpu():
