@@ -4,20 +4,27 @@ SegFormer-B0 training steps raw and with WGSE, latency at batch 1, the
 paper's shape and the targets of docs/gpu.md; writes
 gpu.md and gpu.json (device, driver, versions).
 
-    python dev/gpu_report.py                       # CUDA: docs/gpu.md and gpu.json
-    python dev/gpu_report.py --smoke --out-dir DIR  # CPU, tiny shapes, Triton interpreted
+    python dev/gpu_report.py              # CUDA: docs/gpu.md and gpu.json
+    python dev/gpu_report.py --resume     # finish a run a time limit stopped
+    python dev/gpu_report.py --smoke --out-dir DIR  # CPU, Triton interpreted
 
 On a GPU machine with torch alone: ``bash dev/gpu_report.sh`` (installs
 ``dev/gpu_bundle.sh``'s wheels, then runs this). What each section
 measures: ``wgse_bench/gpu_report.py``. A section that fails is
 recorded with its error and the others still run; the exit status is 1 then.
+Both files are rewritten after each section, so a run stopped part-way (a time
+limit) leaves what it measured; ``--resume`` keeps those sections where the
+earlier run measured the same plan and code on the same machine and software,
+and measures the rest.
 """
 import argparse
+import json
 import os
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+from wgse_mmseg.core.output_folder import (check_tool_outputs, keeps_inputs,
+                                           own_folder)
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 #: docs/gpu.md's targets on one H100 or H200 (issue 43): figure
@@ -47,7 +54,28 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out-dir', type=Path(),
                         default=osp.join(ROOT, 'docs'),
                         help='where gpu.md and gpu.json go (default: docs/)')
+    parser.add_argument('--resume', action='store_true',
+                        help="keep the sections of OUT_DIR/gpu.json that an "
+                        'earlier run of the same plan and code on this '
+                        'machine and software finished; measure the rest')
     return parser
+
+
+def earlier_report(path: str):
+    """The report at ``path`` (its JSON), ``None`` where there is none; a
+    file that is no report's JSON is an error naming it."""
+    try:
+        with open(path, 'rb') as f:
+            report = json.loads(f.read())
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as err:
+        sys.exit(f'gpu_report.py: error: --resume: {path} cannot be read as '
+                 f'a report ({err})')
+    if not isinstance(report, dict):
+        sys.exit(f'gpu_report.py: error: --resume: {path} holds no report '
+                 f'(a JSON object), but {type(report).__name__}')
+    return report
 
 
 @keeps_inputs
@@ -65,10 +93,15 @@ def main(argv=None) -> int:
               'the CPU check)', file=sys.stderr)
         return 2
     plan = gpu_report.SMOKE if args.smoke else gpu_report.GPU
-    report = gpu_report.run_report(plan, ROOT, TARGETS)
     command = 'python dev/gpu_report.py' + (
         ' --smoke' if args.smoke else '')
-    gpu_report.write_report(report, args.out_dir, command)
+    with own_folder(args.out_dir, 'gpu_report'):
+        earlier = earlier_report(osp.join(args.out_dir, 'gpu.json')) \
+            if args.resume else None
+        report = gpu_report.run_report(
+            plan, ROOT, TARGETS, earlier=earlier,
+            save=lambda report: gpu_report.write_report(
+                report, args.out_dir, command))
     print(f'wrote {osp.join(args.out_dir, "gpu.md")} and gpu.json')
     failed = [name for name, section in report['sections'].items()
               if section['status'] != 'ok']

@@ -8,7 +8,8 @@
 #   bash dev/gpu_report.sh [ARGS]       # there, from a copy of the tree with gpu_bundle/
 #
 # GPU_BUNDLE (default gpu_bundle) names the wheel directory; ARGS go to gpu_report.py
-# (--out-dir DIR). If the bundle does not install or import, the report still runs:
+# (--out-dir DIR; --resume: after a run a time limit stopped, measure only the sections it did
+# not finish). If the bundle does not install or import, the report still runs:
 # its WGSE sections need torch alone, and the segmentation sections record the error.
 set -uo pipefail
 cd "$(dirname "$0")/.."

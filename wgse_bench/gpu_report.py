@@ -47,6 +47,7 @@ out-of-memory error or a broken CUDA context ends that job alone.
 interpreter), which CI runs.
 """
 import copy
+import hashlib
 import json
 import os
 import time
@@ -139,12 +140,36 @@ def _shape_text(shape: Sequence[int]) -> str:
     return 'x'.join(map(str, shape))
 
 
-def environment(device: str) -> Dict[str, Any]:
+#: What a report measures the code of, relative to the repository: the
+#: package, this measurement wing and the configs.
+CODE = ('wgse_mmseg', 'wgse_bench', 'configs')
+
+
+def code_digest(root: str) -> str:
+    """16 hex digits of the SHA-256 of the measured code (every ``.py`` and
+    ``.c`` file under :data:`CODE` in ``root``, path and contents): two
+    reports with one digest measured the same code."""
+    digest = hashlib.sha256()
+    for top in CODE:
+        for folder, dirs, files in sorted(os.walk(os.path.join(root, top))):
+            dirs.sort()
+            for name in sorted(files):
+                if name.endswith(('.py', '.c')):
+                    path = os.path.join(folder, name)
+                    digest.update(os.path.relpath(path, root).encode())
+                    with open(path, 'rb') as f:
+                        digest.update(f.read())
+    return digest.hexdigest()[:16]
+
+
+def environment(device: str, root: str) -> Dict[str, Any]:
     """The device, driver and software versions of a report: the machine
-    record (:func:`~wgse_bench.machine.machine_record`) and
-    whether Triton runs in its interpreter."""
+    record (:func:`~wgse_bench.machine.machine_record`), whether Triton
+    runs in its interpreter and the measured code's digest
+    (:func:`code_digest` of the repository ``root``)."""
     return dict(machine_record(device),
-                triton_interpreter=triton_band_networks.interpreting())
+                triton_interpreter=triton_band_networks.interpreting(),
+                code=code_digest(root))
 
 
 @contextmanager
@@ -451,23 +476,25 @@ def _pspnet(models: Dict[str, Tuple[str, str]]
 def _figures(sections: Dict[str, Dict]) -> Dict[str, Optional[float]]:
     """Each of :data:`FIGURES` in this report, ``None`` where it was not
     measured."""
-    wgse = {r['impl']: r for r in sections['wgse']['rows']
-            if r['status'] == 'ok'}
+    def rows(name: str) -> List[Dict[str, Any]]:  # none: not measured
+        return sections.get(name, {}).get('rows', [])
+
+    wgse = {r['impl']: r for r in rows('wgse') if r['status'] == 'ok'}
     # what 'auto' runs on the device: Triton on CUDA, else the fastest
     row = wgse.get('triton') or wgse.get('compiled') or wgse.get('torch')
 
     def step(model: str, enhancer: str) -> Dict[str, Any]:
-        return next((r for r in sections['segmentation']['rows']
+        return next((r for r in rows('segmentation')
                      if r['model'] == model and r['enhancer'] == enhancer),
                     {})
 
     pspnet = step('PSPNet R50-D8', 'WGSE')
-    paper = [r for r in sections['paper']['rows'] if r['status'] == 'ok']
+    paper = [r for r in rows('paper') if r['status'] == 'ok']
     paper_wgse = [r for r in paper if r['enhancer'] == 'WGSE']
-    bf16 = [r for r in sections.get('profile', {}).get('rows', [])
+    bf16 = [r for r in rows('profile')
             if r['status'] == 'ok' and r['precision'] == 'bf16']
-    waits = [r['seconds'] for r in sections.get('first_use', {}).get(
-        'rows', []) if r.get('seconds') is not None]
+    waits = [r['seconds'] for r in rows('first_use')
+             if r.get('seconds') is not None]
     return dict(
         wgse_ms=None if row is None else 1e3 * row['median_s'],
         wgse_bf16_ms=bf16[0]['span_ms'] if bf16 else None,
@@ -500,62 +527,152 @@ def _targets(sections: Dict[str, Dict],
     return found
 
 
-def run_report(plan: Plan, root: str, targets: Targets,
-               models: Optional[Dict[str, Tuple[str, str]]] = None
-               ) -> Dict[str, Any]:
-    """Measure every section of the module docstring; ``root`` is the
-    repository (where the configs of ``models``, default PSPNet and SegFormer-B0,
-    are), ``targets`` what the figures are judged against. Returns the
-    JSON-ready report."""
-    models = MODELS if models is None else models
-    clock = _Clock()
-    print(f'[gpu_report] {plan.device}: {plan._asdict()}', flush=True)
-    env = environment(plan.device)
-    print(' | '.join(f'{k}: {v}' for k, v in env.items()), flush=True)
-    sections = {}
-    correctness = clock.attempt(
+#: The report's sections in the order they run ('latency' comes with the
+#: segmentation steps, 'targets' from the others).
+SECTIONS = ('correctness', 'first_use', 'wgse', 'profile', 'segmentation',
+            'latency', 'paper', 'targets')
+#: What a section holds until it is measured: a run stopped by a time limit
+#: leaves the sections it finished and these.
+NOT_RUN = dict(status='not run',
+               note='not measured: the run stopped before this section')
+#: Environment entries that may differ between runs whose sections one
+#: report keeps together (:func:`kept_sections`)
+_VOLATILE = ('load_average', )
+
+
+def _correctness_section(plan: Plan, clock: _Clock) -> Dict[str, Any]:
+    section = clock.attempt(
         f'correctness against float64, {_shape_text(plan.correctness_shape)}',
         check_correctness, plan.correctness_shape, plan.device)
-    if correctness['status'] == 'ok' and any(
-            r['ok'] is False for r in correctness['rows']):
-        correctness['status'] = 'failed'
-        correctness['error'] = 'raised or outside the tolerance: ' + \
+    if section['status'] == 'ok' and any(
+            r['ok'] is False for r in section['rows']):
+        section['status'] = 'failed'
+        section['error'] = 'raised or outside the tolerance: ' + \
             ', '.join(f"{r['backend']} {r['precision']}"
-                      for r in correctness['rows'] if r['ok'] is False)
-    sections['correctness'] = dict(correctness,
-                                   shape=list(plan.correctness_shape))
-    first_use = clock.attempt(
+                      for r in section['rows'] if r['ok'] is False)
+    return dict(section, shape=list(plan.correctness_shape))
+
+
+def _first_use_section(plan: Plan, clock: _Clock) -> Dict[str, Any]:
+    section = clock.attempt(
         f'first-use check of the Triton kernel, T={plan.wgse_shape[1]}',
         check_first_use, plan.wgse_shape[1], plan.device, plan.check_pixels)
-    if first_use['status'] == 'ok' and any(
-            r['passed'] is False for r in first_use['rows']):
-        first_use['status'] = 'failed'
-        first_use['error'] = 'failed: ' + ', '.join(
-            r['precision'] for r in first_use['rows'] if r['passed'] is False)
-    sections['first_use'] = first_use
-    sections['wgse'] = _wgse_section(plan, clock)
-    sections['profile'] = _profile_section(plan, clock)
+    if section['status'] == 'ok' and any(
+            r['passed'] is False for r in section['rows']):
+        section['status'] = 'failed'
+        section['error'] = 'failed: ' + ', '.join(
+            r['precision'] for r in section['rows'] if r['passed'] is False)
+    return section
+
+
+def _segmentation_sections(plan: Plan, clock: _Clock,
+                           models: Dict[str, Tuple[str, str]], root: str
+                           ) -> Dict[str, Dict[str, Any]]:
+    """The ``segmentation`` section and the ``latency`` section its steps
+    give."""
     rows = _model_rows(plan, clock, plan.train_shape, True, models, root)
     if plan.device.startswith('cuda'):  # AMP: fp16 autocast, CUDA only
         rows += _model_rows(plan, clock, plan.train_shape, False,
                             _pspnet(models), root, amp=True)
-    sections['segmentation'] = dict(status=_status(rows),
-                                    shape=list(plan.train_shape), rows=rows)
-    sections['latency'] = dict(
+    latency = dict(
         status=_status(rows),
         shape=[1] + list(plan.train_shape[1:]), rows=[
             {k: r.get(k) for k in ('model', 'enhancer', 'status',
                                    'latency_ms', 'added_latency_ms')}
             for r in rows if 'AMP' not in r['enhancer']])
+    return dict(segmentation=dict(status=_status(rows),
+                                  shape=list(plan.train_shape), rows=rows),
+                latency=latency)
+
+
+def _paper_section(plan: Plan, clock: _Clock,
+                   models: Dict[str, Tuple[str, str]], root: str
+                   ) -> Dict[str, Any]:
     rows = _model_rows(plan, clock, plan.paper_shape, False,
                        _pspnet(models), root)
-    sections['paper'] = dict(status=_status(rows),
-                             shape=list(plan.paper_shape), rows=rows)
-    sections['targets'] = dict(status='ok',
-                               rows=_targets(sections, targets))
+    return dict(status=_status(rows), shape=list(plan.paper_shape),
+                rows=rows)
+
+
+def kept_sections(earlier: Optional[Dict[str, Any]], plan: Plan,
+                  env: Dict[str, Any]) -> Tuple[List[str], str]:
+    """The sections of ``earlier`` (a report's JSON) that a report of
+    ``plan`` in ``env`` keeps instead of measuring them again: those that
+    finished ``'ok'``, where ``earlier`` ran the same plan with the same
+    code on the same machine and software (the environment but its load).
+    Returns them and a line saying what is kept, or why nothing is."""
+    if earlier is None:
+        return [], 'no earlier report: every section is measured'
+
+    def steady(record):
+        return {k: v for k, v in record.items() if k not in _VOLATILE} \
+            if isinstance(record, dict) else record
+
+    differs = [what for what, same in (
+        ('plan', earlier.get('plan') == json.loads(json.dumps(
+            plan._asdict()))),
+        ('environment', steady(earlier.get('environment')) == steady(env)))
+        if not same]
+    if differs:
+        return [], (f"the earlier report's {' and '.join(differs)} differ "
+                    'from this run: every section is measured')
+    found = earlier.get('sections')
+    kept = [name for name in SECTIONS[:-1] if isinstance(found, dict) and
+            isinstance(found.get(name), dict) and
+            found[name].get('status') == 'ok']
+    return kept, ('kept from the earlier report: ' + (', '.join(kept) or
+                                                      'none'))
+
+
+def run_report(plan: Plan, root: str, targets: Targets,
+               models: Optional[Dict[str, Tuple[str, str]]] = None,
+               earlier: Optional[Dict[str, Any]] = None,
+               save: Optional[Callable[[Dict[str, Any]], None]] = None
+               ) -> Dict[str, Any]:
+    """Measure every section of the module docstring; ``root`` is the
+    repository (where the configs of ``models``, default PSPNet and
+    SegFormer-B0, are), ``targets`` what the figures are judged against.
+    ``earlier``: a report whose finished sections are kept where it ran the
+    same plan and code on the same machine and software (a run resumed
+    after a time limit stopped it). ``save`` is called with the report so far after each section, so
+    that a run stopped part-way leaves what it measured. Returns the
+    JSON-ready report (``kept``: the sections taken from ``earlier``)."""
+    models = MODELS if models is None else models
+    clock = _Clock()
+    print(f'[gpu_report] {plan.device}: {plan._asdict()}', flush=True)
+    env = environment(plan.device, root)
+    print(' | '.join(f'{k}: {v}' for k, v in env.items()), flush=True)
+    steps = [
+        (('correctness', ), lambda: dict(
+            correctness=_correctness_section(plan, clock))),
+        (('first_use', ), lambda: dict(
+            first_use=_first_use_section(plan, clock))),
+        (('wgse', ), lambda: dict(wgse=_wgse_section(plan, clock))),
+        (('profile', ), lambda: dict(profile=_profile_section(plan, clock))),
+        (('segmentation', 'latency'), lambda: _segmentation_sections(
+            plan, clock, models, root)),
+        (('paper', ), lambda: dict(paper=_paper_section(plan, clock, models,
+                                                        root))),
+    ]
+    finished, why = kept_sections(earlier, plan, env)
+    print(f'[gpu_report] {why}', flush=True)
+    # a step's sections are kept together or measured together
+    kept = [name for names, _ in steps
+            if all(name in finished for name in names) for name in names]
+    sections = {name: dict(NOT_RUN) for name in SECTIONS}
+    sections.update({name: earlier['sections'][name] for name in kept})
+    report = dict(plan=plan._asdict(), environment=env, sections=sections,
+                  kept=kept, seconds=0.0)
+    for names, measure in steps:
+        if names[0] not in kept:
+            sections.update(measure())
+        sections['targets'] = dict(status='ok',
+                                   rows=_targets(sections, targets))
+        report['seconds'] = clock.elapsed()
+        if save is not None:
+            save(report)
     print(f'[gpu_report {clock.elapsed():6.1f} s] done', flush=True)
-    return dict(plan=plan._asdict(), environment=env, sections=sections,
-                seconds=clock.elapsed())
+    return report
 
 
 def _num(value: Optional[float], digits: Union[int, str] = 2) -> str:
@@ -611,52 +728,34 @@ def _model_table(rows: Sequence[Dict], latency: bool) -> str:
     return markdown_table(headers, table)
 
 
-def format_report(report: Dict[str, Any], command: str) -> str:
-    """docs/gpu.md: every section as a table, the environment and the
-    command that produced it."""
-    env, sections = report['environment'], report['sections']
-    device = env.get('gpu', f"{env['device']} ({env['cpu']})")
-    out = [f'# WGSE on {device}', '',
-           'Written by `' + command + '` (docs/wgse_speed.md, "On a GPU"); '
-           'every ratio is against a baseline measured in the same run. '
-           'The JSON beside this file has every number and raw sample.', '',
-           markdown_table(['', ''], [[k, v] for k, v in env.items()]), '']
-    if not env['device'].startswith('cuda'):
-        out += ['**Not a GPU run**: the smoke run on the CPU at tiny shapes '
-                '(Triton in its interpreter); its figures say nothing about '
-                'a GPU.', '']
-
-    section = sections['correctness']
-    out += ['## Correctness against float64',
-            '', f"WGSE at {_shape_text(section['shape'])}, the same weights "
-            'in float64 (backend `torch`) as reference; error: largest over '
-            'the output and every parameter gradient of |got - float64| / '
-            'the largest magnitude of that tensor (a hundredth of the '
-            'largest of all at least). Full float32 is held to its '
-            'tolerance; TF32 and bf16 are ' + REDUCED_PRECISION_NOTE + '.',
-            '']
+def _correctness_lines(section: Dict[str, Any]) -> List[str]:
+    out = [f"WGSE at {_shape_text(section['shape'])}, the same weights "
+           'in float64 (backend `torch`) as reference; error: largest over '
+           'the output and every parameter gradient of |got - float64| / '
+           'the largest magnitude of that tensor (a hundredth of the '
+           'largest of all at least). Full float32 is held to its '
+           'tolerance; TF32 and bf16 are ' + REDUCED_PRECISION_NOTE + '.',
+           '']
     if 'rows' in section:
-        out.append(markdown_table(
+        out += [markdown_table(
             ['backend', 'precision', 'max rel. error', 'in', 'tolerance',
              'within'],
             [[r['backend'], r['precision'],
               _num(r['max_rel_error'], '.1e'), r['tensor'] or '-',
               _num(r['tolerance'], '.0e'), _within(r)]
-             for r in section['rows']]))
-        out.append('')
-    if section['status'] != 'ok':
-        out.append(_failed(section))
+             for r in section['rows']]), '']
+    return out
 
-    section = sections['first_use']
-    out += ['## First-use check', '',
-            "What `backend='auto'` checks before it first runs the Triton "
-            'kernel on the device: every launch entry, with or without the '
-            'input gradient as the calls that choose it compute it, against '
-            'the `torch` backend in float64 '
-            '(`wgse_mmseg/core/wgse/first_use_check.py`); where it fails, '
-            "'auto' runs `torch`.", '']
+
+def _first_use_lines(section: Dict[str, Any]) -> List[str]:
+    out = ["What `backend='auto'` checks before it first runs the Triton "
+           'kernel on the device: every launch entry, with or without the '
+           'input gradient as the calls that choose it compute it, against '
+           'the `torch` backend in float64 '
+           '(`wgse_mmseg/core/wgse/first_use_check.py`); where it fails, '
+           "'auto' runs `torch`.", '']
     if section.get('rows'):
-        out.append(markdown_table(
+        out += [markdown_table(
             ['precision', 'passed', 'max rel. error', 'tolerance', 'failure',
              'seconds', "'auto' runs"],
             [[r['precision'],
@@ -665,16 +764,14 @@ def format_report(report: Dict[str, Any], command: str) -> str:
               _num(r.get('tolerance'), '.0e'),
               r.get('failure') or '-',
               _num(r.get('seconds')), r.get('auto_runs', '-')]
-             for r in section['rows']]))
-        out.append('')
+             for r in section['rows']]), '']
     elif section.get('note'):
         out += [section['note'], '']
-    if section['status'] != 'ok':
-        out.append(_failed(section))
+    return out
 
-    section = sections['wgse']
-    out += ['## WGSE forward+backward', '',
-            f"db8, 5 levels, 32 channels, {_shape_text(section['shape'])}, "
+
+def _wgse_lines(section: Dict[str, Any]) -> List[str]:
+    return [f"db8, 5 levels, 32 channels, {_shape_text(section['shape'])}, "
             'loss mean(out²), TF32 as torch defaults; peak: growth of '
             'memory allocated (CUDA) or of peak RSS (CPU) in one pass.', '',
             markdown_table(
@@ -689,14 +786,13 @@ def format_report(report: Dict[str, Any], command: str) -> str:
                   _num(r.get('memory_vs_reference'), 3), _row_status(r)]
                  for r in section['rows']]), '']
 
-    section = sections['profile']
-    out += ['## One WGSE pass, kernel by kernel', '',
-            'Device kernels of one forward+backward at the shape above '
-            '(torch.profiler, after a warm-up pass): time, share of the span '
-            'from the first kernel to the last, the gaps no kernel covers, '
-            "and the band kernels' H x H products in TFLOP/s against the "
-            "device's dense peak (wgse_bench/wgse_profile.py).",
-            '']
+
+def _profile_lines(section: Dict[str, Any]) -> List[str]:
+    out = ['Device kernels of one forward+backward at the shape above '
+           '(torch.profiler, after a warm-up pass): time, share of the span '
+           'from the first kernel to the last, the gaps no kernel covers, '
+           "and the band kernels' H x H products in TFLOP/s against the "
+           "device's dense peak (wgse_bench/wgse_profile.py).", '']
     if section.get('note'):
         out += [section['note'], '']
     for row in section.get('rows', []):
@@ -706,17 +802,20 @@ def format_report(report: Dict[str, Any], command: str) -> str:
                     *wgse_profile.table_lines(row), '']
         else:
             out += [f"{row['precision']}: {_row_status(row)}", '']
+    return out
 
-    section = sections['segmentation']
-    out += ['## Training steps', '',
-            f"Batch {section['shape'][0]}, T={section['shape'][1]}, "
+
+def _segmentation_lines(section: Dict[str, Any]) -> List[str]:
+    return [f"Batch {section['shape'][0]}, T={section['shape'][1]}, "
             f"{section['shape'][2]}x{section['shape'][3]}, "
             "`model.train_step` with the config's optimiser; time: median "
             '± MAD; peak: CUDA memory allocated (CPU: peak RSS) during the '
             'timed steps; ratios: WGSE over raw spikes.', '',
-            _model_table(section['rows'], latency=False), '',
-            '## Latency at batch 1', '',
-            '`model.test_step` on one stream (preprocessing, enhancer, '
+            _model_table(section['rows'], latency=False), '']
+
+
+def _latency_lines(section: Dict[str, Any]) -> List[str]:
+    return ['`model.test_step` on one stream (preprocessing, enhancer, '
             'segmentor, resize, argmax), no gradients; WGSE\'s added '
             'milliseconds over raw spikes.', '',
             markdown_table(
@@ -724,26 +823,70 @@ def format_report(report: Dict[str, Any], command: str) -> str:
                 [[r['model'], r['enhancer'], _timing(r['latency_ms'], 2),
                   _num(r['added_latency_ms']),
                   'ok' if r['status'] == 'ok' else 'failed']
-                 for r in sections['latency']['rows']]), '']
+                 for r in section['rows']]), '']
 
-    section = sections['paper']
-    out += ["## The paper's shape", '',
-            f"{_shape_text(section['shape'])} (batch x T x H x W), training "
+
+def _paper_lines(section: Dict[str, Any]) -> List[str]:
+    return [f"{_shape_text(section['shape'])} (batch x T x H x W), training "
             'step as above.', '', _model_table(section['rows'], False), '']
 
-    out += ['', '## Against the targets (issue 43: an H100 or H200)', '',
-            markdown_table(
-                ['target', 'this run', 'at most', 'aim', 'met'],
-                [[t['what'], '-' if t['value'] is None else
-                  f"{t['value']:.2f} {t['unit']}",
-                  f"{t['target']} {t['unit']}",
-                  '-' if t['moonshot'] is None else
-                  f"{t['moonshot']} {t['unit']}",
-                  'not measured' if t['met'] is None else
-                  ('yes' if t['met'] else 'no') +
-                  (' (aim too)' if t['moonshot_met'] else '')]
-                 for t in sections['targets']['rows']]),
-            '', f"The report took {report['seconds']:.0f} s.", '']
+
+def _targets_lines(section: Dict[str, Any]) -> List[str]:
+    return [markdown_table(
+        ['target', 'this run', 'at most', 'aim', 'met'],
+        [[t['what'], '-' if t['value'] is None else
+          f"{t['value']:.2f} {t['unit']}",
+          f"{t['target']} {t['unit']}",
+          '-' if t['moonshot'] is None else f"{t['moonshot']} {t['unit']}",
+          'not measured' if t['met'] is None else
+          ('yes' if t['met'] else 'no') +
+          (' (aim too)' if t['moonshot_met'] else '')]
+         for t in section['rows']]), '']
+
+
+#: Each section's heading in docs/gpu.md and what goes under it.
+_SECTION_TEXT = dict(
+    correctness=('Correctness against float64', _correctness_lines),
+    first_use=('First-use check', _first_use_lines),
+    wgse=('WGSE forward+backward', _wgse_lines),
+    profile=('One WGSE pass, kernel by kernel', _profile_lines),
+    segmentation=('Training steps', _segmentation_lines),
+    latency=('Latency at batch 1', _latency_lines),
+    paper=("The paper's shape", _paper_lines),
+    targets=('Against the targets (issue 43: an H100 or H200)',
+             _targets_lines))
+
+
+def format_report(report: Dict[str, Any], command: str) -> str:
+    """docs/gpu.md: every section as a table (a section not measured says
+    so), the environment and the command that produced it."""
+    env, sections = report['environment'], report['sections']
+    device = env.get('gpu', f"{env['device']} ({env['cpu']})")
+    out = [f'# WGSE on {device}', '',
+           'Written by `' + command + '` (docs/wgse_speed.md, "On a GPU"); '
+           'every ratio is against a baseline measured in the same run. '
+           'The JSON beside this file has every number and raw sample.', '',
+           markdown_table(['', ''], [[k, v] for k, v in env.items()]), '']
+    if not env['device'].startswith('cuda'):
+        out += ['**Not a GPU run**: the smoke run on the CPU at tiny shapes '
+                '(Triton in its interpreter); its figures say nothing about '
+                'a GPU.', '']
+    if report.get('kept'):
+        out += ['Kept from an earlier run of the same plan and code on the '
+                'same machine and software (`--resume`): ' +
+                ', '.join(report['kept']) + '.', '']
+    for name in SECTIONS:
+        section = sections[name]
+        heading, lines = _SECTION_TEXT[name]
+        out += [f'## {heading}', '']
+        if section['status'] == 'not run':
+            out += [f"**Not run**: {section['note']}.", '']
+            continue
+        out += lines(section)
+        if name in ('correctness', 'first_use') and \
+                section['status'] != 'ok':
+            out.append(_failed(section))
+    out += [f"The report took {report['seconds']:.0f} s.", '']
     return '\n'.join(out)
 
 

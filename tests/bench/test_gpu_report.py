@@ -250,3 +250,124 @@ def test_targets_not_measured_when_their_jobs_failed(targets):
         paper=dict(rows=[dict(failed, enhancer='WGSE')]))
     assert all(t['value'] is None and t['met'] is None
                for t in gpu_report._targets(sections, targets))
+
+
+@pytest.fixture
+def fake_sections(monkeypatch):
+    """The report's sections measured by stand-ins that note their calls
+    (what a stopped and resumed run measures, in a second)."""
+    calls = []
+
+    def stand_in(*names):
+        def measure(plan, clock, *args):
+            calls.append(names[0])
+            section = dict(status='ok', rows=[], shape=[1, 12, 3, 4])
+            return section if len(names) == 1 else {n: section
+                                                    for n in names}
+        return measure
+
+    for function, names in [
+            ('_correctness_section', ('correctness', )),
+            ('_first_use_section', ('first_use', )),
+            ('_wgse_section', ('wgse', )),
+            ('_profile_section', ('profile', )),
+            ('_segmentation_sections', ('segmentation', 'latency')),
+            ('_paper_section', ('paper', ))]:
+        monkeypatch.setattr(gpu_report, function, stand_in(*names))
+    return calls
+
+
+def test_a_stopped_run_leaves_its_sections_and_resumes(
+        tmp_path, monkeypatch, load_tool, fake_sections, capsys):
+    """A run a time limit stops (here at the WGSE section) has written the
+    sections it finished and marked the others; ``--resume`` measures only
+    those, and the report says which it kept."""
+    tool = load_tool('dev/gpu_report.py')
+    measure_wgse = gpu_report._wgse_section
+
+    def time_limit(plan, clock):
+        raise KeyboardInterrupt('the time limit')
+
+    monkeypatch.setattr(gpu_report, '_wgse_section', time_limit)
+    with pytest.raises(KeyboardInterrupt):
+        tool.main(['--smoke', '--out-dir', str(tmp_path)])
+    report = json.loads((tmp_path / 'gpu.json').read_text())
+    statuses = {n: s['status'] for n, s in report['sections'].items()}
+    assert statuses == dict(correctness='ok', first_use='ok',
+                            wgse='not run', profile='not run',
+                            segmentation='not run', latency='not run',
+                            paper='not run', targets='ok')
+    assert all(t['value'] is None for t in
+               report['sections']['targets']['rows'])
+    markdown = (tmp_path / 'gpu.md').read_text()
+    assert markdown.count('**Not run**') == 5
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['gpu.json',
+                                                          'gpu.md']
+
+    monkeypatch.setattr(gpu_report, '_wgse_section', measure_wgse)
+    del fake_sections[:]
+    assert tool.main(['--smoke', '--out-dir', str(tmp_path),
+                      '--resume']) == 0
+    assert fake_sections == ['wgse', 'profile', 'segmentation', 'paper']
+    assert 'kept from the earlier report: correctness, first_use' in \
+        capsys.readouterr().out
+    report = json.loads((tmp_path / 'gpu.json').read_text())
+    assert report['kept'] == ['correctness', 'first_use']
+    assert {s['status'] for s in report['sections'].values()} == {'ok'}
+    assert 'Kept from an earlier run' in (tmp_path / 'gpu.md').read_text()
+
+    # without --resume, or where the code changed, all is measured again
+    del fake_sections[:]
+    assert tool.main(['--smoke', '--out-dir', str(tmp_path)]) == 0
+    assert len(fake_sections) == 6
+    del fake_sections[:]
+    monkeypatch.setattr(gpu_report, 'code_digest', lambda root: 'changed')
+    assert tool.main(['--smoke', '--out-dir', str(tmp_path),
+                      '--resume']) == 0
+    assert len(fake_sections) == 6
+    assert "environment differ from this run" in capsys.readouterr().out
+
+
+def test_what_a_resumed_report_keeps():
+    env = gpu_report.environment('cpu', ROOT)
+    plan = gpu_report.SMOKE
+    ok, failed = dict(status='ok', rows=[]), dict(status='failed', error='x')
+    earlier = json.loads(json.dumps(dict(
+        plan=plan._asdict(), environment=dict(env, load_average=9.0),
+        sections=dict(correctness=ok, first_use=failed, wgse=ok,
+                      targets=ok))))
+    assert gpu_report.kept_sections(earlier, plan, env)[0] == [
+        'correctness', 'wgse']  # finished ones; targets are recomputed
+    for changed in (dict(earlier, plan=dict(earlier['plan'], repeat=2)),
+                    dict(earlier, environment=dict(env, torch='other')),
+                    dict(earlier, environment=dict(env, code='other'))):
+        kept, why = gpu_report.kept_sections(changed, plan, env)
+        assert kept == [] and 'differ' in why
+    assert gpu_report.kept_sections(None, plan, env)[0] == []
+    # a file's odd content keeps nothing rather than failing
+    assert gpu_report.kept_sections(dict(earlier, sections=[1]), plan,
+                                    env)[0] == []
+
+
+def test_the_code_digest_follows_the_code(tmp_path):
+    for top in gpu_report.CODE:
+        (tmp_path / top).mkdir()
+        (tmp_path / top / 'a.py').write_text('x = 1\n')
+    first = gpu_report.code_digest(str(tmp_path))
+    (tmp_path / 'configs' / 'notes.txt').write_text('not code')
+    assert gpu_report.code_digest(str(tmp_path)) == first
+    (tmp_path / 'configs' / 'a.py').write_text('x = 2\n')
+    assert gpu_report.code_digest(str(tmp_path)) != first
+
+
+@pytest.mark.parametrize('content, expected', [
+    (b'{"plan": ', 'cannot be read as a report'),
+    (b'[1, 2]', 'holds no report'),
+])
+def test_resume_from_a_file_that_is_no_report(tmp_path, load_tool, content,
+                                              expected):
+    (tmp_path / 'gpu.json').write_bytes(content)
+    tool = load_tool('dev/gpu_report.py')
+    with pytest.raises(SystemExit, match=expected) as error:
+        tool.main(['--smoke', '--out-dir', str(tmp_path), '--resume'])
+    assert str(tmp_path / 'gpu.json') in str(error.value)
