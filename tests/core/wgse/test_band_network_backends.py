@@ -3,7 +3,9 @@ backend against the band networks run as float64 ``nn.Conv1d`` modules
 (outputs, input gradients, every parameter gradient). The Triton kernel
 runs in triton's CPU interpreter (``TRITON_INTERPRET=1``, set in
 ``conftest.py``)."""
+import contextlib
 import copy
+import types
 import warnings
 
 import pytest
@@ -230,6 +232,67 @@ def test_every_triton_backward_entry_computes_the_same(monkeypatch, entry):
                       _reference(model, spikes, input_grad),
                       triton_band_networks.TOLERANCES['ieee'],
                       f'{entry}, input gradient {input_grad}')
+
+
+def test_a_kernel_is_launched_on_its_tensors_device(monkeypatch):
+    """Triton launches on torch's current device: a CUDA tensor's own
+    device is made current for the launch (a model on cuda:1 while cuda:0
+    is current), a CPU tensor's (the interpreter) changes nothing."""
+    made_current = []
+
+    def device(where):
+        made_current.append(where)
+        return contextlib.nullcontext()
+
+    monkeypatch.setattr(torch.cuda, 'device', device)
+    on_cuda_1 = types.SimpleNamespace(is_cuda=True,
+                                      device=torch.device('cuda', 1))
+    with triton_band_networks.on_device_of(on_cuda_1):
+        pass
+    with triton_band_networks.on_device_of(torch.zeros(1)):
+        pass
+    assert made_current == [torch.device('cuda', 1)]
+
+
+@pytest.mark.needs_triton
+@pytest.mark.parametrize('input_grad', [False, True])
+def test_both_kernels_launch_within_their_devices_context(monkeypatch,
+                                                          input_grad):
+    """Each launch, forward and backward, is made inside
+    :func:`on_device_of` of the coefficients it reads."""
+    inside = []
+    launches = []
+    on_device_of = triton_band_networks.on_device_of
+
+    @contextlib.contextmanager
+    def noting(tensor):
+        inside.append(tensor.shape)
+        with on_device_of(tensor):
+            yield
+        inside.pop()
+
+    def watch(kernel):
+        class Launcher:
+            def __getitem__(self, grid):
+                def launch(*args, **kwargs):
+                    launches.append((kernel, list(inside)))
+                    return getattr(kernels, kernel)[grid](*args, **kwargs)
+                return launch
+        return Launcher()
+
+    kernels = triton_band_networks.kernels
+    watched = types.SimpleNamespace(band_forward=watch('band_forward'),
+                                    band_backward=watch('band_backward'))
+    monkeypatch.setattr(triton_band_networks, 'on_device_of', noting)
+    monkeypatch.setattr(triton_band_networks, 'kernels', watched)
+    model = _model(backend='triton')
+    _run(model, _spikes(1, 9, 1, 3), input_grad)
+    assert [kernel for kernel, _ in launches] == ['band_forward',
+                                                  'band_backward']
+    for _, contexts in launches:  # within one, of the (B, C, P) coeffs
+        assert len(contexts) == 1
+        batch, _, pixels = contexts[0]
+        assert (batch, pixels) == (1, 3)
 
 
 @pytest.mark.needs_triton

@@ -24,10 +24,17 @@ another. Every entry is compiled ahead of time for sm_80, sm_89, sm_90,
 sm_100 and sm_120 by :mod:`~wgse_bench.triton_resources` and tested in the
 interpreter.
 
+Triton launches a kernel on torch's current device and stream, not on its
+tensors' device: every launch here is made with the coefficients' device
+current (:func:`on_device_of`), so that a model on ``cuda:1`` while
+``cuda:0`` is current runs there, ordered with the stream its inputs were
+made on.
+
 Triton's interpreter (``TRITON_INTERPRET=1`` in the environment before
 triton is first imported) runs the same kernels on CPU tensors; the tests
 use it, since CI has no GPU.
 """
+import contextlib
 import os
 from typing import List, NamedTuple, Optional, Sequence, Tuple
 
@@ -237,6 +244,14 @@ def band_kernel_inputs(lengths: Sequence[int], params: Sequence[Tensor]
         tuple(lengths))
 
 
+def on_device_of(tensor: Tensor) -> contextlib.AbstractContextManager:
+    """The context a kernel reading ``tensor`` is launched in: its CUDA
+    device current (triton launches on the current device's current
+    stream); nothing for a CPU tensor (the interpreter)."""
+    return torch.cuda.device(tensor.device) if tensor.is_cuda else \
+        contextlib.nullcontext()
+
+
 def launch_forward(config: LaunchConfig, coeffs: Tensor,
                    inputs: BandKernelInputs, precision: str
                    ) -> Tuple[Tensor, Tensor]:
@@ -250,12 +265,14 @@ def launch_forward(config: LaunchConfig, coeffs: Tensor,
         tiles = triton.cdiv(pixels, config.block)
         major = 0 if interpreting() else \
             torch.cuda.get_device_capability(coeffs.device)[0]
-        kernels.band_forward[(batch * tiles, len(inputs.lengths))](
-            coeffs, out, positive, pixels, columns, tiles, inputs.lengths,
-            inputs.offsets, *inputs.params, HIDDEN=inputs.hidden,
-            BLOCK=config.block, PRECISION=precision,
-            CONV1_DOT=conv1_on_tensor_cores(precision, major),
-            num_warps=config.num_warps, maxnreg=config.maxnreg)
+        with on_device_of(coeffs):
+            kernels.band_forward[(batch * tiles, len(inputs.lengths))](
+                coeffs, out, positive, pixels, columns, tiles,
+                inputs.lengths, inputs.offsets, *inputs.params,
+                HIDDEN=inputs.hidden, BLOCK=config.block,
+                PRECISION=precision,
+                CONV1_DOT=conv1_on_tensor_cores(precision, major),
+                num_warps=config.num_warps, maxnreg=config.maxnreg)
     return out, positive
 
 
@@ -300,13 +317,15 @@ def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
     work = torch.tensor(division, dtype=torch.int32, device=coeffs.device)
     partial = coeffs.new_empty(len(division),
                                sum(p[0].numel() for p in inputs.params[:5]))
-    kernels.band_backward[(len(division), )](
-        coeffs, d3, coeffs if grad_coeffs is None else grad_coeffs,
-        partial, work, pixels, columns, triton.cdiv(pixels, config.block),
-        tiles, inputs.lengths, inputs.offsets, *inputs.params,
-        HIDDEN=inputs.hidden, BLOCK=config.block, PRECISION=precision,
-        INPUT_GRAD=grad_coeffs is not None, num_warps=config.num_warps,
-        maxnreg=config.maxnreg)
+    with on_device_of(coeffs):
+        kernels.band_backward[(len(division), )](
+            coeffs, d3, coeffs if grad_coeffs is None else grad_coeffs,
+            partial, work, pixels, columns,
+            triton.cdiv(pixels, config.block), tiles, inputs.lengths,
+            inputs.offsets, *inputs.params, HIDDEN=inputs.hidden,
+            BLOCK=config.block, PRECISION=precision,
+            INPUT_GRAD=grad_coeffs is not None, num_warps=config.num_warps,
+            maxnreg=config.maxnreg)
     counts = [step for _, first, step in division if first == 0]
     bias3 = d3.sum(dim=(0, 2)).split(list(inputs.band_lengths))
     return [torch.cat([rows.sum(0), rows3.sum().view(1)])
