@@ -292,8 +292,9 @@ def check_first_use(steps: int, device: str,
     """The first-use section's rows: the check of the Triton backend for
     WGSE's default networks at ``T = steps`` on ``device``, at each of
     :data:`PRECISIONS` (``'bf16'`` and ``'tf32'`` noted, not run, under the
-    interpreter: :func:`_not_interpreted`), as ``backend='auto'`` runs it:
-    ``{'rows': [{'precision', 'passed', 'max_error', 'tolerance',
+    interpreter: :func:`_not_interpreted`), as ``backend='auto'`` runs it
+    before a training step (forward and backward, the coefficients needing
+    no gradient): ``{'rows': [{'precision', 'passed', 'max_error', 'tolerance',
     'failure', 'seconds', 'auto_runs'}]}``.
     ``check_pixels`` shrinks the problem and runs the first launch entry
     alone (the smoke run's interpreter; the tests run every entry)."""
@@ -303,8 +304,8 @@ def check_first_use(steps: int, device: str,
         return dict(rows=[], note=f'not run: {reason}')
     if check_pixels is not None:
         backend.check_pixels = check_pixels
-        first = backend.check_launches()[:1]
-        backend.check_launches = lambda: first
+        launches = backend.check_launches
+        backend.check_launches = lambda passes: launches(passes)[:1]
     model = WGSE().to(device)
     lengths = band_lengths(steps, model.wavelet, model.level, model.mode)
     coeffs = torch.zeros(1, 1, sum(lengths), device=device)

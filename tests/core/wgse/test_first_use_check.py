@@ -37,9 +37,9 @@ class _StandIn(band_network_backends.TorchBackend):
     def __init__(self, fault=None, broken=(0, 1)):
         self.fault, self.broken, self.calls = fault, broken, 0
 
-    def check_launches(self):
-        return [(dict(entry=entry), input_grad) for entry in (0, 1)
-                for input_grad in (True, False)]
+    def check_launches(self, passes):
+        return [(dict(entry=entry), band_network_backends._input_grad(passes))
+                for entry in (0, 1)]
 
     def run(self, networks, coeffs, lengths, spatial, entry=0):
         self.calls += 1
@@ -87,7 +87,7 @@ def _torch_result(model, spikes):
 
 
 @pytest.mark.parametrize('fault, what', [
-    ('compile', 'raised (entry=0, input gradient True): RuntimeError: '
+    ('compile', 'raised (entry=0, input gradient False): RuntimeError: '
                 'CompilationError'),
     ('output', 'output disagrees'),
     ('gradient', 'gradient'),
@@ -132,22 +132,57 @@ def test_every_launch_entry_is_checked(monkeypatch, log):
     model = WGSE(wavelet='haar', level=1)
     model(_spikes())
     assert model.backend_in_use == 'torch'
-    assert '(entry=1, input gradient True)' in model.backend_check.failure
+    assert '(entry=1, input gradient False)' in model.backend_check.failure
 
 
-def test_the_triton_check_runs_what_calls_launch():
-    """Each backward entry with the input gradient it is chosen for, every
-    forward entry: no compile of a variant no call runs (the check's
-    compiles are a machine's first wait)."""
-    launches = band_network_backends.TritonBackend().check_launches()
-    for input_grad in (True, False):
-        assert {launch['backward_config'] for launch, grad in launches
-                if grad == input_grad} == set(
-                    triton_band_networks.backward_configs(input_grad))
+@pytest.mark.parametrize('passes, input_grad', list(zip(
+    first_use_check.PASSES, (None, False, True))))
+def test_the_triton_check_runs_what_the_call_launches(passes, input_grad):
+    """Every forward entry, and the backward entries chosen for the call's
+    input gradient where it runs the backward pass: no compile of a kernel
+    the call does not run (the check's compiles are a machine's first
+    wait: training's compiles no backward entry for the input gradient,
+    inference's no backward at all)."""
+    launches = band_network_backends.TritonBackend().check_launches(passes)
+    assert {grad for _, grad in launches} == {input_grad}
     assert {launch['forward_config'] for launch, _ in launches} == set(
         triton_band_networks.FORWARD_CONFIGS)
+    assert {launch.get('backward_config') for launch, _ in launches} == (
+        {None} if input_grad is None else
+        set(triton_band_networks.backward_configs(input_grad)))
     assert len(launches) == len(set(
-        (tuple(launch.items()), grad) for launch, grad in launches))
+        tuple(launch.items()) for launch, _ in launches))
+
+
+@pytest.mark.parametrize('call, passes', [
+    ('inference', 'forward'),
+    ('training', 'forward and backward'),
+    ('input gradient',
+     "forward and backward with the coefficients' gradient"),
+])
+def test_the_check_follows_what_the_call_runs(monkeypatch, log, call,
+                                              passes):
+    seen = []
+
+    class Noting(_StandIn):
+        def check_launches(self, passes):
+            seen.append(passes)
+            return super().check_launches(passes)
+
+    _install(monkeypatch, Noting())
+    model = WGSE(wavelet='haar', level=1)
+    spikes = _spikes()
+    if call == 'inference':
+        with torch.no_grad():
+            model(spikes)
+    else:
+        model(spikes.requires_grad_(call == 'input gradient'))
+    assert seen == [passes]
+    assert model.backend_check.variant.endswith(', ' + passes)
+    if call == 'training':  # a frozen WGSE in training: no gradient
+        model.requires_grad_(False)
+        model(spikes)
+        assert seen == [passes, 'forward']
 
 
 def test_a_gradient_wrong_only_without_the_input_gradient(monkeypatch, log):
@@ -172,22 +207,24 @@ def test_a_kernel_that_agrees_runs_after_one_check_per_variant(
     stand_in = _StandIn()
     _install(monkeypatch, stand_in)
     model = WGSE(wavelet='haar', level=2)
-    with torch.no_grad():  # even without gradients, the check runs them
-        out = model(_spikes())
+    out = model(_spikes())
     assert model.backend_in_use == 'triton'
     check = model.backend_check
     assert check.passed and check.failure is None
     assert 0 <= check.max_error <= first_use_check.TOLERANCE
-    # 2 launch entries x (with, without the input gradient), one call each
-    assert stand_in.calls == 4 + 1
+    # 2 launch entries, one call each, then the call itself
+    assert stand_in.calls == 2 + 1
     torch.testing.assert_close(out, _torch_result(model, _spikes()))
     assert [level for level, _ in log] == [logging.INFO] * 2
     assert 'WGSE: checking' in log[0][1]
     assert 'passed its first-use check' in log[1][1]
     model(_spikes())
-    assert stand_in.calls == 6 and len(log) == 2  # checked once
+    assert stand_in.calls == 4 and len(log) == 2  # checked once
     model(_spikes(steps=20))  # other band lengths: another variant
-    assert stand_in.calls == 6 + 5 and len(log) == 4
+    assert stand_in.calls == 4 + 3 and len(log) == 4
+    with torch.no_grad():  # the forward pass alone: checked on its own
+        model(_spikes())
+    assert stand_in.calls == 7 + 3 and len(log) == 6
 
 
 def test_backends_without_a_kernel_of_their_own_are_not_checked(log):
@@ -210,14 +247,17 @@ def test_relative_errors():
 @pytest.mark.needs_triton
 @pytest.mark.parametrize('autocast', [None, torch.float16, torch.bfloat16])
 @pytest.mark.parametrize('major', [8, 10])
+@pytest.mark.parametrize('call', ['inference', 'training', 'input gradient'])
 def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
-                                                          autocast, major):
-    """The check around the real kernel: every launch entry, with and
-    without the input gradient, against float64, at TF32 and with fp16 and
-    bf16 operands (under autocast; the check's problem is exact in both,
-    so a right kernel agrees to float32's accumulation), with the forward's
-    conv1 as a GPU of compute capability ``major`` computes it (at TF32 on
-    tensor cores on a B200, 10, with multiply-adds before)."""
+                                                          autocast, major,
+                                                          call):
+    """The check around the real kernel: every launch entry of the call
+    (the forward alone, with the backward, with the input gradient) against
+    float64, at TF32 and with fp16 and bf16 operands (under autocast; the
+    check's problem is exact in both, so a right kernel agrees to float32's
+    accumulation), with the forward's conv1 as a GPU of compute capability
+    ``major`` computes it (at TF32 on tensor cores on a B200, 10, with
+    multiply-adds before)."""
 
     class CheckedTriton(band_network_backends.TritonBackend):
         first_use_check = True
@@ -236,8 +276,10 @@ def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
                         on_this_gpu)
     model = WGSE(wavelet='haar', level=1)
     spikes = _spikes(steps=6)[:1, :, :1]
+    spikes.requires_grad_(call == 'input gradient')
     with torch.autocast('cpu', dtype=autocast or torch.bfloat16,
-                        enabled=autocast is not None):
+                        enabled=autocast is not None), \
+            torch.set_grad_enabled(call != 'inference'):
         out = model(spikes)
     assert model.backend_in_use == 'triton', model.backend_check
     check = model.backend_check
@@ -250,6 +292,9 @@ def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
     if autocast is None:
         torch.testing.assert_close(out, _torch_result(model, spikes),
                                    rtol=1e-5, atol=1e-5)
+    assert check.variant.endswith(
+        ', ' + first_use_check.PASSES[['inference', 'training',
+                                       'input gradient'].index(call)])
 
 
 @pytest.mark.parametrize('hidden, steps', [(32, 129), (16, 41)])

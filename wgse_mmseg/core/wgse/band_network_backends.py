@@ -52,7 +52,7 @@ from torch import Tensor, nn
 from torch.utils.checkpoint import checkpoint
 
 from . import compiled_band_networks, triton_band_networks
-from .first_use_check import (CheckResult, FirstUseCheckFailed,
+from .first_use_check import (PASSES, CheckResult, FirstUseCheckFailed,
                               check_on_first_use)
 from .torch_band_networks import torch_band_networks
 
@@ -68,6 +68,13 @@ def _weights(networks: Sequence[nn.Module]
     weights = [[(conv.weight, conv.bias) for conv, _ in plan]
                for plan in plans]
     return weights, [residual for _, residual in plans[0]]
+
+
+def _input_grad(passes: str) -> Optional[bool]:
+    """Whether a call that runs ``passes`` (:data:`.first_use_check.PASSES`)
+    computes the coefficients' gradient; ``None``: no gradient at all."""
+    forward, backward, input_grad = PASSES
+    return {forward: None, backward: False, input_grad: True}[passes]
 
 
 class BandNetworkBackend:
@@ -121,11 +128,14 @@ class BandNetworkBackend:
         """The arithmetic precision of a call on ``coeffs`` made now."""
         return str(coeffs.dtype).replace('torch.', '')
 
-    def check_launches(self) -> Sequence[Tuple[Dict[str, object], bool]]:
-        """The launch settings a call may use, each with whether the
-        coefficients' gradient is computed there: the check runs each
-        pair."""
-        return (({}, True), ({}, False))
+    def check_launches(self, passes: str
+                       ) -> Sequence[Tuple[Dict[str, object],
+                                           Optional[bool]]]:
+        """The launch settings a call that runs ``passes`` (one of
+        :data:`~.first_use_check.PASSES`) may use, each with whether the
+        coefficients' gradient is computed there (``None``: no gradient,
+        the forward pass alone): the check runs each pair."""
+        return (({}, _input_grad(passes)), )
 
 
 class TorchBackend(BandNetworkBackend):
@@ -309,20 +319,20 @@ class TritonBackend(BandNetworkBackend):
     def precision(self, coeffs):
         return triton_band_networks.dot_precision(coeffs.device.type)
 
-    def check_launches(self):
-        # every entry of each list at least once, each backward entry with
-        # the input gradient it is chosen for (what a call can launch; no
-        # compile of a variant that never runs)
+    def check_launches(self, passes):
+        # every entry the call's passes may launch, each at least once: the
+        # forward entries, and the backward entries chosen for its input
+        # gradient (no compile of a kernel the call does not run)
         forward = triton_band_networks.FORWARD_CONFIGS
-        launches = []
-        for input_grad in (True, False):
-            backward = triton_band_networks.backward_configs(input_grad)
-            launches += [
-                (dict(forward_config=forward[min(i, len(forward) - 1)],
+        input_grad = _input_grad(passes)
+        if input_grad is None:
+            return [(dict(forward_config=config), None)
+                    for config in forward]
+        backward = triton_band_networks.backward_configs(input_grad)
+        return [(dict(forward_config=forward[min(i, len(forward) - 1)],
                       backward_config=backward[min(i, len(backward) - 1)]),
                  input_grad)
                 for i in range(max(len(forward), len(backward)))]
-        return launches
 
 
 class _FirstOrderOnly(torch.autograd.Function):

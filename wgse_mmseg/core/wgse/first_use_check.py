@@ -5,10 +5,12 @@ never run there before a user's first training step, and a compiled kernel
 can differ from what the interpreter the tests use computes. So the first
 time a backend whose :attr:`~.band_network_backends.BandNetworkBackend.
 first_use_check` is set would run a *variant* (device, precision of the call,
-network shape, band lengths), :func:`check_on_first_use` runs it on a small
-problem of that variant and compares the output and every gradient (of the
-coefficients and of each parameter) with the ``torch`` backend in float64
-on the same device, within :data:`TOLERANCE` at every precision. A compile
+network shape, band lengths, and the passes the call runs: :data:`PASSES`),
+:func:`check_on_first_use` runs it on a small problem of that variant and
+compares what the call computes (the output, and with the backward pass
+every parameter's gradient and the coefficients' where the call takes it)
+with the ``torch`` backend in float64 on the same device, within
+:data:`TOLERANCE` at every precision. A compile
 or launch error, a NaN or Inf, or an error above the tolerance fails the
 check. A log line says the check starts (in a machine's first process it
 compiles the kernel, for about a minute on an H100), and the result is kept for the
@@ -32,19 +34,19 @@ way (0.18; docs/wgse_speed.md, "The first-use check").
 Cost (once per variant and process): the problem is the call's band
 lengths at :attr:`~.band_network_backends.BandNetworkBackend.check_pixels`
 pixels (259 for Triton: two tiles of its largest launch entry, 128
-pixels, and a partial third); every launch entry the backend can choose is run
-forward and backward, with or without the coefficients' gradient as a call
-choosing it computes them (Triton: the backward's 32-pixel entry without,
-its 16-pixel entry with; one launch of each kernel each time, all bands at
-once), plus one float64 forward+backward of the ``torch`` backend. Its arithmetic is negligible on
-a GPU (259 pixels against the 524288 of a 4x129x256x512 batch); the time is
-the compiles of the variants the check meets first, which the training step
-would have paid anyway, but for the backward's input-gradient entry, which
-training does not run (measured with the former kernels, which compiled one
-variant per band length, on an H100 or H200: 30-60 s per precision in the
-first process on a machine, 0.2-0.9 s in later ones, which find triton's
-cache; the present kernels compile three variants a precision for any T:
-the forward and the backward's two entries).
+pixels, and a partial third); every launch entry the call's passes may use
+is run (Triton: the forward entry alone for inference, with the backward's
+32-pixel entry for training, with its 16-pixel entry where the coefficients'
+gradient is taken; one launch of each kernel each time, all bands at
+once), plus one float64 forward+backward of the ``torch`` backend. Its
+arithmetic is negligible on a GPU (259 pixels against the 524288 of a
+4x129x256x512 batch); the time is the compiles of the kernels the call
+runs, which its first step would pay anyway (measured with the former
+kernels, which compiled one variant per band length, on an H100 or H200:
+30-60 s per precision in the first process on a machine, 0.2-0.9 s in later
+ones, which find triton's cache; the present kernels compile, for any T,
+two a precision for training, the forward and one backward entry, and one
+for inference).
 """
 import copy
 import logging
@@ -125,13 +127,31 @@ def relative_errors(got: Sequence[Tensor], want: Sequence[Tensor]
     return errors
 
 
+#: What a call runs, so what its check runs (:func:`passes_of`): the forward
+#: pass alone (no gradient: inference), the backward pass too for the
+#: parameters' gradients (training: the coefficients come from the data and
+#: need none), or the coefficients' gradient as well.
+PASSES = ('forward', 'forward and backward',
+          "forward and backward with the coefficients' gradient")
+
+
+def passes_of(networks: Sequence[nn.Module], coeffs: Tensor) -> str:
+    """Which of :data:`PASSES` a call on ``coeffs`` made now runs."""
+    if torch.is_grad_enabled() and coeffs.requires_grad:
+        return PASSES[2]
+    if torch.is_grad_enabled() and any(
+            p.requires_grad for net in networks for p in net.parameters()):
+        return PASSES[1]
+    return PASSES[0]
+
+
 def _variant(backend, networks: Sequence[nn.Module], coeffs: Tensor,
              lengths: Sequence[int]) -> str:
     net = networks[0]
     return (f'precision {backend.precision(coeffs)}, dim={net.dim} '
             f'kernel_size={net.kernel_size} hidden_channels='
             f'{net.hidden_channels} num_blocks={net.num_blocks}, bands '
-            f'{list(lengths)}')
+            f'{list(lengths)}, {passes_of(networks, coeffs)}')
 
 
 #: Largest error of the check against float64, relative to each tensor's
@@ -180,7 +200,8 @@ def _problem(networks: Sequence[nn.Module], lengths: Sequence[int],
     ``(1, C, pixels)`` and the loss's weights, float64 (seeded: the same
     everywhere)."""
     generator = torch.Generator().manual_seed(0)
-    nets = copy.deepcopy(list(networks))
+    # every gradient is checked, the parameters' of a frozen model too
+    nets = [copy.deepcopy(net).requires_grad_(True) for net in networks]
     with torch.no_grad():
         for net in nets:
             convs = [conv for conv, _ in net.layers()]
@@ -201,10 +222,15 @@ def _problem(networks: Sequence[nn.Module], lengths: Sequence[int],
 
 
 def _output_and_grads(backend, networks, coeffs: Tensor, weights: Tensor,
-                      lengths, input_grad: bool, launch: dict
+                      lengths, input_grad: Optional[bool], launch: dict
                       ) -> List[Tensor]:
     """The output, the coefficients' gradient (if ``input_grad``) and every
-    parameter's of ``sum(out * weights)``."""
+    parameter's of ``sum(out * weights)``; the output alone, without
+    gradients, where ``input_grad`` is ``None``."""
+    if input_grad is None:
+        with torch.no_grad():
+            return [backend.run(networks, coeffs, lengths,
+                                (1, coeffs.shape[2]), **launch)]
     coeffs = coeffs.detach().requires_grad_(input_grad)
     params = [p for net in networks for p in net.parameters()]
     out = backend.run(networks, coeffs, lengths, (1, coeffs.shape[2]),
@@ -215,9 +241,10 @@ def _output_and_grads(backend, networks, coeffs: Tensor, weights: Tensor,
 
 
 def _run_check(backend, reference, networks: Sequence[nn.Module],
-               coeffs: Tensor, lengths: Sequence[int]
+               coeffs: Tensor, lengths: Sequence[int], passes: str
                ) -> Dict[str, object]:
-    """``passed``, ``max_error`` and ``failure`` of one check."""
+    """``passed``, ``max_error`` and ``failure`` of one check of the
+    launches of a call that runs ``passes`` (:data:`PASSES`)."""
     nets64, coeffs64, weights64 = _problem(networks, lengths,
                                            backend.check_pixels,
                                            coeffs.device)
@@ -226,9 +253,10 @@ def _run_check(backend, reference, networks: Sequence[nn.Module],
                                  lengths, True, {})
     nets32 = [copy.deepcopy(net).float() for net in nets64]
     worst = 0.0
-    for launch, input_grad in backend.check_launches():
-        setting = ', '.join([f'{k}={v}' for k, v in launch.items()] +
-                            [f'input gradient {input_grad}'])
+    for launch, input_grad in backend.check_launches(passes):
+        setting = ', '.join([f'{k}={v}' for k, v in launch.items()] + [
+            'no gradient' if input_grad is None else
+            f'input gradient {input_grad}'])
         try:
             got = _output_and_grads(backend, nets32, coeffs64.float(),
                                     weights64.float(), lengths,
@@ -242,7 +270,8 @@ def _run_check(backend, reference, networks: Sequence[nn.Module],
             f'gradient of band {band} {name}'
             for band, net in enumerate(nets32)
             for name, _ in net.named_parameters()]
-        compared = want if input_grad else want[:1] + want[2:]
+        compared = want[:1] if input_grad is None else want if input_grad \
+            else want[:1] + want[2:]
         errors = relative_errors(got, compared)
         index = max(range(len(errors)), key=errors.__getitem__)
         worst = max(worst, errors[index])
@@ -265,6 +294,7 @@ def check_on_first_use(backend, reference, networks: Sequence[nn.Module],
     device = str(coeffs.device)
     key = (backend.name, device, _variant(backend, networks, coeffs,
                                           lengths))
+    passes = passes_of(networks, coeffs)
     if key not in _RESULTS:
         _log(logging.INFO,
              f'WGSE: checking {_kernel_text(*key)} against the \'torch\' '
@@ -273,7 +303,7 @@ def check_on_first_use(backend, reference, networks: Sequence[nn.Module],
         start = time.perf_counter()
         with torch.inference_mode(False), torch.enable_grad():
             outcome = _run_check(backend, reference, networks, coeffs,
-                                 lengths)
+                                 lengths, passes)
         result = _RESULTS[key] = CheckResult(
             backend.name, device, key[2],
             tolerance=TOLERANCE,
