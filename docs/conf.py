@@ -68,6 +68,8 @@ html_title = f'wgse_mmseg {release}'
 
 #: the packages whose names the API pages hold
 OURS = ('wgse_mmseg', 'wgse_bench')
+
+
 def _existing(target: str, scopes):
     """``(object, dotted name)`` of what ``target`` names, read as Python
     would from one of ``scopes`` (dotted names of modules, classes,

@@ -162,6 +162,7 @@ PRINTS = {
         r'\| WGSE +\| +\d+\.\d+ \|',
 }
 
+
 def _suite_stack() -> str:
     """The stack (``STACK=`` of tools/setup_env.sh) this suite runs on."""
     from wgse_mmseg._openmmlab import installed_stacks

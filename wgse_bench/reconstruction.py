@@ -234,7 +234,7 @@ def format_table(results: Dict[str, Dict[str, float]],
 
 
 @declare(path=Path(), methods=SequenceOf(Choice(METHODS),
-                                            max_length=len(METHODS)),
+                                         max_length=len(METHODS)),
          checkpoint=Path(optional=True), num_steps=NUM_STEPS,
          frames=SequenceOf(Integer(), optional=True),
          exposure=EXPOSURE, height=SIDE.or_none(), width=SIDE.or_none(),

@@ -156,7 +156,7 @@ def run_benchmark(shapes: List[List[int]], impls: List[str], repeat: int,
     for shape in shapes:
         text = 'x'.join(map(str, shape))
         results = {impl: run_worker([impl, text, str(repeat),
-                                      '--device', device])
+                                     '--device', device])
                    for impl in impls}
         base = results.get('reference')
         for impl, res in results.items():
@@ -164,7 +164,7 @@ def run_benchmark(shapes: List[List[int]], impls: List[str], repeat: int,
             if base and impl != 'reference':
                 res['speedup'] = base['median_s'] / res['median_s']
                 res['memory_ratio'] = res['peak_mib'] / max(base['peak_mib'],
-                                                             1e-9)
+                                                            1e-9)
                 speed = f'{res["speedup"]:.1f}x'
                 mem = f'{res["memory_ratio"]:.2f}'
             print(f'{text:>14} {IMPLEMENTATIONS[impl]:<40} '

@@ -284,7 +284,7 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys, load_tool
 
 
 def test_the_tool_refuses_a_failed_check(tmp_path, capsys, monkeypatch,
-                                        load_tool, exported):
+                                         load_tool, exported):
     """Beyond the tolerance the tool exits with 1 and says FAILED; the file
     the check ran on does not land, and an earlier export at --out is kept
     as it was. The exporter's result is the module's file of the same model

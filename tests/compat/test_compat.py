@@ -22,8 +22,8 @@ from wgse_mmseg.compat import (apply_compat,
 from wgse_mmseg.compat.checkpoint_safety import (history_buffer_statistic,
                                                  weights_only_load)
 from wgse_mmseg.compat.mmcv_ops_fallback import (PURE_PYTHON_OPS,
-                                                  MissingCompiledOpError,
-                                                  _ops_imports, stand_in_names)
+                                                 MissingCompiledOpError,
+                                                 _ops_imports, stand_in_names)
 
 HAS_COMPILED_OPS = importlib.util.find_spec('mmcv._ext') is not None
 #: an MMSeg that cannot import without mmcv.ops, and no compiled ops
@@ -58,7 +58,7 @@ def test_the_stand_in_holds_only_the_names_mmseg_imports():
         with pytest.raises(ImportError):
             import mmcv.ops  # noqa: F401
         return
-    import mmcv.ops
+    import mmcv.ops  # noqa: F811  (the branch above returned)
     assert mmcv.ops.__wgse_fallback__
     public = {name for name in vars(mmcv.ops) if not name.startswith('_')}
     assert public == needed

@@ -37,4 +37,3 @@ def test_check_finite_counts_like_numpy(shape, dtype, data):
 ])
 def test_check_finite_passes_finite_and_integer_tensors(tensor):
     check_finite('X', 'spikes', tensor)
-

@@ -114,7 +114,7 @@ def test_npz_keys(tmp_path):
     named = str(tmp_path / 'named.npz')
     np.savez(named, spikes=spikes, extra=np.zeros(3))
     np.testing.assert_array_equal(load_spikes(named, layout='THW'), spikes)
-        # Spike-Zoo's recordings (UHSR): spk beside a label; spikes wins
+    # Spike-Zoo's recordings (UHSR): spk beside a label; spikes wins
     spike_zoo = str(tmp_path / 'spike_zoo.npz')
     np.savez(spike_zoo, spk=spikes, label=np.array(3),
              label_name=np.array('helicopter'))
@@ -343,7 +343,7 @@ def test_dat_save_requires_whole_bytes(tmp_path):
 
 @pytest.mark.parametrize('ext', ['.dat', '.spk'])
 def test_failure_mid_write_keeps_old_file_and_no_temp(tmp_path, monkeypatch,
-                                                       ext):
+                                                      ext):
     path = str(tmp_path / ('keep' + ext))
     old = _random_spikes((2, 4, 6), seed=12)
     save_spikes(path, old)
@@ -361,7 +361,7 @@ def test_failure_mid_write_keeps_old_file_and_no_temp(tmp_path, monkeypatch,
 
 @pytest.mark.parametrize('umask', [0o022, 0o077, 0o002])
 def test_atomic_writes_leave_the_process_umask_alone(tmp_path, monkeypatch,
-                                                    umask):
+                                                     umask):
     """A written file gets the mode ``open`` gives under the umask, and
     the umask is never changed, not even for a moment (``os.umask`` sets
     the process-wide mask: a file another thread made meanwhile would be
@@ -932,7 +932,7 @@ def test_the_same_clip_written_both_ways_reads_the_same(tmp_path, ext,
 
 @pytest.mark.parametrize('ext', ['.npy', '.npz'])
 def test_an_array_that_does_not_record_its_layout_asks_for_it(tmp_path,
-                                                                ext):
+                                                              ext):
     path = str(tmp_path / ('clip' + ext))
     array = _random_spikes((6, 4, 5), seed=22)
     (np.save if ext == '.npy' else np.savez)(path, array)
@@ -1116,7 +1116,6 @@ def test_frame_major_fortran_hwt_npz_inflates_up_to_the_window(tmp_path,
     window = load_spikes(path, start=30, length=9, layout='HWT')
     assert window.shape == (9, 64, 64) and not window.any()
     assert 39 * 64 * 64 <= inflated[0] <= 39 * 64 * 64 + 1024
-
 
 
 @pytest.mark.parametrize('name', ['rec.npy', 'rec.spk', 'rec.dat'])

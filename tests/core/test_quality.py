@@ -199,7 +199,7 @@ def test_no_reference_scores_says_none_where_undefined():
        seed=st.integers(0, 2**16), sigma=st.floats(0.0, 3.0),
        brightness=st.floats(0.05, 1.0))
 def test_scores_are_finite_on_any_textured_image(height, width, seed, sigma,
-                                                  brightness):
+                                                 brightness):
     rng = np.random.default_rng(seed)
     image = rng.random((height, width))
     if sigma > 0:

@@ -215,7 +215,6 @@ def test_resumes_an_interrupted_walk_without_redoing_it(tmp_path):
         _rows(tmp_path / 'cut' / 'walk.csv')[30]['batch'] == '24'
 
 
-
 def _same_walk(one, other):
     """Two walks' CSVs (but the times and batches) and frames are the
     same."""

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from wgse_mmseg.core.constants import READOUT_HZ
 from wgse_mmseg.core.simulation import (EFFECTS, frames_to_intensity,
-                                   initial_charge, parse_effects,
-                                   simulate_spikes)
+                                        initial_charge, parse_effects,
+                                        simulate_spikes)
 from wgse_mmseg.core.simulation.camera_motion import (CameraMotion,
                                                       trajectory_source_maps)
 from wgse_mmseg.core.simulation.effect import SensorEffect, SimulationContext

@@ -10,8 +10,8 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from wgse_mmseg.core.wavelets import (SUPPORTED_MODES, analysis_matrix,
-                                 band_lengths, synthesis_matrix, wavedec,
-                                 waverec)
+                                      band_lengths, synthesis_matrix, wavedec,
+                                      waverec)
 
 
 pytestmark = pytest.mark.usefixtures('single_thread')

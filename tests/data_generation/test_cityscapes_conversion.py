@@ -307,7 +307,7 @@ def test_deterministic_and_settings_aware(tmp_path, cityscapes, calls):
                                 splits=('train', ), progress=False)
     assert counts == dict(sequence=0, static=1, skipped=1)
     lower_threshold = ConversionSettings(height=32, width=64, num_steps=9,
-                                threshold=1.0)
+                                         threshold=1.0)
     counts = convert_cityscapes(root, outs[0], lower_threshold,
                                 splits=('train', ), progress=False)
     assert counts == dict(sequence=1, static=1, skipped=0)

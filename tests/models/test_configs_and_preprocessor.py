@@ -94,8 +94,8 @@ def test_spike_settings_override_every_dependent_field():
     assert cfg.model.data_preprocessor.num_steps == 41
     assert tuple(cfg.model.data_preprocessor.size) == (64, 128)
     assert cfg.train_dataloader.dataset.pipeline[0].num_steps == 41
-    assert tuple(cfg.train_dataloader.dataset.pipeline[2].crop_size) == (64,
-                                                                       128)
+    assert tuple(cfg.train_dataloader.dataset.pipeline[2].crop_size) == (
+        64, 128)
     assert cfg.val_dataloader.dataset.data_root == '/elsewhere'
     # and the override did not leak into the next load
     assert load_config(config_path(PSPNET_WGSE)).num_steps == 129

@@ -34,7 +34,7 @@ from wgse_mmseg.models.reconstruction import (CLASSICAL_METHODS, DEFAULT_WEIGHTS
                                               export_weights,
                                               load_reconstructor)
 from wgse_mmseg.core.reconstruction_baselines import (tfi, tfi_spatial_mean,
-                                                     tfi_temporal_mean, tfp)
+                                                      tfi_temporal_mean, tfp)
 from wgse_mmseg.core.representations import TFI
 from wgse_mmseg.utils.config_data import ConfigDataError
 
@@ -315,7 +315,6 @@ def test_an_exported_config_loads_and_round_trips(tmp_path):
         torch.testing.assert_close(loaded.state_dict()[name], value)
 
 
-
 def test_cpu_config_trains_a_few_iterations(tmp_path):
     from mmengine.runner import Runner
     cfg = load_config(osp.join(CONFIGS, 'wgse_resnet_cpu.py'),
@@ -499,7 +498,7 @@ def test_reds_dataset_centres_the_window_on_the_ground_truth(tmp_path):
         steps[frame, 0, frame % 8] = 1
     save_spikes(str(tmp_path / 'spike' / 'a.dat'), steps)
     cv2.imwrite(str(tmp_path / 'gt' / 'a.png'), np.full((4, 8), 51,
-                                                         np.uint8))
+                                                        np.uint8))
     dataset = REDSSpikeDataset(
         data_root=str(tmp_path),
         pipeline=[LoadSpikeImagePair(num_steps=5),
@@ -696,8 +695,9 @@ def test_recording_table_scores_what_reconstruct_writes(tmp_path, capsys, load_t
     path = str(tmp_path / 'dark.npz')
     np.savez(path, spk=spikes, label=np.array(1))
     results = score_recording(path, ['tfp', 'tfi'], frames=[25, 30])
-    load_tool('tools/misc/reconstruct.py').main([path, '--out', str(tmp_path / 'o'),
-                               '--method', 'tfp', '--frames', '25,30'])
+    load_tool('tools/misc/reconstruct.py').main(
+        [path, '--out', str(tmp_path / 'o'), '--method', 'tfp', '--frames',
+         '25,30'])
     written = [no_reference_scores(cv2.imread(
         str(tmp_path / 'o' / f'dark_{f}.png'), cv2.IMREAD_UNCHANGED))
         for f in (25, 30)]
@@ -729,7 +729,6 @@ def test_benchmark_table(tmp_path):
     assert set(results['tfp']) == {'PSNR', 'SSIM', 'Entropy2D'}
     table = format_table(results)
     assert '| TFP |' in table and '+0.00 |' in table
-
 
 
 def test_multiply_adds_count_every_convolution():
@@ -797,6 +796,7 @@ def test_benchmark_costs_and_more_models(tmp_path):
     with pytest.raises(ValueError, match='takes 5-frame windows, not 9'):
         benchmark(root, ['tfp'], num_steps=9, spike_suffix='.npy',
                   models=[str(checkpoint)], progress=False)
+
 
 # ---------------------------------------------------- shipped weights
 def test_shipped_weights_are_small_and_load():

@@ -163,8 +163,8 @@ CASES = [
                   'data_root={t}/my data', 'num_steps=9'],  # kept, refused
      "{t}/my data/spike/train (img_path under data_root='{t}/my data')"),
     ('dev/make_reconstruction_figure.py', ['{t}/ok.npy', '--out',
-                                            '{t}/f.png', '--methods', 'tfp',
-                                            '--scale', '0.01'],
+                                           '{t}/f.png', '--methods', 'tfp',
+                                           '--scale', '0.01'],
      '--scale 0.01: makes the 8x12 frames of {t}/ok.npy tiles of 0 pixels'),
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', '{t}/walk.mp4',
                              '--stride', '10', '--frames', '25'],
@@ -202,7 +202,7 @@ OUTPUT_OVER_INPUT = [
     ('misc/reconstruct.py', ['{t}/ok.npy', '--out', 'OUT', '--method', 'tfp'],
      'ok.npy'),
     ('dev/make_reconstruction_figure.py', ['{t}/ok.npy', '--out', 'OUT',
-                                            '--methods', 'tfp'], 'ok.npy'),
+                                           '--methods', 'tfp'], 'ok.npy'),
     ('dataset_converters/spike_cityscapes.py', ['{t}/city', 'OUT'], 'city'),
     ('test.py', [CONFIG, '{t}/notes.pth', '--out', 'OUT'], 'notes.pth'),
 ]

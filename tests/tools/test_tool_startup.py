@@ -4,6 +4,7 @@ them (what makes them answer at once: the figures are
 ``dev/benchmark_startup.py``'s, not a test's)."""
 import pytest
 
+
 @pytest.fixture(scope='module')
 def startup(load_tool):
     return load_tool('dev/benchmark_startup.py')

@@ -181,6 +181,8 @@ BUILD_CALL = re.compile(
 #: every such call in wgse_mmseg/ and tools/ (file, enclosing function,
 #: callee), reviewed: where its config comes from
 REVIEWED = {
+    ('wgse_bench/segmentation.py', 'build_model', 'MODELS.build'):
+        'the user\'s config file',
     ('wgse_mmseg/models/reconstruction.py', 'load_reconstructor',
      'build_from_file_config'):
         'a checkpoint: meta model/cfg, checked against RECONSTRUCTION_BUILDS',
@@ -194,8 +196,6 @@ REVIEWED = {
     ('wgse_mmseg/models/data_preprocessor.py',
      'SpikeSegDataPreProcessor.__init__', 'MODELS.build'):
         'its enhancer argument, from the user\'s config file',
-    ('wgse_bench/segmentation.py', 'build_model', 'MODELS.build'):
-        'the user\'s config file',
     ('wgse_bench/segmentation.py', 'validation_cost', 'DATASETS.build'):
         'the user\'s config file',
     ('wgse_bench/segmentation.py', 'validation_cost',

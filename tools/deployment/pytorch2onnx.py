@@ -123,5 +123,6 @@ def main(argv=None) -> int:
     print(f'{out}\tinput spikes (batch, {num_steps}, {height}, {width})')
     return 0
 
+
 if __name__ == '__main__':
     sys.exit(main())

@@ -33,6 +33,7 @@ from .limits import (MAX_CLASSES, MAX_EPOCHS, MAX_IMAGE_SIDE, MAX_ITERS,
 
 __all__ = ['ArgumentError']
 
+
 class ArgumentError(ValueError):
     """An argument is not what its entry point declares.
 
@@ -368,7 +369,6 @@ class Declaration:
         for name, argument in self.arguments.items():
             if name in values:
                 argument.check(values[name], self.entry, name)
-
 
 
 def declare(**arguments: Argument) -> Callable[[Callable], Callable]:

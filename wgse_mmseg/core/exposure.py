@@ -124,4 +124,3 @@ def apply_exposure(image: np.ndarray, exposure: Exposure = 'auto') -> Exposed:
         reason = f'fixed gain {gain:g}'
     scaled = np.clip(np.asarray(image, dtype=np.float32) * gain, 0, 1)
     return Exposed(scaled, gain, reason)
-

@@ -47,6 +47,7 @@ __all__ = [
     'PackReconstructionInputs'
 ]
 
+
 @TRANSFORMS.register_module()
 class LoadSpikeImagePair(BaseTransform):
     """Load a spike window and its ground-truth image.
@@ -152,7 +153,7 @@ class REDSSpikeDataset(BaseDataset):
     @declare(spike_suffix=Text(empty=False), gt_suffix=Text(empty=False),
              gt_frame=Integer(0, optional=True))
     def __init__(self, data_prefix: dict = dict(spike_path='spike',
-                                                 gt_path='gt'),
+                                                gt_path='gt'),
                  spike_suffix: str = '.dat', gt_suffix: str = '.png',
                  gt_frame: Optional[int] = None, **kwargs):
         self.spike_suffix = spike_suffix
@@ -249,7 +250,7 @@ class SimulatedSpikeImageDataset(BaseDataset):
                  max_side: int = 1024, **kwargs):
         self.image_dir = image_dir or _default_image_dir()
         self.image_paths, self.images = load_images(self.image_dir,
-                                                     max_side)
+                                                    max_side)
         areas = np.array([im.size for im in self.images], np.float64)
         self.image_probs = areas / areas.sum()
         self.num_samples = num_samples

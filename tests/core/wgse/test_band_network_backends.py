@@ -402,7 +402,7 @@ def _device_path(budget):
 @pytest.mark.parametrize('budget', [1, 40_000, 1 << 29],
                          ids=['a-pixel-a-chunk', 'several', 'one-chunk'])
 def test_torch_device_path_matches_float64_modules(monkeypatch, kwargs,
-                                                    budget):
+                                                   budget):
     """Every chunking (one pixel, several chunks with a partial last one,
     one chunk) in float64 against the modules run whole."""
     monkeypatch.setitem(band_network_backends.BACKENDS, 'torch',

@@ -15,6 +15,7 @@ from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
+
 class _WrongGradient(torch.autograd.Function):
     """Identity forward; the gradient scaled by 1.5."""
 

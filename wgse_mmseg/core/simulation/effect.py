@@ -25,7 +25,6 @@ draws.
 from dataclasses import dataclass
 from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Type
 
-import numpy as np
 import torch
 
 from ..arguments import Choice, Number, SequenceOf

@@ -10,7 +10,6 @@ file holding that mapping, e.g.::
 
 Effects not named are off. See docs/simulator.md for every effect.
 """
-import json
 import os
 import os.path as osp
 from typing import Any, List, Mapping, Optional, Union

@@ -184,7 +184,7 @@ DEVICE_CHUNK_BYTES = 1 << 29
 
 
 def _pixels_per_chunk(network: nn.Module, length: int, itemsize: int,
-                     budget: int = DEVICE_CHUNK_BYTES) -> int:
+                      budget: int = DEVICE_CHUNK_BYTES) -> int:
     """How many pixels of a band of ``length`` coefficients fit ``budget``
     bytes of activations (``itemsize`` bytes each) in a recomputed
     forward+backward of a ``dim=1`` band network: every convolution's
@@ -222,7 +222,7 @@ def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
         if network.dim == 1:
             signals = band.transpose(1, 2).reshape(batch * pixels, 1, length)
             step = _pixels_per_chunk(network, length, coeffs.element_size(),
-                                    chunk_bytes) if recompute else None
+                                     chunk_bytes) if recompute else None
             if step is None or (signals.shape[0] <= step and not train):
                 out = network(signals)
             else:
@@ -370,7 +370,7 @@ def _choices() -> str:
     for name, backend in BACKENDS.items():
         reason = backend.unavailable()
         lines.append(f'{name!r}' + (f' (unavailable: {reason})'
-                                     if reason else ''))
+                                    if reason else ''))
     return "'auto', " + ', '.join(lines)
 
 

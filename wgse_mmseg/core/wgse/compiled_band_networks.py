@@ -225,7 +225,7 @@ class _CompiledBandNetworks(torch.autograd.Function):
 
 def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
                            weights: Sequence[Sequence[Tuple[Tensor,
-                                                             Tensor]]],
+                                                            Tensor]]],
                            residuals: Sequence[Optional[int]]) -> Tensor:
     """Run one temporal CNN per band over every pixel's coefficients.
 

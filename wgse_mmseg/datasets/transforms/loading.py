@@ -74,7 +74,7 @@ class LoadSpikeFromFile(BaseTransform):
         start = centered_window(path, total, center, length)
         return self.from_window(
             results, load_spikes(path, self.height, self.width, start, length,
-                                  self.layout))
+                                 self.layout))
 
     def from_window(self, results: dict, spikes: np.ndarray) -> dict:
         """``results`` with the keys :meth:`transform` adds, from a window

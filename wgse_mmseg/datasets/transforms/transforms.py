@@ -31,7 +31,6 @@ def _check_label_matches(results: dict) -> None:
                 f'{results[key].shape[0]}x{results[key].shape[1]}')
 
 
-
 @TRANSFORMS.register_module()
 class SpikeRandomCrop(RandomCrop):
     """Random crop of a spike stream and its label maps, over all ``T``.
