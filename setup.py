@@ -49,7 +49,8 @@ def add_mim_extension():
         if 'develop' in sys.argv:
             os.symlink(osp.relpath(src, mim_root), dst)
         else:
-            shutil.copytree(src, dst, ignore=shutil.ignore_patterns('__pycache__', '*.pyc'))
+            shutil.copytree(src, dst, ignore=shutil.ignore_patterns(
+                '__pycache__', '*.pyc'))
 
 
 if __name__ == '__main__':
@@ -57,8 +58,10 @@ if __name__ == '__main__':
     setup(
         name='wgse_mmseg',
         version=version(),
-        description='Wavelet-guided spike enhancing (WGSE) and spike-camera data for MMSegmentation',
-        long_description=open(osp.join(ROOT, 'README.md'), encoding='utf-8').read(),
+        description='Wavelet-guided spike enhancing (WGSE) and spike-camera '
+        'data for MMSegmentation',
+        long_description=open(osp.join(ROOT, 'README.md'),
+                              encoding='utf-8').read(),
         long_description_content_type='text/markdown',
         license='Apache-2.0',
         python_requires='>=3.9',
@@ -67,8 +70,9 @@ if __name__ == '__main__':
         packages=find_packages(include=['wgse_mmseg', 'wgse_mmseg.*',
                                         'wgse_bench', 'wgse_bench.*']),
         include_package_data=True,
-        package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*', '.mim/**/**/**/*',
-                                     'weights/*.pth', 'core/quality/data/*']},
+        package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*',
+                                     '.mim/**/**/**/*', 'weights/*.pth',
+                                     'core/quality/data/*']},
         # The OpenMMLab stack is an extra, one per stack: both publish the
         # import packages mmseg, mmengine, mmcv and mim, so naming one here
         # would install it over the other (docs/install.md;
@@ -94,12 +98,15 @@ if __name__ == '__main__':
         # Two small CPU kernels: the simulator's one-pass integrate-and-fire
         # and WGSE's band networks. Optional: without a C compiler the
         # install goes on and each falls back to its torch path (the same
-        # results, slower): see core.simulation.fixed_point.compiled_unavailable
-        # and core.wgse.compiled_band_networks.unavailable.
+        # results, slower): see
+        # core.simulation.fixed_point.compiled_unavailable and
+        # core.wgse.compiled_band_networks.unavailable.
         ext_modules=[
-            Extension(f'wgse_mmseg.{name}', [f'wgse_mmseg/{name.replace(".", "/")}.c'],
+            Extension(f'wgse_mmseg.{name}',
+                      [f'wgse_mmseg/{name.replace(".", "/")}.c'],
                       extra_compile_args=['-O3'], optional=True)
-            for name in ('core.simulation._integrate_and_fire', 'core.wgse._band_networks')
+            for name in ('core.simulation._integrate_and_fire',
+                         'core.wgse._band_networks')
         ],
         zip_safe=False,
     )

@@ -12,7 +12,8 @@ _base_ = [
     './_base_/default_runtime.py',
     './_base_/schedules/adamw_warmup_100e.py',
 ]
-norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN on multi-GPU runs: sync_bn
+# SyncBN on multi-GPU runs: sync_bn
+norm_cfg = dict(type='BN', requires_grad=True)
 ohem = dict(type='OHEMPixelSampler', thresh=0.7, min_kept=100000)
 model = dict(
     pretrained=None,

@@ -8,7 +8,8 @@ _base_ = [
     './_base_/default_runtime.py',
     './_base_/schedules/adamw_warmup_100e.py',
 ]
-norm_cfg = dict(type='BN', requires_grad=True)  # SyncBN on multi-GPU runs: sync_bn
+# SyncBN on multi-GPU runs: sync_bn
+norm_cfg = dict(type='BN', requires_grad=True)
 model = dict(
     data_preprocessor=dict(
         _delete_=True, **_base_.spike_data_preprocessor, enhancer=_base_.wgse),

@@ -124,7 +124,8 @@ def main(argv=None):
             first, last = length // 2, total - length + length // 2
             frames = np.linspace(first, last, args.count).round().astype(
                 int).tolist()
-        starts = [centered_window(args.spikes, total, f, length) for f in frames]
+        starts = [centered_window(args.spikes, total, f, length)
+                  for f in frames]
     except (SpikeFileError, ValueError, FileNotFoundError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     columns = []

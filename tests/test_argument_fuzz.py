@@ -1,12 +1,12 @@
 """Every declared argument of every public entry point, fuzzed.
 
-For each argument that an entry point declares (:mod:`wgse_mmseg.core.arguments`),
-hypothesis draws wrong types, NaN, Inf, negative, zero, huge and fractional
-numbers, strings with quotes and backslashes and, for paths, a directory,
-an empty file, a text file and a missing file. The call must either give a
-project error (raised in this package) that names the entry point and the
-argument, or a file error naming the file, or succeed, within time and
-memory bounds.
+For each argument that an entry point declares
+(:mod:`wgse_mmseg.core.arguments`), hypothesis draws wrong types, NaN, Inf,
+negative, zero, huge and fractional numbers, strings with quotes and
+backslashes and, for paths, a directory, an empty file, a text file and a
+missing file. The call must either give a project error (raised in this
+package) that names the entry point and the argument, or a file error naming
+the file, or succeed, within time and memory bounds.
 """
 import importlib
 import inspect

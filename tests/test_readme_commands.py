@@ -4,9 +4,10 @@ install in ``.venv``).
 
 The pages are :data:`PAGES`: the README and the docs pages that hold what it
 held before it was cut to the OpenMMLab projects' form (install, user guide,
-security, troubleshooting, known limits). Each command of their ``bash`` blocks (continuation lines joined,
-comments and ``[optional]`` parts left out) must have an entry in
-:data:`HOW`, keyed by its exact text, saying how it is checked:
+security, troubleshooting, known limits). Each command of their ``bash`` blocks
+(continuation lines joined, comments and ``[optional]`` parts left out) must
+have an entry in :data:`HOW`, keyed by its exact text, saying how it is
+checked:
 
 * ``RUN``: run here, literally, by :func:`test_readme_command_runs`;
 * a test's node id: that test runs the same tool on the same config with

@@ -635,9 +635,10 @@ def run_report(plan: Plan, root: str, targets: Targets,
     SegFormer-B0, are), ``targets`` what the figures are judged against.
     ``earlier``: a report whose finished sections are kept where it ran the
     same plan and code on the same machine and software (a run resumed
-    after a time limit stopped it). ``save`` is called with the report so far after each section, so
-    that a run stopped part-way leaves what it measured. Returns the
-    JSON-ready report (``kept``: the sections taken from ``earlier``)."""
+    after a time limit stopped it). ``save`` is called with the report so far
+    after each section, so that a run stopped part-way leaves what it measured.
+    Returns the JSON-ready report (``kept``: the sections taken from
+    ``earlier``)."""
     models = MODELS if models is None else models
     clock = _Clock()
     print(f'[gpu_report] {plan.device}: {plan._asdict()}', flush=True)

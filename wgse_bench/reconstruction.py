@@ -212,7 +212,8 @@ def format_table(results: Dict[str, Dict[str, float]],
     reference = results.get('tfp', {}).get('PSNR')
     rows = []
     for method, scores in results.items():
-        row = [method.upper(), f'{scores["PSNR"]:.2f}', f'{scores["SSIM"]:.4f}',
+        row = [method.upper(), f'{scores["PSNR"]:.2f}',
+               f'{scores["SSIM"]:.4f}',
                f'{scores["Entropy2D"]:.3f}',
                '' if reference is None else
                f'{scores["PSNR"] - reference:+.2f}']

@@ -1,10 +1,10 @@
 """What a spike segmentor costs: parameters, FLOPs, time and memory.
 
-The measurements behind ``tools/analysis_tools/benchmark.py`` and the experiment runner,
-following MMSeg's ``tools/analysis_tools/benchmark.py`` and ``get_flops.py``
-but for ``T``-channel spike input. Inputs are random binary streams
-``(T, H, W)`` (spike probability 0.3) packed as the data loader packs them,
-so every timing includes the data preprocessor (batching, padding, the
+The measurements behind ``tools/analysis_tools/benchmark.py`` and the
+experiment runner, following MMSeg's ``tools/analysis_tools/benchmark.py`` and
+``get_flops.py`` but for ``T``-channel spike input. Inputs are random binary
+streams ``(T, H, W)`` (spike probability 0.3) packed as the data loader packs
+them, so every timing includes the data preprocessor (batching, padding, the
 enhancer) as a real run does; reading files from disk is excluded.
 
 What is measured, and how:
@@ -108,8 +108,8 @@ def build_model(config: str, cfg_options: Optional[dict] = None,
                 checkpoint: Optional[str] = None,
                 device: str = 'cpu') -> Tuple[Any, nn.Module]:
     """``(cfg, model)`` for ``config`` with ``cfg_options`` (``num_steps``,
-    ``crop_size``, ... as in :func:`wgse_mmseg.utils.config.load_config`), weights
-    from ``checkpoint`` if given, on ``device``."""
+    ``crop_size``, ... as in :func:`wgse_mmseg.utils.config.load_config`),
+    weights from ``checkpoint`` if given, on ``device``."""
     cfg = load_config(config, cfg_options)
     model = MODELS.build(cfg.model)
     if checkpoint is not None:

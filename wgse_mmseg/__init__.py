@@ -8,8 +8,8 @@ Two layers:
   :mod:`wgse_mmseg.data_generation` (converters, synthetic scenes) on top
   of it, without OpenMMLab as well;
 * the MMSeg layer (:mod:`.datasets`, :mod:`.engine`, :mod:`.evaluation`,
-  :mod:`.models`; :mod:`.apis` and :mod:`.utils` for the tools) registers them, and the
-  datasets, transforms, data preprocessor and metrics, with MMSeg's
+  :mod:`.models`; :mod:`.apis` and :mod:`.utils` for the tools) registers them,
+  and the datasets, transforms, data preprocessor and metrics, with MMSeg's
   registries.
 
 Importing a module changes nothing in the process (``import wgse_mmseg``

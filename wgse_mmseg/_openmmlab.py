@@ -83,7 +83,8 @@ def require_openmmlab(what: str) -> None:
     stacks = installed_stacks()
     if len(stacks) > 1:
         found = '; '.join(
-            f'{stack}: ' + ', '.join(f'{d} {v}' for d, v in sorted(dists.items()))
+            f'{stack}: ' + ', '.join(f'{d} {v}'
+                                     for d, v in sorted(dists.items()))
             for stack, dists in sorted(stacks.items()))
         raise ImportError(
             f'{what}: distributions of both OpenMMLab stacks are installed '
@@ -96,7 +97,8 @@ def require_openmmlab(what: str) -> None:
 
 def _stack_list() -> str:
     return '; '.join(
-        f'{stack}: ' + ', '.join(' or '.join(dists) for dists in packages.values())
+        f'{stack}: ' + ', '.join(' or '.join(dists)
+                                 for dists in packages.values())
         for stack, packages in STACKS.items())
 
 
@@ -105,7 +107,8 @@ def _mmseg_importable() -> bool:
     ``mmcv.ops`` installed, or an MMSeg that needs no ``mmcv.ops``."""
     from .compat.mmcv_ops_fallback import has_compiled_ops, stand_in_names
     installed = sys.modules.get('mmcv.ops')
-    return (has_compiled_ops() or getattr(installed, '__wgse_fallback__', False)
+    return (has_compiled_ops()
+            or getattr(installed, '__wgse_fallback__', False)
             or not stand_in_names())
 
 

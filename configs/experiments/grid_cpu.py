@@ -1,8 +1,9 @@
 # The experiment grid on the embedded dataset, sized for a CPU
-# (tools/analysis_tools/run_experiments.py; docs/benchmark.md). Every entry is one of
-# `models` with one of `enhancers` in front: the model's raw-spike config with
-# `model.data_preprocessor.enhancer` overridden, nothing else changed.
-# Entry names are `<model>_<enhancer>`, e.g. `segformer_b0_wgse1d_db4_l5`.
+# (tools/analysis_tools/run_experiments.py; docs/benchmark.md). Every entry is
+# one of `models` with one of `enhancers` in front: the model's raw-spike
+# config with `model.data_preprocessor.enhancer` overridden, nothing else
+# changed. Entry names are `<model>_<enhancer>`, e.g.
+# `segformer_b0_wgse1d_db4_l5`.
 
 # model name -> config (relative to the repository root); enhancer None in
 # each

@@ -1,7 +1,8 @@
 # The paper's model trained on a REDS-layout training folder (random crops of
 # crop_size with flips) instead of simulated images, validated on data_root:
 #   python tools/train.py configs/reconstruction/wgse_resnet_reds.py \
-#       --cfg-options train_dataloader.dataset.data_root=REDS_TRAIN data_root=REDS_VAL
+#       --cfg-options train_dataloader.dataset.data_root=REDS_TRAIN \
+#       data_root=REDS_VAL
 _base_ = ['./wgse_resnet.py']
 train_dataloader = dict(
     dataset=dict(

@@ -215,7 +215,8 @@ def test_a_model_that_does_not_export_leaves_no_file(tmp_path):
 
 
 @pytest.mark.long(30)
-def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys, load_tool):
+def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys,
+                                                     load_tool):
     """CONFIG CKPT --shape T H W: weights from the checkpoint (read weights
     only), the check printed; a checkpoint of another T, a shape that is
     not the config's T, refused naming what to change."""

@@ -1,5 +1,6 @@
-"""tools/analysis_tools/run_experiments.py: the grids, the options it passes to the train
-and test tools, aggregation and reports, and one tiny run end to end."""
+"""tools/analysis_tools/run_experiments.py: the grids, the options it passes to
+the train and test tools, aggregation and reports, and one tiny run end to
+end."""
 import argparse
 import ast
 import csv
@@ -141,7 +142,8 @@ def test_converged_grid_has_the_comparison_and_the_ablations():
     ("dict(m=dict(config=3))", 'dict(raw=None)', 'config must be a path'),
     ("dict(m='{c}')", "dict(v=dict(enhancer='TFP'))",
      "enhancer 'v' must be None or dict"),
-    ("dict(m='{c}')", "dict(v=dict(enhancer=None, cfg_options={'a': \"'q'\"}))",
+    ("dict(m='{c}')",
+     "dict(v=dict(enhancer=None, cfg_options={'a': \"'q'\"}))",
      'would not survive'),
 ])
 def test_malformed_grid_entries_are_named(tmp_path, models, enhancers,

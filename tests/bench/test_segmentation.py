@@ -39,7 +39,8 @@ def count(module):
 def test_cli_prints_the_table_and_writes_json(tmp_path):
     out = tmp_path / 'bench.json'
     proc = subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark.py'),
+        [sys.executable,
+         osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark.py'),
          config_path(SEGFORMER_WGSE), '--crop', '32', '64', '--repeat',
          '1', '--warmup', '0', '--threads', '1', '--cfg-options',
          'num_steps=9', 'model.data_preprocessor.enhancer.dim=2', '--out',

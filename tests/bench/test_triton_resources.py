@@ -166,7 +166,7 @@ _SASS = """
         /*0050*/               @P0 BRA 0x10 ;
         /*0060*/              @!P1 BRA 0x0 ;
         /*0070*/                   EXIT ;
-"""
+"""  # noqa: E501  (cuobjdump's columns, verbatim)
 #: sm_100 and sm_120: a branch on a uniform predicate, scheduling notes
 #: after the operands, and a wait for a barrier (a loop that loads nothing)
 #: out of line
@@ -180,7 +180,7 @@ _SASS_BLACKWELL = """
         /*0060*/                   SYNCS.PHASECHK.TRANS64.TRYWAIT P4, [UR4], R5 ;
         /*0070*/              @!P4 BRA 0x60 ;
         /*0080*/                   BRA 0x40 ;
-"""
+"""  # noqa: E501  (cuobjdump's columns, verbatim)
 
 
 def test_step_loop_and_cost_by_hand():

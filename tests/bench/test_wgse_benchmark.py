@@ -1,5 +1,5 @@
-"""tools/analysis_tools/benchmark_wgse.py: the side-by-side table and the agreement check
-(tiny shapes; the issue's shapes are for the published run)."""
+"""tools/analysis_tools/benchmark_wgse.py: the side-by-side table and the
+agreement check (tiny shapes; the issue's shapes are for the published run)."""
 import json
 import os.path as osp
 import subprocess
@@ -21,7 +21,8 @@ CPU_BACKENDS = {'torch'} | (
 
 def _benchmark(*args):
     return subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark_wgse.py')] +
+        [sys.executable,
+         osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark_wgse.py')] +
         list(args), capture_output=True, text=True, cwd=ROOT, env=ENV)
 
 

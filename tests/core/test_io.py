@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 import wgse_mmseg.core.io as spike_io
 from wgse_mmseg.core.arguments import ArgumentError
-from wgse_mmseg.core.io import SpikeFileError, load_spikes, save_spikes, spike_shape
+from wgse_mmseg.core.io import (SpikeFileError, load_spikes, save_spikes,
+                                spike_shape)
 
 
 def _random_spikes(shape, seed=0, p=0.3):
@@ -563,11 +564,11 @@ def _write_npz_bomb(path, shape, frames_written=None, fortran=False):
     """An ``.npz`` whose ``spikes.npy`` member declares a ``uint8`` array
     of ``shape`` and holds zeros: each MiB of zeros deflates to ~1 kB, so a
     GiB takes ~1 MB on disk. The member is built from one compressed piece
-    (a frame, at most a MiB) repeated (each piece ends with a full flush, so pieces are independent),
-    not by compressing a GiB. ``frames_written`` (default ``shape[0]``)
-    frames of data follow the header; the zip declares the size the header
-    says, so fewer or more frames make a member that lies. ``fortran``:
-    the header says Fortran order (the zeros are the same)."""
+    (a frame, at most a MiB) repeated (each piece ends with a full flush, so
+    pieces are independent), not by compressing a GiB. ``frames_written``
+    (default ``shape[0]``) frames of data follow the header; the zip declares
+    the size the header says, so fewer or more frames make a member that lies.
+    ``fortran``: the header says Fortran order (the zeros are the same)."""
     import io
     import struct
     import zlib
@@ -851,9 +852,9 @@ def test_every_registered_format_round_trips_a_window(tmp_path, ext):
 
 
 def test_one_entry_adds_a_format(tmp_path, monkeypatch):
-    """A format is one entry: layout, shape, read and encode of an (illustrative)
-    raw byte-per-spike format with a 3-int header; the public functions
-    dispatch to it and keep their own checks."""
+    """A format is one entry: layout, shape, read and encode of an
+    (illustrative) raw byte-per-spike format with a 3-int header; the public
+    functions dispatch to it and keep their own checks."""
     header = struct.Struct('<3I')
 
     def layout(path, layout):

@@ -1,4 +1,5 @@
-"""``wgse_mmseg.core.wavelets`` against PyWavelets, the independent reference."""
+"""``wgse_mmseg.core.wavelets`` against PyWavelets, the independent
+reference."""
 import inspect
 import warnings
 

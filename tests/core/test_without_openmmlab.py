@@ -54,8 +54,8 @@ def test_core_runs_and_the_mmseg_layer_says_what_to_install(without_openmmlab,
         assert name in report['error']
 
 
-def test_importing_a_layer_module_directly_names_what_is_missing(without_openmmlab,
-                                                                 tmp_path):
+def test_importing_a_layer_module_directly_names_what_is_missing(
+        without_openmmlab, tmp_path):
     proc = subprocess.run(
         [sys.executable, '-c', 'import wgse_mmseg.datasets'],
         capture_output=True, text=True, env=without_openmmlab, cwd=tmp_path)
@@ -66,7 +66,8 @@ def test_importing_a_layer_module_directly_names_what_is_missing(without_openmml
 def test_the_wgse_benchmark_runs_without_the_stack(without_openmmlab,
                                                    tmp_path):
     proc = subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark_wgse.py'),
+        [sys.executable,
+         osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark_wgse.py'),
          '--impls', 'torch', '--shapes', '1x12x3x4', '--repeat', '1'],
         capture_output=True, text=True, env=without_openmmlab, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -99,8 +100,8 @@ def test_the_benchmarks_run_without_the_stack(without_openmmlab, tmp_path):
     machine record, the GPU report's correctness section) import and run
     where OpenMMLab cannot be imported."""
     proc = subprocess.run([sys.executable, '-c', BENCHMARKS],
-                          capture_output=True, text=True, env=without_openmmlab,
-                          cwd=tmp_path)
+                          capture_output=True, text=True,
+                          env=without_openmmlab, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     report = json.loads(proc.stdout.strip().splitlines()[-1])
     assert report['loaded'] == []

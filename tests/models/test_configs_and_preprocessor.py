@@ -1,4 +1,5 @@
-"""The four main configs build and train a step; the preprocessor's contract."""
+"""The four main configs build and train a step; the preprocessor's
+contract."""
 import os.path as osp
 
 import numpy as np

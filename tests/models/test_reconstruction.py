@@ -28,7 +28,8 @@ from wgse_bench.reconstruction import (benchmark, format_table,
                                        score_recording)
 from wgse_mmseg.core.quality import no_reference_scores
 from wgse_mmseg.core.io import load_spikes, save_spikes
-from wgse_mmseg.models.reconstruction import (CLASSICAL_METHODS, DEFAULT_WEIGHTS,
+from wgse_mmseg.models.reconstruction import (CLASSICAL_METHODS,
+                                              DEFAULT_WEIGHTS,
                                               METHODS, reconstruction_method,
                                               SpikeReconstructor,
                                               export_weights,
@@ -571,7 +572,8 @@ def test_render_trajectory_moves_by_the_velocity():
 
 
 # ----------------------------------------------------------------- tools
-def test_reconstruct_cli_makes_a_dark_recording_visible(tmp_path, capsys, load_tool):
+def test_reconstruct_cli_makes_a_dark_recording_visible(tmp_path, capsys,
+                                                        load_tool):
     """A stream of at most 1 spike in 50 steps per pixel (TFP about 0.03)
     is black as it is; by default its brightest pixels become white."""
     rng = np.random.default_rng(1)
@@ -685,7 +687,8 @@ def test_figure_tool_grid(tmp_path, load_tool):
     assert figure.shape == (2 * tile_h + 4, 3 * tile_w + 2 * 4)
 
 
-def test_recording_table_scores_what_reconstruct_writes(tmp_path, capsys, load_tool):
+def test_recording_table_scores_what_reconstruct_writes(tmp_path, capsys,
+                                                        load_tool):
     """The benchmark's real-data mode on a recording without ground truth
     (a dark .npz with Spike-Zoo's key): each method's scores are those of
     the image tools/misc/reconstruct.py writes, meaned over the frames."""
@@ -837,7 +840,8 @@ def test_shipped_weights_reach_33_db_on_the_held_out_reds_stream(shared_dir):
                                          ('reds_train',
                                           '203_part3_key_id151')])
 def test_the_default_exposure_keeps_a_calibrated_stream(shared_dir, tmp_path,
-                                                        capsys, split, name, load_tool):
+                                                        capsys, split, name,
+                                                        load_tool):
     """``reconstruct.py`` with its defaults scores what ``--exposure none``
     scores on a synthetic REDS stream: auto exposure leaves a stream of
     normal brightness alone (it used to apply a gain of 1.29 and clip)."""

@@ -97,7 +97,8 @@ def test_every_command_line_is_declared():
                 f'{tool}: {_display(action)}: use type=Choice(...)')
     # every module of the package that builds a parser is listed (the WGSE
     # benchmark's worker reads words its own driver writes)
-    building = {osp.relpath(p, ROOT) for package in ('wgse_mmseg', 'wgse_bench')
+    building = {osp.relpath(p, ROOT)
+                for package in ('wgse_mmseg', 'wgse_bench')
                 for p in glob.glob(osp.join(ROOT, package, '**', '*.py'),
                                    recursive=True)
                 if 'ArgumentParser(' in open(p).read()}

@@ -117,7 +117,8 @@ def test_mim_train_and_test_from_a_regular_install(installed,
     env = dict(os.environ, PYTHONPATH=str(installed),
                PATH=BIN + os.pathsep + os.environ.get('PATH', ''))
     found = run([sys.executable, '-c', 'from mim.utils import '
-                 'get_installed_path; print(get_installed_path("wgse_mmseg"))'],
+                 'get_installed_path; '
+                 'print(get_installed_path("wgse_mmseg"))'],
                 cwd=tmp_path, env=env).strip().splitlines()[-1]
     record = next(installed.glob('wgse_mmseg-*.dist-info')) / 'RECORD'
     first = record.read_text().splitlines()[0].split(',')[0]

@@ -68,7 +68,8 @@ def test_load_spike_from_file_reads_both_layouts(both_ways):
             dict(img_path=paths['HWT']))
 
 
-def test_reconstruct_tool_reads_both_layouts(both_ways, tmp_path, capsys, load_tool):
+def test_reconstruct_tool_reads_both_layouts(both_ways, tmp_path, capsys,
+                                             load_tool):
     paths, clip = both_ways
     tool = load_tool('tools/misc/reconstruct.py')
     images = {}

@@ -70,7 +70,8 @@ def test_the_configs_runner_builds_the_model_with_the_childs_t(tmp_path):
 def test_fields_that_disagree_are_listed(tmp_path):
     cfg = Config.fromfile(_child(
         tmp_path, 'pspnet_raw.py',
-        'num_steps = 41\nmodel = dict(data_preprocessor=dict(num_steps=41))\n'))
+        'num_steps = 41\n'
+        'model = dict(data_preprocessor=dict(num_steps=41))\n'))
     with pytest.raises(SpikeSettingsError) as error:
         apply_spike_settings(cfg)
     message = str(error.value)

@@ -1,9 +1,10 @@
 """Benchmark spike segmentors: parameters, FLOPs, latency, throughput,
 training-step time, the enhancer's share of the step and peak memory.
 
-    python tools/analysis_tools/benchmark.py CONFIG [CONFIG ...] [--device cpu|cuda]
-        [--crop H W] [--repeat N] [--warmup N] [--batch-size N]
-        [--threads N] [--out FILE] [--cfg-options num_steps=41 ...]
+    python tools/analysis_tools/benchmark.py CONFIG [CONFIG ...]
+        [--device cpu|cuda] [--crop H W] [--repeat N] [--warmup N]
+        [--batch-size N] [--threads N] [--out FILE]
+        [--cfg-options num_steps=41 ...]
 
 Prints a Markdown table, one row per config, with the device and software
 versions beneath it; ``--out`` also writes every number (and the raw timing

@@ -18,7 +18,8 @@ Prints two tables:
 Each time is the median of ``--repeat`` runs after one warm-up run. The
 default size runs in about a minute on two cores; the full-size run is::
 
-    python tools/analysis_tools/benchmark_simulator.py --height 512 --width 1024 --repeat 5
+    python tools/analysis_tools/benchmark_simulator.py --height 512 \\
+        --width 1024 --repeat 5
 
 ``--threads`` sets torch's intra-op threads (default 1, the NumPy loop's
 count, so the ratio compares algorithms, not core counts).

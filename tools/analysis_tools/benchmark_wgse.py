@@ -19,10 +19,12 @@ during the first forward+backward after set-up (inputs and model already
 built), also per pixel (``B*H*W``); time the median (and min-max) wall time
 of ``--repeat`` further forward+backward passes after one warm-up.
 
-    python tools/analysis_tools/benchmark_wgse.py                          # the issue's shapes
-    python tools/analysis_tools/benchmark_wgse.py --shapes 4x41x64x64 --repeat 3
+    python tools/analysis_tools/benchmark_wgse.py  # the issue's shapes
+    python tools/analysis_tools/benchmark_wgse.py --shapes 4x41x64x64 \\
+        --repeat 3
     python tools/analysis_tools/benchmark_wgse.py --out results.json
-    python tools/analysis_tools/benchmark_wgse.py --device cuda --shapes 4x129x256x512
+    python tools/analysis_tools/benchmark_wgse.py --device cuda \\
+        --shapes 4x129x256x512
 
 Needs ``pytorch_wavelets`` (``requirements/tests.txt``).
 """

@@ -1,9 +1,9 @@
 """Train and evaluate a grid of configs over seeds; tabulate and plot.
 
-    python tools/analysis_tools/run_experiments.py GRID --data-root DIR --work-dir DIR
-        [--seeds 0 1 2] [--epochs N | --max-iters N] [--only NAME ...]
-        [--report-dir DIR] [--keep-checkpoints] [--list] [--report-only]
-        [--benchmark] [--deployment FILE]
+    python tools/analysis_tools/run_experiments.py GRID --data-root DIR
+        --work-dir DIR [--seeds 0 1 2] [--epochs N | --max-iters N]
+        [--only NAME ...] [--report-dir DIR] [--keep-checkpoints] [--list]
+        [--report-only] [--benchmark] [--deployment FILE]
 
 GRID (e.g. configs/experiments/grid_cpu.py) lists models and enhancers; each
 entry ``<model>_<enhancer>`` is the model's config with
@@ -150,7 +150,8 @@ def main(argv=None):
             osp.join(settings.data_root, 'spike', 'train')):
         raise SystemExit(
             f'{args.data_root}/spike/train does not exist. Make the embedded '
-            f'dataset with: python tools/dataset_converters/make_synthetic_dataset.py '
+            f'dataset with: python '
+            f'tools/dataset_converters/make_synthetic_dataset.py '
             f'{args.data_root} --num-steps {grid.cfg_options["num_steps"]}')
     runs = experiments.plan(entries, settings, grid)
     try:

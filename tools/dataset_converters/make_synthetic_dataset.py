@@ -1,6 +1,8 @@
-"""Make the embedded Spike-Cityscapes-format dataset (procedural street scenes).
+"""Make the embedded Spike-Cityscapes-format dataset (procedural street
+scenes).
 
-    python tools/dataset_converters/make_synthetic_dataset.py data/synthetic_spike_cityscapes
+    python tools/dataset_converters/make_synthetic_dataset.py \\
+        data/synthetic_spike_cityscapes
 
 Resumable: a sample whose marker matches the settings and its files is kept;
 any other is made again. See wgse_mmseg/data_generation/synthetic.py.
@@ -19,7 +21,7 @@ DECLARED = make_synthetic_dataset.declaration.arguments
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('out_dir', type=DECLARED['out_dir'],
                         help='dataset root to write')
     parser.add_argument('--num-train', type=DECLARED['num_train'], default=48)

@@ -83,7 +83,8 @@ def main():
     part = '' if args.shard == WHOLE else f' (shard {args.shard})'
     print(f'{args.out_dir}{part}: {counts["sequence"]} samples from '
           f'sequences, {counts["static"]} from the static model, '
-          f'{counts["skipped"]} already done, in {time.perf_counter() - start:.1f} s')
+          f'{counts["skipped"]} already done, in '
+          f'{time.perf_counter() - start:.1f} s')
 
 
 if __name__ == '__main__':

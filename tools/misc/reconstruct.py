@@ -1,15 +1,15 @@
 """Reconstruct grey images from a spike stream and write them as PNGs, or
 walk a recording into a video.
 
-    python tools/misc/reconstruct.py SPIKE_FILE --out DIR [--method wgse|tfp|tfi]
-        [--checkpoint CKPT] [--height H --width W] [--layout THW|HWT]
-        [--frames 150,...] [--num-steps 41] [--exposure auto|none|GAIN]
-        [--device cpu]
+    python tools/misc/reconstruct.py SPIKE_FILE --out DIR
+        [--method wgse|tfp|tfi] [--checkpoint CKPT] [--height H --width W]
+        [--layout THW|HWT] [--frames 150,...] [--num-steps 41]
+        [--exposure auto|none|GAIN] [--device cpu]
     python tools/misc/reconstruct.py SPIKE_FILE --out VIDEO.mp4|.gif
         --stride N [--batch-size 8] [--fps 10] [--save-frames] [...]
 
-``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat``, ``.spk``,
-``.npy``, ``.npz``; a ``.dat`` needs ``--height``/``--width`` or a
+``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat``,
+``.spk``, ``.npy``, ``.npz``; a ``.dat`` needs ``--height``/``--width`` or a
 ``<file>.json`` side file). For each requested centre frame (default: the
 middle frame) the window of ``--num-steps`` frames centred on it goes through
 the method, and ``DIR/<stem>_<frame>.png`` (8-bit grey, upright) is written;

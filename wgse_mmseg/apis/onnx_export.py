@@ -137,7 +137,8 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
         raise ValueError(
             f'{path}: this model does not export to ONNX '
             f'({type(graph.enhancer).__name__} enhancer; TFI does not: '
-            f'see docs/user_guide.md, "Export to ONNX"): {type(err).__name__}: '
+            f'see docs/user_guide.md, "Export to ONNX"): '
+            f'{type(err).__name__}: '
             f'{summary[0][:300] if summary else ""}') from err
     model = program.model_proto
     if dataset_meta is not None:

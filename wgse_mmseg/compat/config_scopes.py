@@ -51,7 +51,8 @@ def map_scopes_to_installed_distributions() -> Dict[str, str]:
     providers = None
     changed = {}
     for module, distribution in list(MODULE2PACKAGE.items()):
-        if importlib.util.find_spec(module) is None or _installed(distribution):
+        if importlib.util.find_spec(module) is None or \
+                _installed(distribution):
             continue
         if providers is None:  # reads every installed distribution: once
             providers = metadata.packages_distributions()

@@ -108,8 +108,8 @@ def apply_exposure(image: np.ndarray, exposure: Exposure = 'auto') -> Exposed:
     Args:
         image: ``(H, W)`` non-negative intensities, 1 = white.
         exposure: ``'auto'`` (only a clearly under-exposed image is
-            brightened: its 99.5th percentile to white), ``'none'`` (gain 1) or a
-            positive gain.
+            brightened: its 99.5th percentile to white), ``'none'`` (gain 1) or
+            a positive gain.
 
     Returns:
         The ``(H, W)`` float32 image in ``[0, 1]`` (``image``), the gain

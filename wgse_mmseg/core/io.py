@@ -47,10 +47,11 @@ requested window of frames (memory-mapped; an ``.npz`` member inflated
 once, only up to the window's end, or, where its frames are interleaved
 (``(H, W, T)`` stored in C order, ``(T, H, W)`` in Fortran order), inflated
 whole in chunks keeping only the window), and names the file and the
-expected sizes when the file does not fit. The sizes a file declares (header, side
-file, zip member, ``.npy`` header) are checked against the file and against
-:mod:`wgse_mmseg.core.limits` before anything is allocated. Writers write atomically: a
-temporary file beside the target, renamed into place when complete.
+expected sizes when the file does not fit. The sizes a file declares (header,
+side file, zip member, ``.npy`` header) are checked against the file and
+against :mod:`wgse_mmseg.core.limits` before anything is allocated. Writers
+write atomically: a temporary file beside the target, renamed into place when
+complete.
 """
 import contextlib
 import functools

@@ -39,9 +39,10 @@ No input replaced
     :class:`OutputFolderError` naming both, and nothing is written. Tools
     also check their output arguments against their other arguments
     before any work (:func:`check_tool_outputs`). (A library caller may
-    read a file and save it back; only a tool's run is guarded.) A lock or state file the package
-    writes in place is one it made: a file with other names (a hard link)
-    or content that is not its record is refused, never truncated.
+    read a file and save it back; only a tool's run is guarded.) A lock or
+    state file the package writes in place is one it made: a file with other
+    names (a hard link) or content that is not its record is refused, never
+    truncated.
 State verified before use
     What a tool finds in its folder is checked before it is trusted (a
     frame against the size and SHA-256 its writer recorded, a sample

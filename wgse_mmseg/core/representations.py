@@ -8,9 +8,10 @@ WGSE::
     model = dict(data_preprocessor=dict(enhancer=dict(type='TFI')))
 
 They have no parameters and need only torch; MMSeg's registry knows them by
-their class names (:mod:`wgse_mmseg.models.enhancers`). Each is computed with a handful of vectorised
-tensor operations (cumulative sums and maxima, average pooling), in float32
-(float64 for float64 input) even under autocast, like WGSE's transform.
+their class names (:mod:`wgse_mmseg.models.enhancers`). Each is computed with a
+handful of vectorised tensor operations (cumulative sums and maxima, average
+pooling), in float32 (float64 for float64 input) even under autocast, like
+WGSE's transform.
 
 Where they come from:
 

@@ -117,7 +117,8 @@ def _single_level_analysis(wavelet: pywt.Wavelet, length: int,
 
 def _single_level_synthesis(wavelet: pywt.Wavelet, n_coeffs: int,
                             mode: str) -> Tuple[np.ndarray, np.ndarray]:
-    """Matrices ``(lo, hi)`` of one ``pywt.idwt``: ``x = lo @ cA + hi @ cD``."""
+    """Matrices ``(lo, hi)`` of one ``pywt.idwt``:
+    ``x = lo @ cA + hi @ cD``."""
     rec_lo = np.asarray(wavelet.rec_lo, dtype=np.float64)
     rec_hi = np.asarray(wavelet.rec_hi, dtype=np.float64)
     taps = len(rec_lo)

@@ -403,10 +403,11 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
     Everything is computed before anything is written; then the marker is
     removed, the label and the spikes are written, and the marker (recipe,
     size and SHA-256 of the bytes written to both files, the simulator's
-    metadata) last, each file atomically (:mod:`wgse_mmseg.core.markers`). Returns ``'skipped'`` when
-    the sample is already done, else its model, ``'sequence'`` or
-    ``'static'``. A link at a sample's file is replaced, a linked folder
-    refused (:class:`~wgse_mmseg.core.output_folder.OwnedFolder`).
+    metadata) last, each file atomically (:mod:`wgse_mmseg.core.markers`).
+    Returns ``'skipped'`` when the sample is already done, else its model,
+    ``'sequence'`` or ``'static'``. A link at a sample's file is replaced, a
+    linked folder refused
+    (:class:`~wgse_mmseg.core.output_folder.OwnedFolder`).
     """
     from ..core.simulation import simulate_spikes  # torch, where it runs
     owned = OwnedFolder(out_dir)

@@ -3,9 +3,9 @@
 Each sample is a street-like scene (sky, buildings with windows, vegetation,
 poles and signs, sidewalk, road with lane marks) with cars and pedestrians
 moving across it. The scene is rendered at several instants, turned into a
-spike stream by :func:`wgse_mmseg.core.simulation.simulate_spikes`, and labelled
-with Cityscapes train ids at the middle instant, where the stream is centred.
-Everything is seeded: scene ``i`` is drawn from
+spike stream by :func:`wgse_mmseg.core.simulation.simulate_spikes`, and
+labelled with Cityscapes train ids at the middle instant, where the stream is
+centred. Everything is seeded: scene ``i`` is drawn from
 ``derive_generator(seed, i)`` and its spikes from
 ``derive_seed(seed, i, 'spikes')`` (:mod:`wgse_mmseg.core.seeding`), so the
 same arguments give the same files.

@@ -19,7 +19,8 @@ interrupted run resumes. A run owns ``out_dir``
 (:func:`~wgse_mmseg.core.output_folder.own_folder`): a second run into it
 is refused naming the first, or waits with ``--wait``::
 
-    python -m wgse_mmseg.data_generation.training_images data/reconstruction_images
+    python -m wgse_mmseg.data_generation.training_images \\
+        data/reconstruction_images
 """
 import argparse
 import contextlib

@@ -103,7 +103,8 @@ class LoadSpikeImagePair(BaseTransform):
 
 @TRANSFORMS.register_module()
 class PackReconstructionInputs(BaseTransform):
-    """Pack a sample for :class:`~wgse_mmseg.models.reconstruction.SpikeReconstructor`.
+    """Pack a sample for
+    :class:`~wgse_mmseg.models.reconstruction.SpikeReconstructor`.
 
     Returns ``inputs``: ``(T, H, W)`` uint8 tensor, and ``data_samples``: a
     ``BaseDataElement`` with ``gt_image`` (``PixelData`` ``(1, H, W)``
@@ -203,9 +204,9 @@ class SimulatedSpikeImageDataset(BaseDataset):
 
     Sample ``i`` is drawn from ``derive_generator(seed, i)`` and its spikes
     from ``derive_seed(seed, i, 'spikes')`` (the package's one seed
-    derivation rule), so the set is the same on every run: an image (chosen with probability
-    proportional to its area), a view of ``crop_size`` moved along a random
-    trajectory, a random brightness (gain in
+    derivation rule), so the set is the same on every run: an image (chosen
+    with probability proportional to its area), a view of ``crop_size`` moved
+    along a random trajectory, a random brightness (gain in
     ``gain_range``, gamma log-uniform in ``gamma_range``), then
     :func:`~wgse_mmseg.core.simulation.simulate_spikes` with
     ``threshold = 1 / white_rate`` (the REDS scale). The ground truth is the
@@ -214,8 +215,9 @@ class SimulatedSpikeImageDataset(BaseDataset):
 
     Args:
         image_dir: folder of images (searched recursively, colour -> grey);
-            ``None`` for the sample images matplotlib ships. Images are read once into
-            memory, downscaled to at most ``max_side`` pixels per side.
+            ``None`` for the sample images matplotlib ships. Images are read
+            once into memory, downscaled to at most ``max_side`` pixels per
+            side.
         num_samples: length of the dataset.
         crop_size: ``(h, w)`` of each sample.
         num_steps: spike frames per sample.

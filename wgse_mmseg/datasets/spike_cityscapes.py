@@ -21,7 +21,8 @@ _VERIFY_MODES = ('size', 'full', 'none')
 class SpikeCityscapesDataset(CityscapesDataset):
     """Spike streams beside Cityscapes' fine labels (19 classes, palette).
 
-    Layout under ``data_root`` (docs/user_guide.md, "Spike-Cityscapes layout")::
+    Layout under ``data_root`` (docs/user_guide.md, "Spike-Cityscapes
+    layout")::
 
         spike/{train,val}/<city>/<city>_<seq>_<frame>_spike.spk
         spike/{train,val}/<city>/<city>_<seq>_<frame>_spike.json  marker
@@ -69,8 +70,8 @@ class SpikeCityscapesDataset(CityscapesDataset):
                     f'SpikeCityscapesDataset: {folder} ({key} under '
                     f'data_root={self.data_root!r}) is not a directory; set '
                     f'data_root to a Spike-Cityscapes root (docs/'
-                    f'user_guide.md, "Spike-Cityscapes layout") or make one with '
-                    f'tools/dataset_converters/spike_cityscapes.py')
+                    f'user_guide.md, "Spike-Cityscapes layout") or make one '
+                    f'with tools/dataset_converters/spike_cityscapes.py')
         listed = self._listing()
         served, problems = [], Counter()
         for info in listed:

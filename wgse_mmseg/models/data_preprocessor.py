@@ -167,7 +167,8 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
                     f'label ids')
 
     def forward(self, data: dict, training: bool = False) -> Dict[str, Any]:
-        """``data['inputs']``: list of ``(T, H, W)``; returns ``(B, C, H, W)``."""
+        """``data['inputs']``: list of ``(T, H, W)``; returns
+        ``(B, C, H, W)``."""
         self._check_num_steps(data['inputs'], data.get('data_samples'))
         self._check_values(data['inputs'], data.get('data_samples'))
         self._check_labels(data['inputs'], data.get('data_samples'),

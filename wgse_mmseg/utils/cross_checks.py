@@ -180,6 +180,6 @@ def check_training_fits(cfg, model: nn.Module) -> None:
                 model, num_steps, 2, *probe, training=True) is None:
             raise ModelFitError(
                 f'{name}: train_dataloader.batch_size=1 does not train this '
-                f'model: {cut(str(failure), 200)} (a batch norm after a pooled '
-                f'1x1 branch sees one value per channel); the smallest '
+                f'model: {cut(str(failure), 200)} (a batch norm after a '
+                f'pooled 1x1 branch sees one value per channel); the smallest '
                 f'batch_size that works is 2')

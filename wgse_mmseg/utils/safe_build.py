@@ -32,8 +32,8 @@ a file; a value a built class refuses (its declared arguments and stated
 limits, :mod:`wgse_mmseg.core.arguments`: ``channels=200000``) is reported
 as a :class:`ConfigDataError` naming the file and the argument's key path
 (``ckpt.pth: meta['model'].channels: SpikeReconstructor: channels must be
-...``), before anything is allocated. Every build from file data in the package goes through it
-(``tests/utils/test_safe_build.py`` audits the call sites).
+...``), before anything is allocated. Every build from file data in the package
+goes through it (``tests/utils/test_safe_build.py`` audits the call sites).
 """
 import inspect
 from typing import Any, Dict, FrozenSet, Mapping, Optional

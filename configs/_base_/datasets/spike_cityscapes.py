@@ -1,10 +1,12 @@
-# Spike-Cityscapes: Cityscapes scenes as spike streams (docs/user_guide.md, "Spike-Cityscapes layout").
+# Spike-Cityscapes: Cityscapes scenes as spike streams (docs/user_guide.md,
+# "Spike-Cityscapes layout").
 #
 # The spike settings are set here, once:
 #   num_steps  T, spike frames per sample (the paper: 129)
 #   data_root  the dataset root
 #   crop_size  training crop (H, W) (the paper: 256 x 512)
-# Override them with `--cfg-options num_steps=41 data_root=DIR crop_size=128,256`
+# Override them with
+# `--cfg-options num_steps=41 data_root=DIR crop_size=128,256`
 # (any tool: the configs' runner, SpikeRunner) or by setting them alone in a
 # child config: they reach every field that carries them (the list:
 # wgse_mmseg/utils/spike_settings.py), so the loader, the preprocessor and the

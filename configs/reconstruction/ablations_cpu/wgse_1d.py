@@ -4,7 +4,8 @@
 # same 64-channel residual network and the same 300 iterations, batch 4, so
 # they differ only in the enhancer. This one: WGSE-1d (db8, 5 levels).
 #   python tools/train.py configs/reconstruction/ablations_cpu/wgse_1d.py \
-#       --cfg-options train_dataloader.dataset.datasets.1.dataset.data_root=REDS_TRAIN
+#       --cfg-options \
+#       train_dataloader.dataset.datasets.1.dataset.data_root=REDS_TRAIN
 # docs/reconstruction.md ("Ablations") has the results and the commands.
 _base_ = ['../wgse_resnet_cpu_finetune.py']
 load_from = None

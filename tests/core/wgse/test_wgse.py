@@ -428,7 +428,8 @@ def test_stability_of_parameter_gradients(model_pair, steps):
 def _cpu_autocast_supports(dtype):
     try:
         with torch.autocast('cpu', dtype=dtype):
-            torch.nn.functional.conv1d(torch.ones(1, 1, 3), torch.ones(1, 1, 1))
+            torch.nn.functional.conv1d(torch.ones(1, 1, 3),
+                                       torch.ones(1, 1, 1))
         return True
     except (RuntimeError, ValueError):
         return False

@@ -199,8 +199,8 @@ class Integrator:
                                             None]) -> None:
         """``task(begin, end, buffers)`` for every tile of pixels; on the
         CPU the tiles run side by side on torch's threads
-        (:func:`~wgse_mmseg.core.parallel.for_each_on_threads`), each thread with
-        its own buffers, kept for the next call (``None`` for the compiled
+        (:func:`~wgse_mmseg.core.parallel.for_each_on_threads`), each thread
+        with its own buffers, kept for the next call (``None`` for the compiled
         kernel, which needs none)."""
         pixels = self.charge.numel()
         spare = iter(self._buffers)

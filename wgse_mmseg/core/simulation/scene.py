@@ -16,7 +16,8 @@ from typing import Any, List, Mapping, Optional, Union
 
 import yaml
 
-from ..limits import EXCERPT_CHARS, cut, excerpt, load_json_file, read_text_file
+from ..limits import (EXCERPT_CHARS, cut, excerpt, load_json_file,
+                      read_text_file)
 from .effect import EFFECTS, Effect
 
 __all__ = []

@@ -1,11 +1,11 @@
 """The backends that run WGSE's band networks, behind one interface.
 
-A backend takes the band networks (:class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`,
-one per wavelet band) and every pixel's wavelet coefficients ``(B, C, P)``
-(``P = H*W`` pixels; the bands one after another along ``C``, so that one
-coefficient of every pixel is a contiguous row) and returns the networks'
-outputs in the same layout. All compute the same function; they
-differ in where they run and how fast:
+A backend takes the band networks
+(:class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`, one per wavelet band) and
+every pixel's wavelet coefficients ``(B, C, P)`` (``P = H*W`` pixels; the bands
+one after another along ``C``, so that one coefficient of every pixel is a
+contiguous row) and returns the networks' outputs in the same layout. All
+compute the same function; they differ in where they run and how fast:
 
 * ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
   every variant. ``dim=1`` runs the chunked kernel of
@@ -16,8 +16,9 @@ differ in where they run and how fast:
 * ``'compiled'``: the C kernel of
   :mod:`~wgse_mmseg.core.wgse.compiled_band_networks`: CPU with AVX2/FMA,
   where the extension was built; float32, the paper's width and kernel.
-* ``'triton'``: the kernel of :mod:`~wgse_mmseg.core.wgse.triton_band_networks`:
-  CUDA, where triton imports; the paper's network shape.
+* ``'triton'``: the kernel of
+  :mod:`~wgse_mmseg.core.wgse.triton_band_networks`: CUDA, where triton
+  imports; the paper's network shape.
 * ``'reference'``: the band networks' own ``nn.Conv`` modules, the
   definition the others are tested against: any variant, device and dtype,
   following autocast; it keeps every activation for the backward pass

@@ -232,7 +232,8 @@ def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
     Arguments and result as
     :func:`~wgse_mmseg.core.wgse.torch_band_networks.torch_band_networks`
     (``coeffs`` ``(N, C)``, bands side by side); only where
-    :func:`unsupported` returns ``None``. Gradients flow to the parameters, not to ``coeffs``.
+    :func:`unsupported` returns ``None``. Gradients flow to the parameters, not
+    to ``coeffs``.
     """
     reason = unsupported(coeffs, weights, residuals)
     if reason:

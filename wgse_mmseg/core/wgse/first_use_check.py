@@ -13,8 +13,8 @@ with the ``torch`` backend in float64 on the same device, within
 :data:`TOLERANCE` at every precision. A compile
 or launch error, a NaN or Inf, or an error above the tolerance fails the
 check. A log line says the check starts (in a machine's first process it
-compiles the kernel, for about a minute on an H100), and the result is kept for the
-process and logged once: where it failed, ``'auto'`` then runs the
+compiles the kernel, for about a minute on an H100), and the result is kept for
+the process and logged once: where it failed, ``'auto'`` then runs the
 ``torch`` backend; a backend named explicitly raises
 :class:`FirstUseCheckFailed` with the same message.
 

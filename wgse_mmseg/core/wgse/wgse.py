@@ -337,7 +337,8 @@ class WGSE(nn.Module):
     def _matrices(self, num_steps: int, device: torch.device,
                   dtype: torch.dtype) -> Tuple[torch.Tensor, torch.Tensor,
                                                List[int]]:
-        """Analysis ``(C, T)`` and synthesis ``(T, C)`` matrices, band sizes."""
+        """Analysis ``(C, T)`` and synthesis ``(T, C)`` matrices, band
+        sizes."""
         key = (num_steps, device, dtype)
         if key not in self._transforms:
             analysis = analysis_matrix(num_steps, self.wavelet, self.level,
@@ -364,7 +365,8 @@ class WGSE(nn.Module):
                 f'{tuple(spikes.shape)}')
         check_finite('WGSE', 'spikes', spikes)
         batch, num_steps, height, width = spikes.shape
-        dtype = torch.float64 if spikes.dtype == torch.float64 else torch.float32
+        dtype = (torch.float64 if spikes.dtype == torch.float64
+                 else torch.float32)
         weights = self.band_networks[0].output_convs[-1].weight.dtype
         if dtype == torch.float64 and weights != torch.float64:
             raise ValueError(

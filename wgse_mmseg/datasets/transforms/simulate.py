@@ -57,7 +57,8 @@ class SimulateSpikes(BaseTransform):
 
     Args:
         num_steps: ``T``, readout steps to simulate.
-        threshold, gain: as in :func:`~wgse_mmseg.core.simulation.simulate_spikes`
+        threshold, gain: as in
+            :func:`~wgse_mmseg.core.simulation.simulate_spikes`
             (intensity 1.0 fires ``gain / threshold`` spikes per step; the
             REDS convention is ``threshold=1 / 0.6``).
         effects: the scene: a mapping ``effect name -> parameters`` or a

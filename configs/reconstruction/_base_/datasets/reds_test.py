@@ -1,5 +1,5 @@
 # Evaluation on a REDS-layout folder (docs/reconstruction.md):
-#   data_root/spike/<name>.dat  (250x400 frames)  beside  data_root/gt/<name>.png
+#   data_root/spike/<name>.dat (250x400 frames) beside data_root/gt/<name>.png
 # Each sample is the num_steps-frame window centred on the ground truth's
 # frame (the middle frame of the stream). Settings overridable with
 # `--cfg-options num_steps=41 data_root=DIR crop_size=H,W` or in a child
