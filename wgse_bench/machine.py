@@ -72,7 +72,9 @@ def machine_record(device: str = 'cpu') -> Dict[str, Any]:
     ``torch_threads``, ``load_average`` (1 minute, ``None`` where the OS
     has none), ``python``, ``platform``, ``torch`` and each key of
     :data:`PACKAGES`; on CUDA also ``gpu``, ``capability``,
-    ``gpu_memory_gib``, ``sms``, ``driver``, ``cuda`` and ``cudnn``. Reads
+    ``gpu_memory_gib``, ``sms``, ``sm_clock_mhz`` (the SMs' peak clock the
+    driver reports; ``None`` where torch does not read it), ``driver``,
+    ``cuda`` and ``cudnn``. Reads
     versions from the installed distributions' metadata: imports nothing of
     OpenMMLab.
     """
@@ -90,7 +92,9 @@ def machine_record(device: str = 'cpu') -> Dict[str, Any]:
         record.update(gpu=props.name,
                       capability=f'sm_{props.major}{props.minor}',
                       gpu_memory_gib=round(props.total_memory / 2**30, 1),
-                      sms=props.multi_processor_count, driver=_driver(),
+                      sms=props.multi_processor_count,
+                      sm_clock_mhz=getattr(props, 'clock_rate', 0) / 1e3
+                      or None, driver=_driver(),
                       cuda=torch.version.cuda,
                       cudnn=torch.backends.cudnn.version())
     return record

@@ -26,7 +26,9 @@ coefficient of a tile takes), all and tensor-core ones (``HMMA``,
 position (times the
 warps, over the pixels of a tile). An SM issues at most one warp
 instruction per scheduler and clock, so :func:`predicted_ms` turns those
-counts into a lower bound on a pass's time at a GPU's clock.
+counts into a lower bound on a pass's time at a GPU's clock;
+:func:`measured_against_predicted` sets that bound beside what a GPU
+report's profile measured (``--against gpu.json``).
 
 Triton's interpreter (``TRITON_INTERPRET=1``) replaces the kernels by
 Python functions that cannot be compiled, so the compiles run in a fresh
@@ -43,7 +45,7 @@ import sys
 import tempfile
 from typing import Dict, List, NamedTuple, Optional, Sequence
 
-from wgse_mmseg.core.arguments import Choice, Integer
+from wgse_mmseg.core.arguments import Choice, Integer, Path
 from wgse_mmseg.core.limits import MAX_WORKERS
 
 __all__ = []
@@ -208,6 +210,103 @@ def predicted_ms(positions: float, instructions_per_position: float,
         sms * schedulers * clock_ghz * 1e6)
 
 
+def measured_against_predicted(report: Dict, rows: Sequence[Dict]
+                               ) -> List[Dict]:
+    """The band kernels a GPU report profiled, each beside the cost model's
+    floor on the report's GPU. ``report``: the report's JSON (gpu.json, by
+    :mod:`.gpu_report`; its ``profile`` section); ``rows``:
+    :func:`compile_all`'s rows for the report's target. Per profiled
+    precision and kernel: ``per_position`` (warp instructions a coefficient
+    position), ``predicted_ms`` (:func:`predicted_ms` at the report's SMs
+    and peak clock, times the kernel's launches), ``measured_ms`` and
+    ``of_issue`` (predicted over measured: the share of the SMs' issue
+    slots the kernel's instructions filled). The variants are the launch
+    entries a training pass runs (no input gradient).
+
+    Raises:
+        ValueError: the report lacks what this needs (a GPU of one of
+            :data:`ARCHITECTURES`, its SMs and clock, a profile), or
+            ``rows`` holds no variant a profiled kernel ran.
+    """
+    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
+                                                           backward_configs)
+    entries = dict(band_forward=FORWARD_CONFIGS[0],
+                   band_backward=backward_configs(False)[0])
+    env = report.get('environment') if isinstance(report, dict) else None
+    if not isinstance(env, dict) or env.get('capability') not in \
+            ARCHITECTURES or not env.get('sms') or \
+            not env.get('sm_clock_mhz'):
+        raise ValueError(
+            f"the report names no GPU of {list(ARCHITECTURES)} with its SMs "
+            f"and clock (environment's capability, sms, sm_clock_mhz; a "
+            f"report from before they were recorded has no clock)")
+    sections = report.get('sections')
+    profile = sections.get('profile') if isinstance(sections, dict) else None
+    measured = [r for r in profile.get('rows', []) if isinstance(r, dict)
+                and r.get('status') == 'ok'] \
+        if isinstance(profile, dict) else []
+    if not measured:
+        raise ValueError('the report has no profile of a WGSE pass (its '
+                         "'profile' section did not run or failed)")
+    try:
+        return [row for run in measured
+                for row in _against_floor(run, env, entries, rows)]
+    except (KeyError, TypeError) as err:
+        raise ValueError(f"the report's profile is not as "
+                         f'dev/gpu_report.py writes it ({err!r} missing or '
+                         f'odd)') from err
+
+
+def _against_floor(run: Dict, env: Dict, entries: Dict,
+                   rows: Sequence[Dict]) -> List[Dict]:
+    """:func:`measured_against_predicted`'s rows of one profiled pass."""
+    found = []
+    for kernel_row in run.get('rows', []):
+        kernel = next((k for k in entries if k in kernel_row['kernel']),
+                      None)
+        if kernel is None:
+            continue
+        entry = entries[kernel]
+        compiled = [r for r in rows if r['arch'] == env['capability']
+                    and r['kernel'] == kernel
+                    and r['hidden'] == run['hidden']
+                    and r['precision'] == run['precision']
+                    and not r['input_grad']
+                    and r['block'] == entry.block
+                    and r['num_warps'] == entry.num_warps]
+        if not compiled:
+            raise ValueError(
+                f"no compiled {kernel} for {env['capability']} at "
+                f"{run['precision']}, {run['hidden']} channels, "
+                f'{entry.name}')
+        floor = kernel_row['launches'] * predicted_ms(
+            run['positions'], compiled[0]['per_position'], env['sms'],
+            env['sm_clock_mhz'] / 1e3)
+        found.append(dict(
+            precision=run['precision'], kernel=kernel,
+            per_position=compiled[0]['per_position'],
+            predicted_ms=floor, measured_ms=kernel_row['ms'],
+            of_issue=floor / kernel_row['ms']))
+    return found
+
+
+def format_comparison(found: Sequence[Dict], report: Dict) -> str:
+    """:func:`measured_against_predicted`'s rows as a Markdown table, the
+    GPU named."""
+    env = report['environment']
+    lines = [f"{env.get('gpu', env['capability'])} ({env['capability']}, "
+             f"{env['sms']} SMs at {env['sm_clock_mhz']:.0f} MHz, 4 "
+             f'schedulers each):', '',
+             '| precision | kernel | instr/position | issue floor ms '
+             '| measured ms | of issue |',
+             '|---|---|--:|--:|--:|--:|']
+    lines += [f"| {r['precision']} | {r['kernel']} | "
+              f"{r['per_position']:.1f} | {r['predicted_ms']:.2f} | "
+              f"{r['measured_ms']:.2f} | {r['of_issue']:.0%} |"
+              for r in found]
+    return '\n'.join(lines)
+
+
 def _cuobjdump() -> str:
     import triton
     path = os.path.join(os.path.dirname(triton.__file__), 'backends',
@@ -333,7 +432,32 @@ def build_parser() -> argparse.ArgumentParser:
                         default=min(os.cpu_count() or 1, MAX_WORKERS))
     parser.add_argument('--json', action='store_true',
                         help='print the rows as JSON instead of a table')
+    parser.add_argument('--against', metavar='REPORT', type=Path(),
+                        help="a GPU report's gpu.json (dev/gpu_report.py): "
+                        'compile for its GPU and print each profiled band '
+                        "kernel's measured time beside the cost model's "
+                        'floor, as the share of issue it reached')
     return parser
+
+
+def _report_of_this_code(path: str) -> Dict:
+    """The report at ``path``, checked to have measured the code here (its
+    digest), so that what is compiled here is what ran there."""
+    from .gpu_report import code_digest
+    try:
+        with open(path, 'rb') as f:
+            report = json.loads(f.read())
+    except (OSError, ValueError) as err:
+        raise ValueError(f'{path}: cannot be read as a report ({err})')
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    measured = report.get('environment', {}).get('code') \
+        if isinstance(report, dict) else None
+    here = code_digest(root)
+    if measured != here:
+        raise ValueError(f'{path}: it measured other code (digest '
+                         f'{measured}) than this checkout\'s ({here}); '
+                         f'compiling this code would not predict that run')
+    return report
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -342,6 +466,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
         parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
                      'cannot be compiled')
+    if args.against:
+        try:
+            report = _report_of_this_code(args.against)
+            capability = report.get('environment', {}).get('capability')
+            rows = _compile_here([capability], args.jobs) \
+                if capability in ARCHITECTURES else []
+            found = measured_against_predicted(report, rows)
+        except ValueError as err:
+            parser.error(f'--against {args.against}: {err}')
+        print(json.dumps(found) if args.json else
+              format_comparison(found, report))
+        return 0
     rows = _compile_here(args.archs, args.jobs)
     print(json.dumps(rows) if args.json else format_table(rows))
     return 0

@@ -106,7 +106,8 @@ def profile_pass(shape: Sequence[int], device: str,
     """One WGSE forward+backward of a ``(B, T, H, W)`` batch of spikes on a
     CUDA ``device`` at ``precision`` (``'tf32'``, or ``'bf16'``/``'fp16'``
     autocast), profiled after one warm-up pass: :func:`summarize`'s result
-    with ``device``, ``precision`` and ``backend`` (what ran)."""
+    with ``device``, ``precision``, ``backend`` (what ran), ``positions``
+    (coefficient positions of the pass) and ``hidden`` (channels)."""
     from wgse_mmseg.core.wavelets import band_lengths
     from wgse_mmseg.core.wgse import WGSE
     if not torch.cuda.is_available() or not device.startswith('cuda'):
@@ -140,11 +141,13 @@ def profile_pass(shape: Sequence[int], device: str,
     coefficients = sum(band_lengths(steps, model.wavelet, model.level,
                                     model.mode))
     name = torch.cuda.get_device_name(device)
-    return dict(summarize(intervals, batch * height * width * coefficients,
-                          model.band_networks[0].hidden_channels,
+    positions = batch * height * width * coefficients
+    hidden = model.band_networks[0].hidden_channels
+    return dict(summarize(intervals, positions, hidden,
                           peak_tflops(name, precision)),
                 device=name, precision=precision,
-                backend=model.backend_in_use)
+                backend=model.backend_in_use, positions=positions,
+                hidden=hidden)
 
 
 def table_lines(profile: Dict[str, object]) -> List[str]:

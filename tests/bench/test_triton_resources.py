@@ -216,3 +216,78 @@ def test_step_loop_and_cost_by_hand():
 def test_programs_per_sm_by_hand(registers, warps, shared, arch, programs):
     assert triton_resources.programs_per_sm(registers, warps, shared,
                                             arch) == programs
+
+
+def _report(**environment):
+    """A GPU report's JSON as dev/gpu_report.py writes it, its profile of
+    one pass at bf16 (the band kernels and a product between them)."""
+    run = dict(status='ok', precision='bf16', hidden=32,
+               positions=106_000_000, rows=[
+                   dict(kernel='band_backward', launches=1, ms=12.0),
+                   dict(kernel='band_forward', launches=1, ms=4.0),
+                   dict(kernel='sm90_xmma_gemm_f32f32', launches=2,
+                        ms=0.3)])
+    failed = dict(status='failed', precision='tf32', error='x')
+    env = dict(gpu='NVIDIA H100 80GB HBM3', capability='sm_90', sms=132,
+               sm_clock_mhz=1980.0)
+    env.update(environment)
+    return dict(environment=env,
+                sections=dict(profile=dict(status='partial',
+                                           rows=[failed, run])))
+
+
+def test_measured_beside_the_cost_models_floor(rows):
+    """Each profiled band kernel's time against the issue floor of the
+    variant a training pass launches (no input gradient, the default
+    entries), compiled for the report's GPU; other kernels and failed
+    profiles left out."""
+    found = triton_resources.measured_against_predicted(_report(), rows)
+    assert [(r['precision'], r['kernel']) for r in found] == [
+        ('bf16', 'band_backward'), ('bf16', 'band_forward')]
+    for row, entry, ms in zip(
+            found, (triton_band_networks.backward_configs(False)[0],
+                    triton_band_networks.FORWARD_CONFIGS[0]), (12.0, 4.0)):
+        compiled, = [r for r in rows if r['arch'] == 'sm_90' and
+                     r['kernel'] == row['kernel'] and r['hidden'] == 32 and
+                     r['precision'] == 'bf16' and not r['input_grad'] and
+                     r['block'] == entry.block]
+        assert row['per_position'] == compiled['per_position']
+        floor = 106_000_000 * compiled['per_position'] / (
+            132 * 4 * 1.98e9) * 1e3
+        assert row['predicted_ms'] == pytest.approx(floor)
+        assert row['measured_ms'] == ms
+        assert row['of_issue'] == pytest.approx(floor / ms)
+    table = triton_resources.format_comparison(found, _report())
+    assert table.startswith('NVIDIA H100 80GB HBM3 (sm_90, 132 SMs at 1980 '
+                            'MHz')
+    assert '| bf16 | band_backward |' in table
+
+
+@pytest.mark.parametrize('report, match', [
+    (_report(sm_clock_mhz=None), 'no clock'),
+    (_report(capability='sm_75'), 'names no GPU of'),
+    (dict(_report(), sections=dict(profile=dict(status='not run'))),
+     'no profile of a WGSE pass'),
+    (dict(_report(), sections=dict(profile=dict(rows=[dict(
+        status='ok', precision='bf16', rows=[dict(kernel='band_forward',
+                                                  launches=1, ms=1.0)])]))),
+     'not as dev/gpu_report.py writes it'),
+    ([1, 2], 'names no GPU of'),
+])
+def test_a_report_the_comparison_cannot_read(rows, report, match):
+    with pytest.raises(ValueError, match=match):
+        triton_resources.measured_against_predicted(report, rows)
+
+
+def test_the_comparison_refuses_a_report_of_other_code(
+        tmp_path, capsys, monkeypatch):
+    """What is compiled here must be what ran there: a report whose code
+    digest differs from this checkout's is refused before any compile."""
+    monkeypatch.delenv('TRITON_INTERPRET')  # as the command line runs
+    path = tmp_path / 'gpu.json'
+    path.write_text(json.dumps(_report(code='0123456789abcdef')))
+    with pytest.raises(SystemExit) as error:
+        triton_resources.main(['--against', str(path)])
+    assert error.value.code == 2
+    assert 'measured other code (digest 0123456789abcdef)' in \
+        capsys.readouterr().err
