@@ -18,7 +18,6 @@ earlier run measured the same plan and code on the same machine and software,
 and measures the rest.
 """
 import argparse
-import json
 import os
 import os.path as osp
 import sys
@@ -61,23 +60,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def earlier_report(path: str):
-    """The report at ``path`` (its JSON), ``None`` where there is none; a
-    file that is no report's JSON is an error naming it."""
-    try:
-        with open(path, 'rb') as f:
-            report = json.loads(f.read())
-    except FileNotFoundError:
-        return None
-    except (OSError, ValueError) as err:
-        sys.exit(f'gpu_report.py: error: --resume: {path} cannot be read as '
-                 f'a report ({err})')
-    if not isinstance(report, dict):
-        sys.exit(f'gpu_report.py: error: --resume: {path} holds no report '
-                 f'(a JSON object), but {type(report).__name__}')
-    return report
-
-
 @keeps_inputs
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -96,8 +78,13 @@ def main(argv=None) -> int:
     command = 'python dev/gpu_report.py' + (
         ' --smoke' if args.smoke else '')
     with own_folder(args.out_dir, 'gpu_report'):
-        earlier = earlier_report(osp.join(args.out_dir, 'gpu.json')) \
-            if args.resume else None
+        earlier = None
+        path = osp.join(args.out_dir, 'gpu.json')
+        if args.resume and osp.exists(path):
+            try:
+                earlier = gpu_report.read_report(path)
+            except ValueError as err:
+                sys.exit(f'gpu_report.py: error: --resume: {err}')
         report = gpu_report.run_report(
             plan, ROOT, TARGETS, earlier=earlier,
             save=lambda report: gpu_report.write_report(

@@ -751,11 +751,10 @@ def _correctness_lines(section: Dict[str, Any]) -> List[str]:
 
 def _first_use_lines(section: Dict[str, Any]) -> List[str]:
     out = ["What `backend='auto'` checks before it first runs the Triton "
-           'kernel on the device: every launch entry, with or without the '
-           'input gradient as the calls that choose it compute it, against '
-           'the `torch` backend in float64 '
-           '(`wgse_mmseg/core/wgse/first_use_check.py`); where it fails, '
-           "'auto' runs `torch`.", '']
+           'kernel on the device for a training step: the launch entries it '
+           'runs, forward and backward, against the `torch` backend in '
+           'float64 (`wgse_mmseg/core/wgse/first_use_check.py`); where it '
+           "fails, 'auto' runs `torch`.", '']
     if section.get('rows'):
         out += [markdown_table(
             ['precision', 'passed', 'max rel. error', 'tolerance', 'failure',
@@ -890,6 +889,24 @@ def format_report(report: Dict[str, Any], command: str) -> str:
             out.append(_failed(section))
     out += [f"The report took {report['seconds']:.0f} s.", '']
     return '\n'.join(out)
+
+
+def read_report(path: str) -> Dict[str, Any]:
+    """The report whose JSON :func:`write_report` wrote at ``path``.
+
+    Raises:
+        ValueError: naming ``path``, where it cannot be read as JSON or
+            holds no JSON object.
+    """
+    try:
+        with open(path, 'rb') as f:
+            report = json.loads(f.read())
+    except (OSError, ValueError) as err:
+        raise ValueError(f'{path} cannot be read as a report ({err})')
+    if not isinstance(report, dict):
+        raise ValueError(f'{path} holds no report (a JSON object), but '
+                         f'{type(report).__name__}')
+    return report
 
 
 def write_report(report: Dict[str, Any], out_dir: str, command: str) -> None:

@@ -443,15 +443,12 @@ def build_parser() -> argparse.ArgumentParser:
 def _report_of_this_code(path: str) -> Dict:
     """The report at ``path``, checked to have measured the code here (its
     digest), so that what is compiled here is what ran there."""
-    from .gpu_report import code_digest
-    try:
-        with open(path, 'rb') as f:
-            report = json.loads(f.read())
-    except (OSError, ValueError) as err:
-        raise ValueError(f'{path}: cannot be read as a report ({err})')
+    from .gpu_report import code_digest, read_report
+    report = read_report(path)
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    measured = report.get('environment', {}).get('code') \
-        if isinstance(report, dict) else None
+    environment = report.get('environment')
+    measured = environment.get('code') \
+        if isinstance(environment, dict) else None
     here = code_digest(root)
     if measured != here:
         raise ValueError(f'{path}: it measured other code (digest '

@@ -291,3 +291,13 @@ def test_the_comparison_refuses_a_report_of_other_code(
     assert error.value.code == 2
     assert 'measured other code (digest 0123456789abcdef)' in \
         capsys.readouterr().err
+
+
+def test_the_comparison_refuses_a_file_that_is_no_report(
+        tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv('TRITON_INTERPRET')
+    path = tmp_path / 'gpu.json'
+    path.write_text('[1, 2]')
+    with pytest.raises(SystemExit):
+        triton_resources.main(['--against', str(path)])
+    assert f'{path} holds no report' in capsys.readouterr().err
