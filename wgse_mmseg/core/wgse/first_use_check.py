@@ -146,12 +146,12 @@ def passes_of(networks: Sequence[nn.Module], coeffs: Tensor) -> str:
 
 
 def _variant(backend, networks: Sequence[nn.Module], coeffs: Tensor,
-             lengths: Sequence[int]) -> str:
+             lengths: Sequence[int], passes: str) -> str:
     net = networks[0]
     return (f'precision {backend.precision(coeffs)}, dim={net.dim} '
             f'kernel_size={net.kernel_size} hidden_channels='
             f'{net.hidden_channels} num_blocks={net.num_blocks}, bands '
-            f'{list(lengths)}, {passes_of(networks, coeffs)}')
+            f'{list(lengths)}, {passes}')
 
 
 #: Largest error of the check against float64, relative to each tensor's
@@ -292,9 +292,9 @@ def check_on_first_use(backend, reference, networks: Sequence[nn.Module],
     logged when it starts (info) and once with its result (passed: info;
     failed: warning)."""
     device = str(coeffs.device)
-    key = (backend.name, device, _variant(backend, networks, coeffs,
-                                          lengths))
     passes = passes_of(networks, coeffs)
+    key = (backend.name, device, _variant(backend, networks, coeffs,
+                                          lengths, passes))
     if key not in _RESULTS:
         _log(logging.INFO,
              f'WGSE: checking {_kernel_text(*key)} against the \'torch\' '
