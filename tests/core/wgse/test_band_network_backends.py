@@ -389,7 +389,8 @@ def _device_path(budget):
     """The ``'torch'`` backend's path for CUDA tensors (``nn.Conv1d``
     chunks of ``budget`` bytes, each recomputed), forced on CPU tensors."""
     class DevicePath(band_network_backends.TorchBackend):
-        def run(self, networks, coeffs, lengths, spatial):
+        def run(self, networks, coeffs, lengths, spatial,
+                output_grad_is_scratch=False):
             return band_network_backends._module_bands(
                 networks, coeffs, lengths, spatial, recompute=True,
                 chunk_bytes=budget)

@@ -42,7 +42,8 @@ class _StandIn(band_network_backends.TorchBackend):
         return [(dict(entry=entry), band_network_backends._input_grad(passes))
                 for entry in (0, 1)]
 
-    def run(self, networks, coeffs, lengths, spatial, entry=0):
+    def run(self, networks, coeffs, lengths, spatial,
+            output_grad_is_scratch=False, entry=0):
         self.calls += 1
         out = super().run(networks, coeffs, lengths, spatial)
         if entry not in self.broken or self.fault is None:
@@ -191,8 +192,10 @@ def test_a_gradient_wrong_only_without_the_input_gradient(monkeypatch, log):
     training) are compared too."""
 
     class ParameterGradientsOff(_StandIn):
-        def run(self, networks, coeffs, lengths, spatial, entry=0):
-            out = super().run(networks, coeffs, lengths, spatial, entry)
+        def run(self, networks, coeffs, lengths, spatial,
+                output_grad_is_scratch=False, entry=0):
+            out = super().run(networks, coeffs, lengths, spatial,
+                              entry=entry)
             return out if coeffs.requires_grad else _WrongGradient.apply(out)
 
     _install(monkeypatch, ParameterGradientsOff())

@@ -1,6 +1,7 @@
 """The WGSE module: shapes, variants, an independent PyWavelets reference,
 numerical stability and error handling."""
 import contextlib
+import gc
 import warnings
 import weakref
 
@@ -9,6 +10,8 @@ import pytest
 import pywt
 import torch
 from torch.func import functional_call
+from torch.utils._python_dispatch import TorchDispatchMode
+from torch.utils._pytree import tree_leaves
 
 from mmseg.registry import MODELS
 
@@ -16,6 +19,7 @@ import wgse_mmseg
 from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
     torch_band_networks, triton_band_networks
 from wgse_mmseg.core.representations import TFP
+from wgse_mmseg.core.wavelets import band_lengths
 from wgse_mmseg.core.wgse import wgse as wgse_module
 from wgse_mmseg.core.wgse.wgse import LOWPASS_DETAIL_BIAS, BandNetwork
 
@@ -632,6 +636,102 @@ def test_a_second_backward_pass_of_one_graph_makes_the_mask_again():
     second = torch.autograd.grad(loss, wrt)
     assert all(torch.equal(a, b) for a, b in zip(first, second))
     assert any(g.abs().sum() > 0 for g in first[1:])
+
+
+class _PixelBytes(TorchDispatchMode):
+    """Bytes of the pixel-sized storages that ops make under it (element
+    count a multiple of ``pixels``: with a prime count of pixels that tells
+    coefficients, outputs, masks and their gradients from parameters and
+    partial sums) that are still alive (:attr:`now`), and their most
+    (:attr:`peak`). A storage is alive while any tensor of it is."""
+
+    def __init__(self, pixels):
+        super().__init__()
+        self.pixels = pixels
+        self.sizes = {}  # data_ptr -> bytes of the storages alive
+        self.refs = []
+        self.now = self.peak = 0
+
+    def _freed(self, key, _):
+        self.now -= self.sizes.pop(key)
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        out = func(*args, **(kwargs or {}))
+        made = [t for t in tree_leaves(out) if isinstance(t, torch.Tensor)]
+        inputs = {t.untyped_storage().data_ptr()
+                  for t in tree_leaves((args, kwargs))
+                  if isinstance(t, torch.Tensor)}
+        for tensor in made:
+            storage = tensor.untyped_storage()
+            key, size = storage.data_ptr(), storage.nbytes()
+            elements = size // tensor.element_size()
+            if key in inputs or key in self.sizes or not elements or \
+                    elements % self.pixels:
+                continue
+            self.sizes[key] = size
+            self.refs.append(weakref.ref(
+                storage, lambda ref, key=key: self._freed(key, ref)))
+            self.now += size
+            if self.now > self.peak:
+                # frames this mode's dispatching leaves in reference cycles
+                # (none without it) would keep tensors of them alive
+                gc.collect()
+                self.peak = max(self.peak, self.now)
+        return out
+
+
+@pytest.mark.needs_triton
+def test_a_training_pass_holds_two_coefficient_tensors_at_its_peak():
+    """Pixel-sized tensors a WGSE training pass on the Triton kernel makes,
+    its output's gradient given (as a segmentor hands it one): at most two
+    coefficient tensors ``(B, C, P)`` and the output ``(B, T, H, W)`` alive
+    at once. The forward pass frees the coefficients before the synthesis
+    (with the output, the band networks' output and the mask alive); the
+    backward kernel runs with the coefficients made again and ``d3``
+    formed in the synthesis gradient's memory. Before, the backward kernel
+    held three: ``d3`` beside that gradient."""
+    batch, steps, pixels = 1, 41, 37  # 37: a prime count of pixels
+    model = _seeded(backend='triton', hidden_channels=16)
+    spikes = (torch.rand(batch, steps, 1, pixels, generator=torch.Generator(
+    ).manual_seed(4)) < 0.4).float()
+    grad = torch.randn(spikes.shape, generator=torch.Generator().manual_seed(
+        5))
+    model(spikes).backward(grad)  # the transforms' matrices, made once
+    expected = [p.grad.clone() for p in model.parameters()]
+    model.zero_grad(set_to_none=True)
+    columns = sum(band_lengths(steps, model.wavelet, model.level,
+                               model.mode))
+    coefficients = batch * columns * pixels * 4
+    with _PixelBytes(pixels) as pixel_bytes:
+        out = model(spikes)
+        forward_peak = pixel_bytes.peak
+        out.backward(grad)
+        del out
+        gc.collect()
+    assert forward_peak <= 2 * coefficients + spikes.numel() * 4
+    assert pixel_bytes.peak == 2 * coefficients + spikes.numel() * 4
+    assert pixel_bytes.now == 0
+    assert all(torch.equal(p.grad, g)
+               for p, g in zip(model.parameters(), expected))
+
+
+@pytest.mark.needs_triton
+def test_a_gradient_given_to_backward_is_never_overwritten():
+    """Without wavelets the band networks' output is WGSE's: the gradient
+    that reaches the kernel is the caller's own tensor, which the backward
+    pass must leave as it was (the kernel forms its gradient in place only
+    in a synthesis product's memory)."""
+    spikes = (torch.rand(1, 16, 2, 3, generator=torch.Generator().manual_seed(
+        6)) < 0.4).float()
+    model = _seeded(backend='triton', wavelet=None, hidden_channels=16)
+    grad = torch.randn(spikes.shape, generator=torch.Generator().manual_seed(
+        7))
+    given = grad.clone()
+    out = model(spikes)
+    assert out.grad_fn is not None
+    out.backward(grad)
+    assert torch.equal(grad, given)
+    assert any(p.grad.abs().sum() > 0 for p in model.parameters())
 
 
 @pytest.mark.needs_triton

@@ -110,11 +110,15 @@ class BandNetworkBackend:
 
     def run(self, networks: Sequence[nn.Module], coeffs: Tensor,
             lengths: Sequence[int], spatial: Tuple[int, int],
-            **launch) -> Tensor:
+            output_grad_is_scratch: bool = False, **launch) -> Tensor:
         """The band networks on ``coeffs`` ``(B, C, P)``, bands of
         ``lengths`` side by side, pixels of a ``spatial`` ``(H, W)``
-        frame; same shape and dtype out. ``launch``: one of
-        :meth:`check_launches` (the first-use check names each)."""
+        frame; same shape and dtype out. ``output_grad_is_scratch``: the
+        gradient that will reach the output in the backward pass is a
+        tensor nothing else reads (WGSE's synthesis product makes a new
+        one), which a backend may overwrite (the Triton kernel does).
+        ``launch``: one of :meth:`check_launches` (the first-use check
+        names each)."""
         raise NotImplementedError
 
     # The first-use check (:mod:`.first_use_check`), for kernels compiled
@@ -150,7 +154,8 @@ class TorchBackend(BandNetworkBackend):
 
     name = 'torch'
 
-    def run(self, networks, coeffs, lengths, spatial):
+    def run(self, networks, coeffs, lengths, spatial,
+            output_grad_is_scratch=False):
         if networks[0].dim == 1 and not torch.jit.is_tracing():
             with torch.autocast(coeffs.device.type, enabled=False):
                 if coeffs.device.type != 'cpu':
@@ -172,7 +177,8 @@ class ReferenceBackend(BandNetworkBackend):
 
     name = 'reference'
 
-    def run(self, networks, coeffs, lengths, spatial):
+    def run(self, networks, coeffs, lengths, spatial,
+            output_grad_is_scratch=False):
         return _module_bands(networks, coeffs, lengths, spatial,
                              recompute=False)
 
@@ -274,7 +280,8 @@ class CompiledBackend(BandNetworkBackend):
         return compiled_band_networks.unsupported(_pixel_rows(coeffs),
                                                   weights, residuals)
 
-    def run(self, networks, coeffs, lengths, spatial):
+    def run(self, networks, coeffs, lengths, spatial,
+            output_grad_is_scratch=False):
         weights, residuals = _weights(networks)
         with torch.autocast(coeffs.device.type, enabled=False):
             out = compiled_band_networks.compiled_band_networks(
@@ -299,12 +306,14 @@ class TritonBackend(BandNetworkBackend):
     def unsupported_call(self, networks, coeffs):
         return triton_band_networks.unsupported_tensor(coeffs)
 
-    def run(self, networks, coeffs, lengths, spatial, **launch):
+    def run(self, networks, coeffs, lengths, spatial,
+            output_grad_is_scratch=False, **launch):
         weights, _ = _weights(networks)
         precision = self.precision(coeffs)
         with torch.autocast(coeffs.device.type, enabled=False):
             out = triton_band_networks.triton_band_networks(
-                coeffs, lengths, weights, precision, **launch)
+                coeffs, lengths, weights, precision,
+                output_grad_is_scratch=output_grad_is_scratch, **launch)
         return _FirstOrderOnly.apply(out, self.name)
 
     @property

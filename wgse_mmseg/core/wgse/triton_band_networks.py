@@ -276,12 +276,20 @@ def launch_forward(config: LaunchConfig, coeffs: Tensor,
     return out, positive
 
 
-def relu_gradient(grad_out: Tensor, positive: Tensor) -> Tensor:
+def relu_gradient(grad_out: Tensor, positive: Tensor,
+                  in_place: bool = False) -> Tensor:
     """``d3`` ``(B, C, P)``: the gradient at the last convolution's
     pre-activation, ``grad_out`` where ``positive`` (from
-    :func:`launch_forward`) is set, else 0 (both ``(B, C, P)``)."""
-    return torch.where(positive.view(torch.bool), grad_out,
-                       0.0).contiguous()
+    :func:`launch_forward`) is set, else 0 (both ``(B, C, P)``). With
+    ``in_place`` (``grad_out`` is a tensor nothing else reads) it is formed
+    in ``grad_out``'s memory where that is a contiguous float32 tensor:
+    one coefficient-sized tensor less at the backward pass's peak."""
+    keep = positive.view(torch.bool)
+    if in_place and grad_out.is_contiguous() and \
+            grad_out.dtype == torch.float32:
+        return torch.where(keep, grad_out, grad_out.new_zeros(()),
+                           out=grad_out)
+    return torch.where(keep, grad_out, 0.0).contiguous()
 
 
 def work_division(lengths: Sequence[int], tiles: int, slots: int
@@ -348,12 +356,13 @@ class _TritonBandNetworks(torch.autograd.Function):
     @staticmethod
     def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
                 precision: str, configs: Tuple[Optional[LaunchConfig], ...],
-                *params: Tensor) -> Tensor:
+                output_grad_is_scratch: bool, *params: Tensor) -> Tensor:
         inputs = band_kernel_inputs(lengths, params)
         out, positive = launch_forward(configs[0] or FORWARD_CONFIGS[0],
                                        coeffs, inputs, precision)
         ctx.lengths, ctx.precision = lengths, precision
         ctx.configs, ctx.inputs = configs, inputs
+        ctx.output_grad_is_scratch = output_grad_is_scratch
         # kept outside the saved tensors so that the backward pass can drop
         # it before the coefficients are made again (WGSE's hooks): the two
         # are never alive together
@@ -369,14 +378,16 @@ class _TritonBandNetworks(torch.autograd.Function):
                 "gradients (create_graph=True); the 'torch' backend has "
                 "them: WGSE(backend='torch')")
         positive, ctx.positive = ctx.positive, None
-        d3 = None if positive is None else relu_gradient(grad_out, positive)
+        scratch = ctx.output_grad_is_scratch
+        d3 = None if positive is None else relu_gradient(grad_out, positive,
+                                                         scratch)
         del positive
         coeffs, *params = ctx.saved_tensors
         input_grad = ctx.needs_input_grad[0]
         sizes = [p.numel() for p in params[:6]]
         if not coeffs.numel():
             return (torch.zeros_like(coeffs) if input_grad else None, None,
-                    None, None, *[torch.zeros_like(p) for p in params])
+                    None, None, None, *[torch.zeros_like(p) for p in params])
         inputs = ctx.inputs  # the forward's stacked parameters
         forward_config, backward_config = ctx.configs
         if d3 is None:
@@ -385,7 +396,7 @@ class _TritonBandNetworks(torch.autograd.Function):
             _, positive = launch_forward(
                 forward_config or FORWARD_CONFIGS[0], coeffs, inputs,
                 ctx.precision)
-            d3 = relu_gradient(grad_out, positive)
+            d3 = relu_gradient(grad_out, positive, scratch)
             del positive
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
         totals = launch_backward(
@@ -396,15 +407,15 @@ class _TritonBandNetworks(torch.autograd.Function):
         for total, band_params in zip(totals, zip(*[iter(params)] * 6)):
             grads += [g.view_as(p) for g, p in
                       zip(total.split(sizes), band_params)]
-        return (grad_coeffs, None, None, None, *grads)
+        return (grad_coeffs, None, None, None, None, *grads)
 
 
 def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
                          weights: Sequence[Sequence[Tuple[Tensor, Tensor]]],
                          precision: str = 'ieee',
                          forward_config: Optional[LaunchConfig] = None,
-                         backward_config: Optional[LaunchConfig] = None
-                         ) -> Tensor:
+                         backward_config: Optional[LaunchConfig] = None,
+                         output_grad_is_scratch: bool = False) -> Tensor:
     """Run one band network per band over every pixel's coefficients.
 
     Args:
@@ -419,6 +430,12 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
         forward_config, backward_config: the launch of each kernel; by
             default the first entry of :data:`FORWARD_CONFIGS` and of
             :func:`backward_configs` for the input gradient's choice.
+        output_grad_is_scratch: the gradient that will reach the output in
+            the backward pass is a tensor nothing else reads (WGSE's
+            synthesis product makes a new one): ``d3`` is then formed in
+            its memory (:func:`relu_gradient`), one ``(B, C, P)`` tensor
+            less at the backward pass's peak. Never for a gradient a
+            caller may read again (one passed to ``backward()``).
 
     Returns:
         ``(B, C, P)``: each band's network output in place of its input.
@@ -462,4 +479,4 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
     return _TritonBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
                                      precision,
                                      (forward_config, backward_config),
-                                     *params)
+                                     output_grad_is_scratch, *params)

@@ -397,8 +397,13 @@ class WGSE(nn.Module):
             self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
         with _saved_as_recomputation(coeffs, spikes, coefficients):
+            # the synthesis product below gives the band networks' output
+            # a gradient of its own, which the backend may overwrite
             enhanced = backend.run(self.band_networks, coeffs, lengths,
-                                   (height, width))
+                                   (height, width),
+                                   output_grad_is_scratch=analysis is not None)
+        # freed before the synthesis: the backends keep what they need
+        del coeffs
         with torch.autocast(device_type, enabled=False):
             if self.wavelet is not None:
                 enhanced = torch.matmul(synthesis, enhanced)  # (B, T, P)
