@@ -773,8 +773,10 @@ def _first_use_lines(section: Dict[str, Any]) -> List[str]:
 
 def _wgse_lines(section: Dict[str, Any]) -> List[str]:
     return [f"db8, 5 levels, 32 channels, {_shape_text(section['shape'])}, "
-            'loss mean(out²), TF32 as torch defaults; peak: growth of '
-            'memory allocated (CUDA) or of peak RSS (CPU) in one pass.', '',
+            'the output gradient given (a fixed random tensor made before '
+            'the pass, as a segmentor hands WGSE one), TF32 as torch '
+            'defaults; peak: growth of memory allocated (CUDA) or of peak '
+            'RSS (CPU) in one pass.', '',
             markdown_table(
                 ['implementation', 'median ms', 'min-max ms', 'peak MiB',
                  'time / reference', 'memory / reference', 'status'],
