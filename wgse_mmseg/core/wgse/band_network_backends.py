@@ -54,7 +54,7 @@ from torch.utils.checkpoint import checkpoint
 
 from . import compiled_band_networks, triton_band_networks
 from .first_use_check import (PASSES, CheckResult, FirstUseCheckFailed,
-                              check_on_first_use)
+                              check_on_first_use, passes_of)
 from .torch_band_networks import torch_band_networks
 
 __all__ = []
@@ -220,9 +220,7 @@ def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
     pixel is kept (the ``'reference'`` backend).
     """
     batch, _, pixels = coeffs.shape
-    train = recompute and torch.is_grad_enabled() and (
-        coeffs.requires_grad or any(p.requires_grad for net in networks
-                                    for p in net.parameters()))
+    train = recompute and passes_of(networks, coeffs) != PASSES[0]
     outs = []
     for network, band in zip(networks, coeffs.split(list(lengths), dim=1)):
         length = band.shape[1]

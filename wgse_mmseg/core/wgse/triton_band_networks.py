@@ -282,11 +282,10 @@ def relu_gradient(grad_out: Tensor, positive: Tensor,
     pre-activation, ``grad_out`` where ``positive`` (from
     :func:`launch_forward`) is set, else 0 (both ``(B, C, P)``). With
     ``in_place`` (``grad_out`` is a tensor nothing else reads) it is formed
-    in ``grad_out``'s memory where that is a contiguous float32 tensor:
-    one coefficient-sized tensor less at the backward pass's peak."""
+    in ``grad_out``'s memory where that is contiguous: one
+    coefficient-sized tensor less at the backward pass's peak."""
     keep = positive.view(torch.bool)
-    if in_place and grad_out.is_contiguous() and \
-            grad_out.dtype == torch.float32:
+    if in_place and grad_out.is_contiguous():
         return torch.where(keep, grad_out, grad_out.new_zeros(()),
                            out=grad_out)
     return torch.where(keep, grad_out, 0.0).contiguous()

@@ -399,9 +399,9 @@ class WGSE(nn.Module):
         with _saved_as_recomputation(coeffs, spikes, coefficients):
             # the synthesis product below gives the band networks' output
             # a gradient of its own, which the backend may overwrite
-            enhanced = backend.run(self.band_networks, coeffs, lengths,
-                                   (height, width),
-                                   output_grad_is_scratch=analysis is not None)
+            enhanced = backend.run(
+                self.band_networks, coeffs, lengths, (height, width),
+                output_grad_is_scratch=self.wavelet is not None)
         # freed before the synthesis: the backends keep what they need
         del coeffs
         with torch.autocast(device_type, enabled=False):
