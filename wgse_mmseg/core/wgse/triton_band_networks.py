@@ -57,7 +57,8 @@ class LaunchConfig(NamedTuple):
     """How a kernel is launched: ``block`` pixels per program (``tl.dot``
     needs at least 16), ``num_warps`` warps per program and, where not
     ``None``, ``maxnreg``: the most registers a thread may use (ptxas
-    spills the rest), which lets more programs share an SM."""
+    spills the rest; without it ptxas chooses, and may spill to fit more
+    programs an SM)."""
     block: int
     num_warps: int
     maxnreg: Optional[int] = None
@@ -84,9 +85,11 @@ FORWARD_CONFIGS = (LaunchConfig(128, 4), )
 #: memory at TF32: two programs share sm_89's and sm_120's 100 KB), 16
 #: wherever the input gradient is computed (WGSE's coefficients need none
 #: in training: they come from the data; it carries three more vectors, and
-#: 32 pixels spill). 64 pixels spill even on sm_90 at TF32.
+#: 32 pixels spill), with 255 registers allowed: left to choose, ptxas gives
+#: its 32-channel fp16 and bf16 variants 168 and spills 8-16 bytes a thread
+#: to fit three programs an SM. 64 pixels spill even on sm_90 at TF32.
 BACKWARD_CONFIGS = dict(default=(LaunchConfig(32, 4), ),
-                        input_grad=(LaunchConfig(16, 4), ))
+                        input_grad=(LaunchConfig(16, 4, 255), ))
 #: Programs of the backward kernel per SM the work is divided for: what
 #: every entry above fits at once.
 PROGRAMS_PER_SM = 2
