@@ -272,17 +272,18 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
     takes). ``work_ptr`` ``(programs, 3)`` int32: per program its band, its
     first tile and the step between its tiles (of ``tiles`` in all).
 
-    Step ``s`` recomputes ``h1[s - 2]``, ``h1[s - 1]``, ``h1[s]`` and from
-    them ``h2[s - 1]``; ``d2[s - 1]`` follows from three values of ``d3``;
-    the ``H x H`` layer's transposed products scatter ``d2[s - 1]`` into
-    its three neighbours' partial sums (``e_*``), completing ``d1[s - 2]``,
-    so the only ``(BLOCK, H)`` tiles carried between steps are two partial
-    sums. conv1 runs on tensor cores: the step's window of ``x`` is one
-    ``(BLOCK, 16)`` tile loaded whole (:func:`_load_window`), and each
-    ``h1`` its product with conv1's taps placed at that ``h1``'s rows
-    (:func:`_conv1_taps`), which leaves it in the layout of the products it
-    feeds; the transposed window times ``d1`` sums conv1's weight and bias
-    gradients over the pixels.
+    Step ``s`` recomputes ``h1[s]`` and, with the two ``h1`` of the steps
+    before, ``h2[s - 1]``; ``d2[s - 1]`` follows from three values of
+    ``d3``; the ``H x H`` layer's transposed products scatter ``d2[s - 1]``
+    into its three neighbours' partial sums (``e_*``), completing
+    ``d1[s - 2]``, so the ``(BLOCK, H)`` tiles carried between steps are
+    two ``h1`` and two partial sums. conv1 runs on tensor cores: the step's
+    window of ``x`` is one ``(BLOCK, 16)`` tile loaded whole
+    (:func:`_load_window`), and ``h1[s]`` its product with conv1's taps
+    placed at the rows of ``x[s - 1 .. s + 1]`` (:func:`_conv1_taps`),
+    which leaves it in the layout of the products it feeds; the transposed
+    window times ``d1`` sums conv1's weight and bias gradients over the
+    pixels.
     conv3's weight gradient is summed element-wise in float32, in three
     ``(BLOCK, H)`` sums over the program's steps reduced over the pixels at
     the end: three multiply-adds a value, fewer instructions than a product
@@ -300,10 +301,8 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
     w2t_1 = tl.trans(w2_1)
     w2t_2 = tl.trans(w2_2)
     r = tl.arange(0, 16)[:, None]
-    # h1[s - k] is _load_window(...) @ v_k
-    v_2 = _conv1_taps(r, 0, w1_0, w1_1, w1_2)
-    v_1 = _conv1_taps(r, 1, w1_0, w1_1, w1_2)
-    v_0 = _conv1_taps(r, 2, w1_0, w1_1, w1_2)
+    # h1[s] is _load_window(...) @ taps (the window's x[s - 1 .. s + 1])
+    taps = _conv1_taps(r, 2, w1_0, w1_1, w1_2)
     c = tl.arange(0, 16)[None, :]
 
     # sums over this program's tiles: conv2's weight transposed, (H_out,
@@ -323,11 +322,14 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
                       tl.load(work_ptr + pid * 3 + 2)):
         first, cols, valid = _tile_rows(tile, band, pixels, columns,
                                         tiles_per_sample, offsets_ptr, BLOCK)
-        # names: d3_k is d3[s - k], each its own tensor (see band_forward);
-        # 'part of' sums still miss the taps of later steps
+        # names: d3_k is d3[s - k], h1_k h1[s - k], each its own tensor
+        # (see band_forward); 'part of' sums still miss the taps of later
+        # steps
         d3_2 = tl.zeros((BLOCK, ), tl.float32)
         d3_1 = tl.zeros((BLOCK, ), tl.float32)
         e_1 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # part of dh1[s - 1]
+        h1_1 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # outside the band
+        h1_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)
         e_2 = tl.zeros((BLOCK, HIDDEN), tl.float32)  # part of dh1[s - 2]
         gx_3 = tl.zeros((BLOCK, ), tl.float32)  # part of gx[s - 3]
         gx_2 = tl.zeros((BLOCK, ), tl.float32)  # part of gx[s - 2]
@@ -341,10 +343,9 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
                           mask=valid & (s >= 1) & (s - 1 < length), other=0.0)
             d3_0 = tl.load(d3_ptr + first + s * row + cols,
                            mask=valid & (s < length), other=0.0)
-            # forward: h1[s - 2 .. s], h2[s - 1]
-            h1_2 = _h1_of_window(s - 2, xs, v_2, b1, length, PRECISION)
-            h1_1 = _h1_of_window(s - 1, xs, v_1, b1, length, PRECISION)
-            h1_0 = _h1_of_window(s, xs, v_0, b1, length, PRECISION)
+            # forward: h1[s] (h1[s - 1], h1[s - 2] from the steps before),
+            # h2[s - 1]
+            h1_0 = _h1_of_window(s, xs, taps, b1, length, PRECISION)
             h2_1 = (_bias_at(s - 1, length, b2) +
                     _dot(h1_2, w2_0, PRECISION) +
                     _dot(h1_1, w2_1, PRECISION) +
@@ -385,6 +386,7 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
                 gx_3 = gx_2 + tl.sum(d1 * w1_1, axis=1)
                 gx_2 = tl.sum(d1 * w1_2 + d2, axis=1)
             d3_2, d3_1 = d3_1, d3_0
+            h1_2, h1_1 = h1_1, h1_0
 
     channels = tl.arange(0, HIDDEN)
     part = partial_ptr + pid.to(tl.int64) * (8 * HIDDEN +
