@@ -42,7 +42,7 @@ from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 #: the longest band of WGSE's default (db8, 5 levels) at T = 129
 BAND_LENGTH = 72
 DEFAULT_FORWARD = ['128x4', '64x4', '128x8', '256x8']
-DEFAULT_BACKWARD = ['32x4', '64x4', '16x4', '64x8', '32x2']
+DEFAULT_BACKWARD = ['32x4', '64x4', '16x4r255', '64x8', '32x2']
 
 
 def launch_entry(text: str) -> Tuple[int, int, Optional[int]]:

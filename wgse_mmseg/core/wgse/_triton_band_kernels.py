@@ -38,10 +38,12 @@ to ``s - 2``, the input gradient up to ``s - 3``), and keeps its band's
 parameter-gradient sums in registers across its tiles: one row of a
 ``(programs, P_band)`` buffer per program (a few MB), written once. The
 caller adds the rows of each band (no atomics: the same bits every run).
-Reading ``d3`` whole, one float a coefficient, is what lets it carry two
-``(BLOCK, H)`` tiles between steps instead of six, so that it runs 32-pixel
-tiles without spilling (forming it from ``y``'s gradient and the mask in
-the kernel costs 6-14 more warp instructions a position and spills).
+It carries four ``(BLOCK, H)`` tiles between steps (the last two ``h1``,
+two partial sums of their gradient) and loads the rest each step, which
+is what lets it run 32-pixel tiles without spilling: its window of ``x``
+(loaded whole), and ``d3``, one float a coefficient (forming ``d3`` from
+``y``'s gradient and the mask in the kernel cost 6-14 more warp
+instructions a position and spilled).
 
 Parameters are float32, each kind stacked over the bands, contiguous:
 ``conv1`` ``(bands, H, 1, 3)``, ``conv2`` ``(bands, H, H, 3)``, ``conv3``
