@@ -339,7 +339,10 @@ def band_backward(x_ptr, d3_ptr, gx_ptr, partial_ptr, work_ptr, pixels,
             # the window x[s - 3 .. s + 1] loaded whole each step (its rows
             # are in the L1 cache from the steps before): carried from step
             # to step as five vectors instead, they cost register moves and
-            # a select per column, 9-12% more warp instructions a position
+            # a select per column, 9-12% more warp instructions a position.
+            # x[s - 1] is loaded again for the residual, in the layout of the
+            # (BLOCK, H) tiles: taking it from the window's column costs
+            # more (a reduction across the warps holding the columns)
             xs = _load_window(x_ptr, first, row, cols, valid, s, length, c)
             x_1 = tl.load(x_ptr + first + (s - 1) * row + cols,
                           mask=valid & (s >= 1) & (s - 1 < length), other=0.0)
