@@ -125,7 +125,7 @@ def variants() -> List[Variant]:
                       for c in FORWARD_CONFIGS]
             found += [Variant('band_backward', hidden, precision, grad, *c)
                       for grad in (False, True)
-                      for c in backward_configs(grad)]
+                      for c in backward_configs(grad, precision)]
     return found
 
 
@@ -228,10 +228,6 @@ def measured_against_predicted(report: Dict, rows: Sequence[Dict]
             :data:`ARCHITECTURES`, its SMs and clock, a profile), or
             ``rows`` holds no variant a profiled kernel ran.
     """
-    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
-                                                           backward_configs)
-    entries = dict(band_forward=FORWARD_CONFIGS[0],
-                   band_backward=backward_configs(False)[0])
     env = report.get('environment') if isinstance(report, dict) else None
     if not isinstance(env, dict) or env.get('capability') not in \
             ARCHITECTURES or not env.get('sms') or \
@@ -250,16 +246,25 @@ def measured_against_predicted(report: Dict, rows: Sequence[Dict]
                          "'profile' section did not run or failed)")
     try:
         return [row for run in measured
-                for row in _against_floor(run, env, entries, rows)]
+                for row in _against_floor(run, env, rows)]
     except (KeyError, TypeError) as err:
         raise ValueError(f"the report's profile is not as "
                          f'dev/gpu_report.py writes it ({err!r} missing or '
                          f'odd)') from err
 
 
-def _against_floor(run: Dict, env: Dict, entries: Dict,
-                   rows: Sequence[Dict]) -> List[Dict]:
+def _against_floor(run: Dict, env: Dict, rows: Sequence[Dict]
+                   ) -> List[Dict]:
     """:func:`measured_against_predicted`'s rows of one profiled pass."""
+    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
+                                                           TOLERANCES,
+                                                           backward_configs)
+    if run['precision'] not in TOLERANCES:
+        raise ValueError(f"the report's profile ran at precision "
+                         f"{run['precision']!r}, not one of "
+                         f'{list(TOLERANCES)}')
+    entries = dict(band_forward=FORWARD_CONFIGS[0],
+                   band_backward=backward_configs(False, run['precision'])[0])
     found = []
     for kernel_row in run.get('rows', []):
         kernel = next((k for k in entries if k in kernel_row['kernel']),

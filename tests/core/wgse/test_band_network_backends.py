@@ -330,6 +330,34 @@ def test_the_first_use_check_runs_every_program_over_several_tiles(programs):
 
 
 @pytest.mark.needs_triton
+@pytest.mark.parametrize('allow_tf32, precision', [(True, 'tf32'),
+                                                   (False, 'ieee')])
+def test_full_float32_trains_on_the_sixteen_pixel_backward(
+        monkeypatch, allow_tf32, precision):
+    """A training call (no input gradient) launches the backward's 32-pixel
+    entry at TF32 and the 16-pixel one in full float32, whose products on
+    the FMA units spill at 32 pixels (docs/wgse_speed.md); an unknown
+    precision is refused by name."""
+    launched = []
+    launch = triton_band_networks.launch_backward
+
+    def noting(config, *args):
+        launched.append(config)
+        return launch(config, *args)
+
+    monkeypatch.setattr(triton_band_networks, 'launch_backward', noting)
+    monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', allow_tf32)
+    model = _model(backend='triton', wavelet='haar', level=1)
+    _run(model, _spikes(1, 4, 1, 3), False)
+    assert launched == [triton_band_networks.LaunchConfig(
+        *(32, 4) if allow_tf32 else (16, 4, 255))]
+    assert launched == list(triton_band_networks.backward_configs(
+        False, precision))
+    with pytest.raises(ValueError, match="precision must be one of.*'fp32'"):
+        triton_band_networks.backward_configs(False, 'fp32')
+
+
+@pytest.mark.needs_triton
 def test_triton_rejects_a_launch_config_not_in_its_lists():
     coeffs = torch.zeros(1, 5, 4)
     model = _model(backend='triton')

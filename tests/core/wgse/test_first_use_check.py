@@ -38,7 +38,7 @@ class _StandIn(band_network_backends.TorchBackend):
     def __init__(self, fault=None, broken=(0, 1)):
         self.fault, self.broken, self.calls = fault, broken, 0
 
-    def check_launches(self, passes):
+    def check_launches(self, passes, precision):
         return [(dict(entry=entry), band_network_backends._input_grad(passes))
                 for entry in (0, 1)]
 
@@ -137,21 +137,24 @@ def test_every_launch_entry_is_checked(monkeypatch, log):
     assert '(entry=1, input gradient False)' in model.backend_check.failure
 
 
+@pytest.mark.parametrize('precision', ['ieee', 'tf32', 'fp16', 'bf16'])
 @pytest.mark.parametrize('passes, input_grad', list(zip(
     first_use_check.PASSES, (None, False, True))))
-def test_the_triton_check_runs_what_the_call_launches(passes, input_grad):
+def test_the_triton_check_runs_what_the_call_launches(passes, input_grad,
+                                                      precision):
     """Every forward entry, and the backward entries chosen for the call's
-    input gradient where it runs the backward pass: no compile of a kernel
-    the call does not run (the check's compiles are a machine's first
-    wait: training's compiles no backward entry for the input gradient,
-    inference's no backward at all)."""
-    launches = band_network_backends.TritonBackend().check_launches(passes)
+    input gradient and precision where it runs the backward pass: no
+    compile of a kernel the call does not run (the check's compiles are a
+    machine's first wait: training's compiles no backward entry for the
+    input gradient, inference's no backward at all)."""
+    launches = band_network_backends.TritonBackend().check_launches(
+        passes, precision)
     assert {grad for _, grad in launches} == {input_grad}
     assert {launch['forward_config'] for launch, _ in launches} == set(
         triton_band_networks.FORWARD_CONFIGS)
     assert {launch.get('backward_config') for launch, _ in launches} == (
         {None} if input_grad is None else
-        set(triton_band_networks.backward_configs(input_grad)))
+        set(triton_band_networks.backward_configs(input_grad, precision)))
     assert len(launches) == len(set(
         tuple(launch.items()) for launch, _ in launches))
 
@@ -167,9 +170,9 @@ def test_the_check_follows_what_the_call_runs(monkeypatch, log, call,
     seen = []
 
     class Noting(_StandIn):
-        def check_launches(self, passes):
+        def check_launches(self, passes, precision):
             seen.append(passes)
-            return super().check_launches(passes)
+            return super().check_launches(passes, precision)
 
     _install(monkeypatch, Noting())
     model = WGSE(wavelet='haar', level=1)

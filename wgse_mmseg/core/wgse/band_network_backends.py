@@ -133,13 +133,14 @@ class BandNetworkBackend:
         """The arithmetic precision of a call on ``coeffs`` made now."""
         return str(coeffs.dtype).replace('torch.', '')
 
-    def check_launches(self, passes: str
+    def check_launches(self, passes: str, precision: str
                        ) -> Sequence[Tuple[Dict[str, object],
                                            Optional[bool]]]:
         """The launch settings a call that runs ``passes`` (one of
-        :data:`~.first_use_check.PASSES`) may use, each with whether the
-        coefficients' gradient is computed there (``None``: no gradient,
-        the forward pass alone): the check runs each pair."""
+        :data:`~.first_use_check.PASSES`) at ``precision``
+        (:meth:`precision`) may use, each with whether the coefficients'
+        gradient is computed there (``None``: no gradient, the forward pass
+        alone): the check runs each pair."""
         return (({}, _input_grad(passes)), )
 
 
@@ -327,16 +328,18 @@ class TritonBackend(BandNetworkBackend):
     def precision(self, coeffs):
         return triton_band_networks.dot_precision(coeffs.device.type)
 
-    def check_launches(self, passes):
+    def check_launches(self, passes, precision):
         # every entry the call's passes may launch, each at least once: the
         # forward entries, and the backward entries chosen for its input
-        # gradient (no compile of a kernel the call does not run)
+        # gradient and precision (no compile of a kernel the call does not
+        # run)
         forward = triton_band_networks.FORWARD_CONFIGS
         input_grad = _input_grad(passes)
         if input_grad is None:
             return [(dict(forward_config=config), None)
                     for config in forward]
-        backward = triton_band_networks.backward_configs(input_grad)
+        backward = triton_band_networks.backward_configs(input_grad,
+                                                         precision)
         return [(dict(forward_config=forward[min(i, len(forward) - 1)],
                       backward_config=backward[min(i, len(backward) - 1)]),
                  input_grad)

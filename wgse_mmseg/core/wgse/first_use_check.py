@@ -253,7 +253,8 @@ def _run_check(backend, reference, networks: Sequence[nn.Module],
                                  lengths, True, {})
     nets32 = [copy.deepcopy(net).float() for net in nets64]
     worst = 0.0
-    for launch, input_grad in backend.check_launches(passes):
+    for launch, input_grad in backend.check_launches(
+            passes, backend.precision(coeffs)):
         setting = ', '.join([f'{k}={v}' for k, v in launch.items()] + [
             'no gradient' if input_grad is None else
             f'input gradient {input_grad}'])

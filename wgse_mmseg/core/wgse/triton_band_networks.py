@@ -79,15 +79,16 @@ class LaunchConfig(NamedTuple):
 FORWARD_CONFIGS = (LaunchConfig(128, 4), )
 #: The backward kernel's entries (:func:`backward_configs`), the first of a
 #: list running unless a caller names another. Each compiles without
-#: spilling to at least two programs an SM at TF32, fp16 and bf16 on sm_80,
+#: spilling to at least two programs an SM at every precision on sm_80,
 #: sm_89, sm_90, sm_100 and sm_120 (the resources tool's table,
 #: docs/wgse_speed.md, "Compiled for GPUs"): 32 pixels (48 KB of shared
 #: memory at TF32: two programs share sm_89's and sm_120's 100 KB), 16
 #: wherever the input gradient is computed (WGSE's coefficients need none
 #: in training: they come from the data; it carries three more vectors, and
-#: 32 pixels spill), with 255 registers allowed: left to choose, ptxas gives
-#: its 32-channel fp16 and bf16 variants 168 and spills 8-16 bytes a thread
-#: to fit three programs an SM. 64 pixels spill even on sm_90 at TF32.
+#: 32 pixels spill) or the products are full float32, with 255 registers
+#: allowed: left to choose, ptxas gives its 32-channel fp16 and bf16
+#: variants 168 and spills 8-16 bytes a thread to fit three programs an
+#: SM. 64 pixels spill even on sm_90 at TF32.
 BACKWARD_CONFIGS = dict(default=(LaunchConfig(32, 4), ),
                         input_grad=(LaunchConfig(16, 4, 255), ))
 #: Programs of the backward kernel per SM the work is divided for: what
@@ -125,13 +126,24 @@ def conv1_on_tensor_cores(precision: str, major: int) -> bool:
                                              major == 10)
 
 
-def backward_configs(input_grad: Optional[bool] = None
+def backward_configs(input_grad: Optional[bool] = None,
+                     precision: Optional[str] = None
                      ) -> Tuple[LaunchConfig, ...]:
-    """The backward entries (:data:`BACKWARD_CONFIGS`) computing the input
-    gradient or not; ``None``: every entry."""
+    """The backward entries (:data:`BACKWARD_CONFIGS`) a call launches,
+    computing the input gradient or not, with products of ``precision``
+    (:func:`dot_precision`, needed with ``input_grad``); ``None``: every
+    entry. Full float32 (``'ieee'``: TF32 turned off) runs the input
+    gradient's entries either way: its products multiply on the FMA units,
+    whose operands take more registers, and at 32 pixels its backward
+    spills 8-40 bytes a thread on sm_80, sm_89 and sm_90 and 136-176 on
+    sm_100 and sm_120 (at 16 pixels, 255 registers, nothing)."""
     if input_grad is None:
         return BACKWARD_CONFIGS['default'] + BACKWARD_CONFIGS['input_grad']
-    return BACKWARD_CONFIGS['input_grad' if input_grad else 'default']
+    if precision not in TOLERANCES:
+        raise ValueError(f'backward_configs: precision must be one of '
+                         f'{list(TOLERANCES)}, got {precision!r}')
+    return BACKWARD_CONFIGS['input_grad' if input_grad or
+                            precision == 'ieee' else 'default']
 
 
 def interpreting() -> bool:
@@ -402,8 +414,8 @@ class _TritonBandNetworks(torch.autograd.Function):
             del positive
         grad_coeffs = torch.empty_like(coeffs) if input_grad else None
         totals = launch_backward(
-            backward_config or backward_configs(input_grad)[0], coeffs, d3,
-            grad_coeffs, inputs, ctx.precision,
+            backward_config or backward_configs(input_grad, ctx.precision)[0],
+            coeffs, d3, grad_coeffs, inputs, ctx.precision,
             backward_slots(coeffs.device, len(ctx.lengths)))
         grads = []
         for total, band_params in zip(totals, zip(*[iter(params)] * 6)):
@@ -431,7 +443,8 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
         precision: of the tensor-core products (:func:`dot_precision`).
         forward_config, backward_config: the launch of each kernel; by
             default the first entry of :data:`FORWARD_CONFIGS` and of
-            :func:`backward_configs` for the input gradient's choice.
+            :func:`backward_configs` for the input gradient's choice and
+            ``precision``.
         output_grad_is_scratch: the gradient that will reach the output in
             the backward pass is a tensor nothing else reads (WGSE's
             synthesis product makes a new one): ``d3`` is then formed in
