@@ -304,6 +304,41 @@ def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
                                        'input gradient'].index(call)])
 
 
+@pytest.mark.long(60)
+@pytest.mark.needs_triton
+@pytest.mark.parametrize('call', ['training', 'input gradient'])
+@pytest.mark.parametrize('precision', ['ieee', 'tf32', 'fp16', 'bf16'])
+def test_the_papers_network_passes_its_check_in_the_interpreter(
+        monkeypatch, log, precision, call):
+    """The check of the paper's network (db8, 5 levels, 32 channels) at T =
+    129, whose bands are 18, 18, 22, 29, 43 and 72 coefficients long, over
+    a partial tile of every launch entry, at every precision: the
+    kernels' paths at the band lengths training runs, against float64 on
+    the check's exact problem (the test above runs a one-level Haar
+    network, bands of 3)."""
+
+    class CheckedTriton(band_network_backends.TritonBackend):
+        first_use_check = True
+        check_pixels = 17
+
+    _install(monkeypatch, CheckedTriton())
+    monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32',
+                        precision != 'ieee')
+    model = WGSE()  # the paper's
+    spikes = _spikes(steps=129)[:1, :, :1, :1]
+    spikes.requires_grad_(call == 'input gradient')
+    autocast = dict(fp16=torch.float16, bf16=torch.bfloat16).get(precision)
+    with torch.autocast('cpu', dtype=autocast or torch.bfloat16,
+                        enabled=autocast is not None):
+        model(spikes).sum().backward()
+    check = model.backend_check
+    assert model.backend_in_use == 'triton', check
+    assert check.passed, check.message()
+    assert check.variant.startswith(f'precision {precision}')
+    assert 'hidden_channels=32 ' in check.variant
+    assert 'bands [18, 18, 22, 29, 43, 72]' in check.variant
+
+
 @pytest.mark.parametrize('hidden, steps', [(32, 129), (16, 41)])
 def test_the_problem_is_exact_at_every_precision(hidden, steps):
     """What the check's one tolerance rests on: on its problem, every
