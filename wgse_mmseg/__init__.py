@@ -52,10 +52,22 @@ def register_all_modules() -> None:
         importlib.import_module(name)
 
 
+def load_config(path: str, cfg_options: dict = None):
+    """The config at ``path`` as the tools read it: ``cfg_options`` (a dict
+    of dotted keys, ``--cfg-options``' values: ``{'num_steps': 41,
+    'data_root': DIR}``) applied, the spike settings given to every field
+    that carries them (the loaders, the data preprocessor, the backbone's
+    stem, whatever the backbone), the MMSeg layer set up. Pass the result
+    to ``mmseg.apis.init_model`` for the model ``tools/test.py`` builds
+    (:func:`wgse_mmseg.utils.config.load_config`)."""
+    from .utils.config import load_config as load
+    return load(path, cfg_options)
+
+
 def __getattr__(name):
     if name in _LAZY:
         return importlib.import_module(f'{__name__}.{name}')
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
-__all__ = ['__version__', 'register_all_modules']
+__all__ = ['__version__', 'load_config', 'register_all_modules']

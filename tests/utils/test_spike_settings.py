@@ -76,7 +76,6 @@ def test_fields_that_disagree_are_listed(tmp_path):
         apply_spike_settings(cfg)
     message = str(error.value)
     assert 'model.data_preprocessor.num_steps = 41' in message
-    assert 'model.backbone.in_channels = 129' in message
     assert 'train_dataloader.dataset.pipeline[0].num_steps = 129' in message
     assert '--cfg-options num_steps=41' in message
     with pytest.raises(SpikeSettingsError, match='must be an integer >= 1'):
@@ -170,3 +169,49 @@ def test_a_file_that_is_no_config_is_named(tmp_path, name, error, message):
     path = str(tmp_path / name)
     with pytest.raises(error, match=f'{path}: {message}'):
         load_config(path)
+
+
+def _spike_model(tmp_path, base, body=''):
+    """A user's config for MMSeg's model base ``base`` by the documented
+    recipe, without the ``in_channels`` line."""
+    path = tmp_path / 'mine.py'
+    path.write_text(
+        f"_base_ = ['mmseg::_base_/models/{base}.py',\n"
+        f"          {osp.join(ROOT, 'configs/_base_/datasets/spike_cityscapes.py')!r}]\n"  # noqa: E501
+        "model = dict(data_preprocessor=dict(\n"
+        "    _delete_=True, **_base_.spike_data_preprocessor))\n" + body)
+    return str(path)
+
+
+@pytest.mark.parametrize('base, stems', [
+    # in_channels=3 in MMSeg's base: replaced
+    ('fcn_unet_s5-d16', {'model.backbone.in_channels': 3}),
+    # not in the config, BiSeNetV2 takes it: added
+    ('bisenetv2', {'model.backbone.in_channels': None}),
+    # not in the config, ResNetV1c takes it through **kwargs: added
+    ('pspnet_r50-d8', {'model.backbone.in_channels': None}),
+    # the stem of STDC's context path is its nested backbone's
+    ('stdc', {'model.backbone.backbone_cfg.in_channels': 3}),
+    # BiSeNetV1: its spatial path and its context path's ResNet
+    ('bisenetv1_r18-d32', {'model.backbone.in_channels': 3,
+                           'model.backbone.backbone_cfg.in_channels': 3}),
+])
+def test_t_reaches_the_stem_wherever_the_backbone_keeps_it(
+        tmp_path, base, stems):
+    cfg = Config.fromfile(_spike_model(tmp_path, base))
+    changed = apply_spike_settings(cfg, dict(num_steps=41))
+    assert {k: v for k, v in changed.items() if 'in_channels' in k} == stems
+    for path in stems:
+        node = cfg
+        for part in path.split('.'):
+            node = node[part]
+        assert node == 41
+
+
+def test_a_backbone_without_in_channels_is_left_to_the_start_up_check(
+        tmp_path):
+    """MobileNetV3 hard-codes three input channels: nothing to set."""
+    cfg = Config.fromfile(_spike_model(tmp_path, 'lraspp_m-v3-d8'))
+    changed = apply_spike_settings(cfg, dict(num_steps=41))
+    assert 'in_channels' not in cfg.model.backbone
+    assert not any('in_channels' in path for path in changed)

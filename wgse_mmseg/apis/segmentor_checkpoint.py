@@ -17,6 +17,7 @@ from torch import nn  # noqa: E402
 
 from mmseg.registry import MODELS  # noqa: E402
 from ..datasets import SpikeCityscapesDataset  # noqa: E402
+from ..models.data_preprocessor import SpikeModelMismatchError  # noqa: E402
 from ..utils.checkpoint import (CheckpointError, check_dataset_meta,  # noqa
                                 checkpoint_state_dict, read_checkpoint)
 
@@ -59,6 +60,8 @@ def load_segmentor(cfg, checkpoint: str) -> Tuple[nn.Module, dict]:
     model = MODELS.build(cfg.model)
     try:
         load_state_dict(model, weights, strict=True)
+    except SpikeModelMismatchError as err:
+        raise SpikeModelMismatchError(f'{checkpoint}: {err}') from None
     except RuntimeError as err:
         raise ValueError(
             f'{checkpoint}: does not fit the model built from the config '

@@ -30,7 +30,9 @@ from .._openmmlab import prepare_mmseg_layer
 from ..core.output_folder import (OutputFolderError, discard, own_folder,
                                   unshare)
 from ..utils.checkpoint import CheckpointError, load_error
-from ..utils.cross_checks import check_training_fits
+from ..models.data_preprocessor import SpikeModelMismatchError
+from ..utils.cross_checks import check_model_fits, check_training_fits
+from ..utils.distributed import fit_to_cpus, fit_workers
 from ..utils.spike_settings import apply_spike_settings
 
 __all__ = ['SpikeRunner']
@@ -71,7 +73,11 @@ class SpikeRunner(Runner):
     """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` sets up the
     MMSeg layer (as :func:`wgse_mmseg.register_all_modules` does, once per
     process) and applies the config's spike settings first (also those
-    ``--cfg-options`` of MMSeg's own tools merged in) and formats the
+    ``--cfg-options`` of MMSeg's own tools merged in), fits the config to a
+    machine without GPUs (SyncBN as BN,
+    :func:`~wgse_mmseg.utils.distributed.fit_to_cpus`) and to
+    ``num_workers=0`` (:func:`~wgse_mmseg.utils.distributed.fit_workers`),
+    and formats the
     config's text once for all its uses, whose :meth:`train` first checks
     that the crop and the batch fit the model
     (:class:`~wgse_mmseg.utils.cross_checks.ModelFitError` where not) and
@@ -88,6 +94,8 @@ class SpikeRunner(Runner):
                       "config's values): " + ', '.join(
                           f'{path} (was {old!r})' for path, old in
                           sorted(changed.items())), logger='current')
+        fit_to_cpus(cfg)
+        fit_workers(cfg)
         if isinstance(cfg, Config):
             cfg = _FormattedOnce.of(cfg)
         return super().from_cfg(cfg)
@@ -120,7 +128,10 @@ class SpikeRunner(Runner):
         return super().val()
 
     def test(self) -> dict:
-        """mmengine's, with the config dumped as it starts."""
+        """mmengine's, with the config dumped as it starts, after the
+        checks of the built model against its spikes and classes
+        (:func:`~wgse_mmseg.utils.cross_checks.check_model_fits`)."""
+        check_model_fits(self.cfg, self.model)
         super().dump_config()
         return super().test()
 
@@ -160,6 +171,8 @@ class SpikeRunner(Runner):
         (:mod:`wgse_mmseg.compat.checkpoint_safety`)."""
         try:
             checkpoint = super().load_checkpoint(filename, *args, **kwargs)
+        except SpikeModelMismatchError as err:
+            raise SpikeModelMismatchError(f'{filename}: {err}') from None
         except pickle.UnpicklingError as err:
             raise CheckpointError(
                 f'{filename}: refused: it holds objects that weights-only '

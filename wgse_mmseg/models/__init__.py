@@ -6,12 +6,14 @@ from .._openmmlab import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.models')
 
-from .data_preprocessor import SpikeSegDataPreProcessor  # noqa: E402
+from .data_preprocessor import (SpikeModelMismatchError,  # noqa: E402
+                                SpikeSegDataPreProcessor)
 from .enhancers import ENHANCERS  # noqa: E402
 from .reconstruction import (ResidualBlock,  # noqa: E402
                              SpikeReconstructor, load_reconstructor)
 from .segmentors import LEGACY_SEGMENTORS  # noqa: E402
 
 __all__ = [
-    'SpikeSegDataPreProcessor', 'SpikeReconstructor', 'load_reconstructor'
+    'SpikeSegDataPreProcessor', 'SpikeModelMismatchError',
+    'SpikeReconstructor', 'load_reconstructor'
 ]

@@ -1,5 +1,5 @@
 """Batching of spike streams for MMSeg segmentors."""
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import torch
 
@@ -8,7 +8,37 @@ from mmseg.registry import MODELS
 from ..core.arguments import (FRAME_SIZE, NUM_CLASSES, NUM_STEPS, SIDE,
                               Choice, Integer, declare)
 
-__all__ = ['SpikeSegDataPreProcessor']
+__all__ = ['SpikeSegDataPreProcessor', 'SpikeModelMismatchError']
+
+#: the state-dict key of the preprocessor's record, under its prefix
+RECORD_KEY = '_extra_state'
+
+
+class SpikeModelMismatchError(ValueError):
+    """Weights made for another T or enhancer than the model's."""
+
+
+def encode_record(num_steps: Optional[int],
+                  enhancer: Optional[str]) -> torch.Tensor:
+    """T and the enhancer's class name as one int64 tensor (a state dict
+    holds tensors): ``[T or -1, *name's bytes]``."""
+    name = (enhancer or '').encode('ascii', 'replace')
+    return torch.tensor([-1 if num_steps is None else num_steps, *name],
+                        dtype=torch.int64)
+
+
+def decode_record(record: Any) -> Optional[Tuple[Optional[int], str]]:
+    """``(T or None, enhancer name or '')`` of a record, ``None`` for no
+    record (a checkpoint made before records, or not a record)."""
+    if not isinstance(record, torch.Tensor) or record.dim() != 1 or \
+            record.numel() < 1 or record.numel() > 257 or \
+            record.dtype != torch.int64:
+        return None
+    values = record.tolist()
+    if not all(0 <= v < 128 for v in values[1:]) or values[0] < -1:
+        return None
+    return (None if values[0] == -1 else values[0],
+            bytes(values[1:]).decode('ascii'))
 
 
 def _source(data_samples: Optional[list], index: int) -> str:
@@ -57,6 +87,14 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
 
     Every input must hold only 0 and 1 (any dtype); another value (NaN, a
     grey level, a negative) fails naming the file.
+
+    Its state dict records the model's T and enhancer
+    (``data_preprocessor._extra_state``), so weights made for another T
+    or enhancer are refused when they are loaded, by every loader
+    (``load_state_dict``, mmengine's ``load_checkpoint``, MMSeg's
+    ``init_model``, the tools), with a :class:`SpikeModelMismatchError`
+    naming both, instead of loading around a mismatched stem. Weights
+    without a record (saved before it existed) load as before.
     """
 
     @declare(num_steps=NUM_STEPS.or_none(),
@@ -87,6 +125,46 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
         self.num_steps = num_steps
         self.num_classes = num_classes
         self.enhancer = MODELS.build(enhancer) if enhancer else None
+        self._register_load_state_dict_pre_hook(self._record_or_none)
+
+    def _enhancer_name(self) -> str:
+        return '' if self.enhancer is None else type(self.enhancer).__name__
+
+    def get_extra_state(self) -> torch.Tensor:
+        """The record of T and the enhancer (:func:`encode_record`)."""
+        return encode_record(self.num_steps, self._enhancer_name())
+
+    @staticmethod
+    def _record_or_none(state_dict, prefix, *args) -> None:
+        """Weights without a record load as before: an empty record."""
+        state_dict.setdefault(prefix + RECORD_KEY,
+                              torch.empty(0, dtype=torch.int64))
+
+    def set_extra_state(self, state: Any) -> None:
+        """Refuse weights whose record names another T or enhancer.
+
+        Raises:
+            SpikeModelMismatchError: naming both and the setting to change.
+        """
+        record = decode_record(state)
+        if record is None:
+            return
+        num_steps, enhancer = record
+        ours = self._enhancer_name()
+        if num_steps is not None and self.num_steps is not None and \
+                num_steps != self.num_steps:
+            raise SpikeModelMismatchError(
+                f'the weights were trained with num_steps={num_steps}, the '
+                f'model is built for num_steps={self.num_steps}: load them '
+                f'into a model of the same T (--cfg-options num_steps='
+                f'{num_steps}; from Python wgse_mmseg.load_config(config, '
+                f"{{'num_steps': {num_steps}}}))")
+        if enhancer != ours:
+            raise SpikeModelMismatchError(
+                f'the weights were trained with enhancer '
+                f'{enhancer or "None"}, the model has {ours or "None"} '
+                f'(model.data_preprocessor.enhancer): use the config they '
+                f'were trained with')
 
     def _check_num_steps(self, inputs: Sequence[torch.Tensor],
                          data_samples: Optional[list]) -> None:

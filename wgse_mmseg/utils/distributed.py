@@ -59,3 +59,47 @@ def prepare_launcher(cfg: Config) -> None:
         warnings.warn(f'sync_bn={cfg.sync_bn!r} ignored: SyncBN needs GPUs, '
                       f'this CPU run keeps per-process BN statistics')
         cfg.sync_bn = None
+
+
+def _sync_bn_fields(node, path: str, found: list) -> None:
+    """Append ``(path, dict)`` of every ``type='SyncBN'`` dict under
+    ``node`` (dicts, lists and tuples, at any depth)."""
+    if isinstance(node, dict):
+        if node.get('type') == 'SyncBN':
+            found.append((path, node))
+        for key, value in node.items():
+            _sync_bn_fields(value, f'{path}.{key}', found)
+    elif isinstance(node, (list, tuple)):
+        for index, value in enumerate(node):
+            _sync_bn_fields(value, f'{path}[{index}]', found)
+
+
+def fit_to_cpus(cfg: Config) -> None:
+    """Make a model config that names SyncBN runnable where there is no
+    CUDA: every ``norm_cfg`` of ``type='SyncBN'`` in ``cfg.model``, at any
+    depth, becomes ``'BN'`` (per-process statistics, as one GPU has), with
+    one warning naming the fields; nothing changes where CUDA is
+    available. :class:`~wgse_mmseg.engine.SpikeRunner` calls it for every
+    run, distributed or not."""
+    if torch.cuda.is_available():
+        return
+    found: list = []
+    _sync_bn_fields(cfg.get('model'), 'model', found)
+    for _, norm in found:
+        norm['type'] = 'BN'
+    if found and os.environ.get('RANK', '0') == '0':
+        warnings.warn(
+            f'SyncBN needs GPUs: on this CPU machine {len(found)} norm '
+            f'layers of type SyncBN are BN ({", ".join(p for p, _ in found[:4])}'
+            f'{", ..." if len(found) > 4 else ""})')
+
+
+def fit_workers(cfg: Config) -> None:
+    """``persistent_workers`` off in every data loader of ``cfg`` that has
+    ``num_workers=0`` (torch refuses the pair; ``num_workers=0``, the
+    usual way to debug a pipeline, then works alone)."""
+    for split in ('train', 'val', 'test'):
+        loader = cfg.get(f'{split}_dataloader')
+        if isinstance(loader, dict) and loader.get('num_workers') == 0 \
+                and loader.get('persistent_workers'):
+            loader['persistent_workers'] = False

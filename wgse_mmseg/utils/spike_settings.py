@@ -18,9 +18,19 @@ Which fields take a setting's value:
 * the listed fields that hold one value, different from the setting's: the
   config changed the setting after its base derived them, so all take it;
 * ``num_steps``: its fields must all hold T (the loader's window, the
-  preprocessor's check, the backbone's input channels, ...); fields that
-  disagree among themselves raise :class:`SpikeSettingsError` listing them,
-  since which of them was meant cannot be told;
+  preprocessor's check, ...); fields that disagree among themselves raise
+  :class:`SpikeSettingsError` listing them, since which of them was meant
+  cannot be told;
+* the stem of a spike model (one whose data preprocessor has
+  ``num_steps``) takes T channels, whatever the backbone: every enhancer
+  keeps T channels, so there is no other width it could take. The
+  ``in_channels`` of the backbone and of each backbone nested in its config
+  (``backbone_cfg``: BiSeNetV1's, ICNet's, STDC's context path) becomes T,
+  also where it holds an RGB base's 3; where the config does not set it
+  and the registered class takes ``in_channels`` (at any depth of its
+  constructors), it is added (:func:`stem_fields`). A backbone that takes
+  no ``in_channels`` (MobileNetV2/V3) is left as it is: the start-up check
+  (:mod:`wgse_mmseg.utils.cross_checks`) names its first layer;
 * ``data_root`` and ``crop_size``: a field that holds another value than
   the setting while others hold the setting was set apart on purpose (a
   separate training root, a validation crop) and keeps its value.
@@ -28,6 +38,7 @@ Which fields take a setting's value:
 A command-line value (``overrides``) goes to the fields that hold the
 setting's value as the config gives it, then becomes the setting's value.
 """
+import inspect
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -55,15 +66,12 @@ class _SpikeSetting:
             a path missing from a config is skipped.
         agree: every field must hold the value (else a field may be set
             apart).
-        conditional: ``{field: path}``: the field carries the setting only
-            where ``path`` exists in the config.
         hint: the value's form on the command line.
     """
     name: str
     kind: Argument
     fields: Tuple[str, ...]
     agree: bool = False
-    conditional: Optional[Dict[str, str]] = None
     hint: str = ''
 
 
@@ -83,14 +91,10 @@ SPIKE_SETTINGS = (
     _SpikeSetting(
         'num_steps', NUM_STEPS, agree=True, hint='T',
         fields=('model.data_preprocessor.num_steps',
-                # the enhancers keep T channels: a spike model's stem
-                'model.backbone.in_channels',
                 'model.num_steps',  # SpikeReconstructor
                 *_loaders('num_steps',  # SimulatedSpikeImageDataset
                           f'{_T_STEPS}.num_steps'),
-                f'train_{_T_STEPS}.num_steps', f'test_{_T_STEPS}.num_steps'),
-        conditional={'model.backbone.in_channels':
-                     'model.data_preprocessor.num_steps'}),
+                f'train_{_T_STEPS}.num_steps', f'test_{_T_STEPS}.num_steps')),
     _SpikeSetting('data_root', Path(), hint='DIR',
                   fields=_loaders('data_root')),
     _SpikeSetting(
@@ -170,10 +174,82 @@ def _fields(cfg, setting: _SpikeSetting) -> List[Tuple[str, Any, str]]:
     """``(path, container, key)`` of the fields of ``setting`` in ``cfg``."""
     found: List[Tuple[str, Any, str]] = []
     for spec in setting.fields:
-        condition = (setting.conditional or {}).get(spec)
-        if condition is None or _find(cfg, condition):
-            found.extend(_find(cfg, spec))
+        found.extend(_find(cfg, spec))
     return found
+
+
+#: keys of a backbone's config that hold a backbone of its own, which
+#: sees the model's input too
+INNER_BACKBONE_KEYS = ('backbone_cfg',)
+
+
+def takes_in_channels(kind: Any) -> bool:
+    """Whether the backbone ``kind`` (a config's ``type``: a registered
+    name or a class) takes ``in_channels``, by its constructors' signatures
+    (following ``**kwargs`` to the base classes). A name is looked up in
+    MMSeg's registry only where it is a plain identifier (a dotted name
+    would make mmengine import a module); ``False`` where it cannot be
+    found."""
+    if isinstance(kind, str):
+        if not kind.isidentifier():
+            return False
+        try:
+            from mmseg.registry import MODELS
+            kind = MODELS.get(kind)
+        except Exception:  # no MMSeg, or a registry that cannot look it up
+            return False
+    if not inspect.isclass(kind):
+        return False
+    for klass in kind.__mro__:
+        init = klass.__dict__.get('__init__')
+        if init is None:
+            continue
+        try:
+            parameters = inspect.signature(init).parameters
+        except (TypeError, ValueError):
+            return False
+        if 'in_channels' in parameters:
+            return True
+        if not any(p.kind is p.VAR_KEYWORD for p in parameters.values()):
+            return False
+    return False
+
+
+def stem_fields(cfg) -> List[Tuple[str, dict]]:
+    """``(path, backbone config)`` of every backbone of ``cfg``'s model
+    that sees its input: ``model.backbone`` and the backbones nested in it
+    (:data:`INNER_BACKBONE_KEYS`), for a spike model only (a data
+    preprocessor with ``num_steps``); their ``in_channels`` is the stem's
+    width."""
+    model = cfg.get('model')
+    if not isinstance(model, dict) or not isinstance(
+            model.get('data_preprocessor'), dict) or \
+            'num_steps' not in model['data_preprocessor']:
+        return []
+    found: List[Tuple[str, dict]] = []
+    pending = [('model.backbone', model.get('backbone'))]
+    while pending:
+        path, backbone = pending.pop(0)
+        if not isinstance(backbone, dict):
+            continue
+        found.append((path, backbone))
+        pending.extend((f'{path}.{key}', backbone.get(key))
+                       for key in INNER_BACKBONE_KEYS)
+    return found
+
+
+def _give_stems(cfg, num_steps: int) -> Dict[str, Any]:
+    """T to every stem's ``in_channels`` (module docstring); returns
+    ``{path: old value}`` of those that changed (``None``: added)."""
+    changed: Dict[str, Any] = {}
+    for path, backbone in stem_fields(cfg):
+        present = 'in_channels' in backbone
+        if present and backbone['in_channels'] == num_steps:
+            continue
+        if present or takes_in_channels(backbone.get('type')):
+            changed[f'{path}.in_channels'] = backbone.get('in_channels')
+            backbone['in_channels'] = num_steps
+    return changed
 
 
 def _reconcile(cfg, setting: _SpikeSetting) -> Dict[str, Any]:
@@ -231,4 +307,14 @@ def apply_spike_settings(cfg, overrides: Optional[Dict[str, Any]] = None
                     changed.setdefault(path, container[key])
                     container[key] = value
         cfg[name] = value
+    num_steps = cfg.get('num_steps')
+    if num_steps is None:  # a config without the setting: its model's T
+        model = cfg.get('model')
+        preprocessor = model.get('data_preprocessor') if isinstance(
+            model, dict) else None
+        num_steps = preprocessor.get('num_steps') if isinstance(
+            preprocessor, dict) else None
+    if isinstance(num_steps, int) and not isinstance(num_steps, bool):
+        for path, old in _give_stems(cfg, num_steps).items():
+            changed.setdefault(path, old)
     return changed
