@@ -105,3 +105,80 @@ def test_the_checks_leave_the_model_and_the_generators_as_they_were():
     assert all(torch.equal(state[k], v) for k, v in
                model.state_dict().items())
     assert all(m.training for m in model.modules())
+
+
+def _user_model(tmp_path, base, num_steps=T, plain=False, **options):
+    """A user's config for MMSeg's model base ``base`` by the documented
+    recipe without its ``in_channels`` line, and its built model; with
+    ``plain``, read by mmengine alone (no spike settings applied)."""
+    from mmengine.config import Config
+    path = tmp_path / f'{base}_spikes.py'
+    path.write_text(
+        f"_base_ = ['mmseg::_base_/models/{base}.py', "
+        f"{osp.join(ROOT, 'configs/_base_/datasets/spike_cityscapes.py')!r}]"
+        "\nnorm_cfg = dict(type='BN', requires_grad=True)\n"
+        "model = dict(data_preprocessor=dict(\n"
+        "    _delete_=True, **_base_.spike_data_preprocessor))\n")
+    cfg = Config.fromfile(str(path)) if plain else load_config(
+        str(path), dict(num_steps=num_steps, **options))
+    init_default_scope('mmseg')
+    return cfg, MODELS.build(cfg.model)
+
+
+def _peak_growth_mb(call):
+    import resource
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    try:
+        call()
+    finally:
+        after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return (after - before) / 1024
+
+
+def test_a_stem_of_the_wrong_width_is_named_with_its_field(tmp_path):
+    """The config read without the spike settings keeps ResNet's three
+    input channels: the check names the stem and the field, at once and
+    without allocating trial inputs (it once grew them to 16384x16384)."""
+    cfg, model = _user_model(tmp_path, 'pspnet_r50-d8', plain=True)
+    cfg.crop_size = (512, 1024)
+    with pytest.raises(ModelFitError) as error:
+        grown = _peak_growth_mb(lambda: check_training_fits(cfg, model))
+    message = str(error.value)
+    assert "layer backbone.stem.0 (Conv2d) takes 3 input channels but is " \
+        "given the spikes' 129 channels (num_steps=129)" in message
+    assert 'set model.backbone.in_channels=129' in message
+    # loaded by the package, the same config trains: T reached the stem
+    cfg, model = _user_model(tmp_path, 'pspnet_r50-d8')
+    assert model.backbone.stem[0].in_channels == T
+    grown = _peak_growth_mb(lambda: check_training_fits(cfg, model))
+    assert grown < 300, grown
+
+
+def test_a_backbone_that_takes_no_in_channels_is_refused_naming_it(
+        tmp_path):
+    cfg, model = _user_model(tmp_path, 'lraspp_m-v3-d8')
+    with pytest.raises(ModelFitError, match=r'layer backbone\.layer0\.conv '
+                       r'.*takes 3 input channels.*model\.backbone '
+                       r'\(MobileNetV3\) has no in_channels argument'):
+        check_training_fits(cfg, model)
+
+
+def test_a_crop_of_any_size_is_checked_in_bounded_memory(tmp_path):
+    """A forward of shapes only: a 4096x8192 crop (its input alone 1.2
+    GB at T=9) costs the check no more memory than a small one."""
+    for crop in ((512, 1024), (4096, 8192)):
+        cfg, model = _built('pspnet_wgse.py', crop_size=crop)
+        grown = _peak_growth_mb(lambda: check_training_fits(cfg, model))
+        assert grown < 300, (crop, grown)
+
+
+def test_a_head_of_another_class_count_is_named(tmp_path):
+    """MMSeg's UNet base predicts 2 classes; the data has 19."""
+    cfg, model = _user_model(tmp_path, 'fcn_unet_s5-d16')
+    with pytest.raises(ModelFitError, match=r'model\.decode_head\.'
+                       r'num_classes=2, but the data has 19 classes.*set '
+                       r'num_classes=19 in model\.decode_head'):
+        check_training_fits(cfg, model)
+    # STDC's boundary head predicts its own two classes: not refused
+    cfg, model = _user_model(tmp_path, 'stdc')
+    check_training_fits(cfg, model)
