@@ -15,7 +15,7 @@ import argparse
 import os
 import os.path as osp
 import re
-from typing import TYPE_CHECKING, Any, Dict, List, Optional
+from typing import TYPE_CHECKING, Any, Dict, List, Optional, Union
 
 from .._openmmlab import prepare_mmseg_layer
 from ..core.arguments import Choice, Integer, Path
@@ -38,8 +38,10 @@ SPIKE_SETTING_KINDS = {setting.name: setting.kind
                        for setting in SPIKE_SETTINGS}
 
 
-def load_config(path: str, cfg_options: Optional[Dict] = None) -> 'Config':
-    """``Config.fromfile(path)`` with ``cfg_options`` applied.
+def load_config(path: Union[str, 'Config'],
+                cfg_options: Optional[Dict] = None) -> 'Config':
+    """``Config.fromfile(path)`` (or the ``Config`` ``path`` itself) with
+    ``cfg_options`` applied.
 
     ``num_steps``, ``data_root`` and ``crop_size`` in ``cfg_options`` go to
     the fields that carry them, before the other keys are merged with
@@ -50,18 +52,19 @@ def load_config(path: str, cfg_options: Optional[Dict] = None) -> 'Config':
     prepare_mmseg_layer`), which the configs' ``mmseg::`` bases need on the
     onedl stack.
     """
-    if not osp.isfile(path):
-        raise FileNotFoundError(f'{path}: no such config file')
-    if osp.splitext(path)[1] not in CONFIG_EXTENSIONS:
-        raise ValueError(f'{path}: not a config file (expected one of '
-                         f'{", ".join(CONFIG_EXTENSIONS)})')
-    note_input(path)
     prepare_mmseg_layer('load_config')
     from mmengine.config import Config
+    if not isinstance(path, Config):
+        if not osp.isfile(path):
+            raise FileNotFoundError(f'{path}: no such config file')
+        if osp.splitext(path)[1] not in CONFIG_EXTENSIONS:
+            raise ValueError(f'{path}: not a config file (expected one of '
+                             f'{", ".join(CONFIG_EXTENSIONS)})')
+        note_input(path)
     options = dict(cfg_options or {})
     settings = {setting.name: options.pop(setting.name)
                 for setting in SPIKE_SETTINGS if setting.name in options}
-    cfg = Config.fromfile(path)
+    cfg = path if isinstance(path, Config) else Config.fromfile(path)
     apply_spike_settings(cfg, settings)
     if options:
         cfg.merge_from_dict(options)

@@ -296,8 +296,11 @@ def _stem_hint(cfg, num_steps: int) -> str:
             fixes.append(f'{path} ({kind}) has no in_channels argument, so '
                          f'it cannot take spikes: choose a backbone that '
                          f'has one (docs/models.md)')
+    named = ', '.join(f'{path} ({backbone.get("type")})'
+                      for path, backbone in stems)
     return '; '.join(fixes) or (
-        f'the field that builds this layer must be {num_steps}')
+        f'{named} has in_channels={num_steps} but does not build this layer '
+        f'from it: it cannot take spikes (docs/models.md)')
 
 
 #: heads that predict targets of their own, not the data's classes
