@@ -90,9 +90,9 @@ def test_every_export_is_on_the_page(package):
 
 
 def test_the_plugin_part_is_short():
-    """What a plugin user reads first: at most 30 names, before the core
+    """What a plugin user reads first: at most 32 names, before the core
     library's building blocks."""
     text = open(PAGES[wgse_mmseg], encoding='utf-8').read()
     assert BUILDING_BLOCKS in text
     first = page_entries(text.split(BUILDING_BLOCKS)[0])
-    assert 20 <= len(first) <= 30, len(first)
+    assert 20 <= len(first) <= 32, len(first)

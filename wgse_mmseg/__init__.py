@@ -64,10 +64,23 @@ def load_config(path: str, cfg_options: dict = None):
     return load(path, cfg_options)
 
 
+def spike_config(config, enhancer: dict = None, cfg_options: dict = None):
+    """Any MMSeg config (a path, ``mmseg::`` names included, or a loaded
+    ``Config``: a model base or a full config, such as SegNeXt's, that
+    mmengine would refuse to combine with the spike dataset base) with the
+    spike dataset's data, its model taking spikes (the spike data
+    preprocessor with ``enhancer``, T to the stem, the heads' classes to
+    the data's) and ``cfg_options`` applied
+    (:func:`wgse_mmseg.utils.spike_model.spike_config`)."""
+    from .utils.spike_model import spike_config as combine
+    return combine(config, enhancer, cfg_options)
+
+
 def __getattr__(name):
     if name in _LAZY:
         return importlib.import_module(f'{__name__}.{name}')
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
-__all__ = ['__version__', 'load_config', 'register_all_modules']
+__all__ = ['__version__', 'load_config', 'register_all_modules',
+           'spike_config']

@@ -8,7 +8,9 @@ config but its data (model, schedule, runtime), the spike dataset base's
 data (loaders, evaluators, pipelines, the spike settings), and the model
 changed by the documented recipe: the spike data preprocessor (with an
 enhancer or none) and the heads' class count; T then reaches the stem by
-the spike settings (:mod:`wgse_mmseg.utils.spike_settings`).
+the spike settings (:mod:`wgse_mmseg.utils.spike_settings`). A sliding
+test window given as one side (MMSeg's UNet bases) becomes ``(side,
+side)``, as MMSeg's own UNet configs set it.
 """
 import os.path as osp
 from typing import Any, Dict, Optional, Union
@@ -74,6 +76,13 @@ def spike_config(config: Union[str, Any], enhancer: Optional[dict] = None,
     for head in _heads(model):
         if 'num_classes' in head and head.get('type') != 'STDCHead':
             head['num_classes'] = base['num_classes']
+    test_cfg = model.get('test_cfg')
+    if isinstance(test_cfg, dict) and isinstance(test_cfg.get('crop_size'),
+                                                 int):  # UNet's bases
+        side = test_cfg['crop_size']
+        test_cfg['crop_size'] = (side, side)
+        if isinstance(test_cfg.get('stride'), int):
+            test_cfg['stride'] = (test_cfg['stride'], ) * 2
     merged.setdefault('default_scope', 'mmseg')
     spike = Config(merged, filename=getattr(cfg, 'filename', None))
     for _, backbone in stem_fields(spike):
