@@ -30,7 +30,8 @@ __all__ = ['model_bases', 'try_model_base']
 _NEEDS = ((r'mmcv\._ext|MissingCompiledOp|compiled op', 'compiled mmcv ops'),
           (r'mmdet|got an unexpected keyword argument', 'MMDetection'),
           (r'mmpretrain|mmpretrain\.', 'MMPretrain'),
-          (r'mmengine\.model|open_clip|diffusers|ldm', 'an extra package'))
+          (r'text_encoder required', 'a vocabulary and CLIP weights '
+           '(an open-vocabulary model)'))
 
 
 def model_bases() -> List[str]:
@@ -158,19 +159,42 @@ def format_rows(rows: List[Dict[str, Any]], machine: Dict[str, Any],
           ', '.join(r['downloads']) or '-', r['reason'] or '-']
          for r in rows])
     trains = sum(r['status'] == 'trains' for r in rows)
-    return (f'{trains} of {len(rows)} model bases train with spikes '
+    return (f'# Models\n\nMMSeg\'s model bases (`mmseg::_base_/models/`) '
+            f'with spike input by the recipe of the user guide ("WGSE in '
+            f'front of any MMSeg model"; `wgse_mmseg.spike_config`): each '
+            f'is built for T={num_steps}, checked as training starts, '
+            f'trained two iterations of batch 2 on random '
+            f'{side}x{side} spikes and labels and asked for one '
+            f'prediction, or refused with the reason the package gives. '
+            f'*Weights left out* are the RGB weights a base would '
+            f'download, which a spike stem cannot take: set them to `None` '
+            f'to train from scratch, as the shipped configs do. The step '
+            f'time is one training iteration on the CPU, without an '
+            f'enhancer. Made by `python -m wgse_bench.model_bases --out '
+            f'docs/models.md`.\n\n'
+            f'{trains} of {len(rows)} model bases train with spikes '
             f'here; machine: {machine["cpu"]}, {machine["cpu_count"]} '
-            f'CPUs, torch {machine["torch"]}, mmseg {machine["mmsegmentation"]}, '
-            f'mmcv {machine["mmcv"]}.\n\n{table}\n')
+            f'CPUs, torch {machine["torch"]}, mmseg '
+            f'{machine["mmsegmentation"]}, mmcv {machine["mmcv"]}.\n\n'
+            f'{table}\n')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from wgse_mmseg.core.arguments import Integer, Path, Text
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--num-steps', type=Integer(1, 1024), default=8,
+                        help='T of the spike input')
+    parser.add_argument('--side', type=Integer(16, 1024), default=64,
+                        help='side of the square training windows')
+    parser.add_argument('--only', nargs='+', type=Text(empty=False),
+                        help='base file names (pspnet_r50-d8.py ...)')
+    parser.add_argument('--out', type=Path(),
+                        help='write the page here as well')
+    return parser
 
 
 def main(argv: Optional[List[str]] = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--num-steps', type=int, default=8)
-    parser.add_argument('--side', type=int, default=64)
-    parser.add_argument('--only', nargs='*', help='base file names')
-    parser.add_argument('--out', help='write the table here as well')
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     import wgse_mmseg
     wgse_mmseg.register_all_modules()
     from .machine import machine_record

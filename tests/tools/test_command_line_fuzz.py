@@ -39,7 +39,7 @@ ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 TOOL_FILES = sorted(osp.relpath(p, ROOT) for room in ('tools', 'dev')
                     for p in glob.glob(osp.join(ROOT, room, '**', '*.py'),
                                        recursive=True))
-TOOL_MODULES = ['wgse_bench.reconstruction',
+TOOL_MODULES = ['wgse_bench.model_bases', 'wgse_bench.reconstruction',
                 'wgse_bench.triton_resources',
                 'wgse_mmseg.data_generation.training_images']
 TOOLS = TOOL_FILES + TOOL_MODULES

@@ -181,6 +181,13 @@ BUILD_CALL = re.compile(
 #: every such call in wgse_mmseg/ and tools/ (file, enclosing function,
 #: callee), reviewed: where its config comes from
 REVIEWED = {
+    ('wgse_bench/model_bases.py', 'try_model_base', 'MODELS.build'):
+        'MMSeg\'s own model bases, combined by spike_config',
+    ('wgse_bench/model_bases.py', 'try_model_base', 'init_default_scope'):
+        'MMSeg\'s own model bases',
+    ('wgse_mmseg/utils/spike_model.py', 'spike_config', 'Config.fromfile'):
+        'the user\'s config file and the package\'s dataset base (Python '
+        'by design)',
     ('wgse_bench/segmentation.py', 'build_model', 'MODELS.build'):
         'the user\'s config file',
     ('wgse_mmseg/models/reconstruction.py', 'load_reconstructor',

@@ -23,7 +23,7 @@ def test_a_full_config_takes_the_spike_dataset(tmp_path, config):
     assert cfg.model.data_preprocessor.type == 'SpikeSegDataPreProcessor'
     assert cfg.model.data_preprocessor.enhancer == dict(type='TFP')
     assert cfg.model.backbone.in_channels == 7
-    assert 'tta_pipeline' not in cfg
+    assert cfg.tta_pipeline[0].num_steps == 7  # the spike set's flips
     init_default_scope('mmseg')
     model = MODELS.build(cfg.model)
     check_training_fits(cfg, model)

@@ -32,6 +32,7 @@ them; the demo, the recording walk and the ONNX export run
 :func:`check_input_fits`.
 """
 import contextlib
+import warnings
 from typing import Callable, Iterator, Optional, Tuple
 
 import torch
@@ -119,6 +120,7 @@ class _Probe:
                                                        stem_hint)
         self.device = next(self.model.parameters(), torch.empty(0)).device
         self.shapes_only = True
+        self.unjudged: Optional[Exception] = None
         self.channels = self._enhanced_channels()
 
     def _enhanced_channels(self) -> int:
@@ -171,6 +173,29 @@ class _Probe:
                 raise
             except _REFUSALS as err:
                 return err
+            except Exception as err:  # a forward mode='tensor' cannot run
+                # (MMSeg's PointRend: its point head needs the training
+                # step's inputs): no verdict on sizes, said once
+                if self.unjudged is None:
+                    self.unjudged = err
+                    warnings.warn(
+                        f'{self.source}: the start-up check cannot run the '
+                        f"model's tensor forward ({type(err).__name__}: "
+                        f'{cut(str(err), 120)}): its input sizes and batch '
+                        f'are not checked')
+        return None
+
+    def _fixed_size(self) -> Optional[Tuple[int, int]]:
+        """The ``img_size`` of a backbone that runs only at it (a vision
+        transformer with fixed position embeddings), else ``None``."""
+        for module in self.model.modules():
+            size = getattr(module, 'img_size', None)
+            if isinstance(size, int):
+                size = (size, size)
+            if isinstance(size, (tuple, list)) and len(size) == 2 and all(
+                    isinstance(v, int) and v > 0 for v in size) and \
+                    self.error(1, *size, training=False) is None:
+                return tuple(size)
         return None
 
     def smallest_side(self, probe: Tuple[int, int]) -> Optional[int]:
@@ -189,6 +214,13 @@ class _Probe:
         side = smallest_input_side(
             lambda s: self.error(1, s, s, training=False) is None,
             min(probe)) if self.shapes_only else None
+        fixed = self._fixed_size() if side is None else None
+        if fixed is not None:
+            raise ModelFitError(
+                f'{self.source}: the model takes only its fixed input size '
+                f'{fixed[0]}x{fixed[1]} (its backbone\'s img_size, for its '
+                f'position embeddings): set crop_size={fixed[0]},'
+                f'{fixed[1]}, and a test pipeline that gives that size')
         if side is None:
             reach = (f'on no input up to {MAX_IMAGE_SIDE}x{MAX_IMAGE_SIDE}'
                      if self.shapes_only else

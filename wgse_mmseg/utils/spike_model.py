@@ -23,9 +23,10 @@ __all__ = []
 DATA_KEYS = ('custom_imports', 'dataset_type', 'num_classes', 'data_root',
              'num_steps', 'crop_size', 'train_pipeline', 'test_pipeline',
              'train_dataloader', 'val_dataloader', 'test_dataloader',
-             'val_evaluator', 'test_evaluator', 'spike_data_preprocessor')
+             'val_evaluator', 'test_evaluator', 'spike_data_preprocessor',
+             'tta_pipeline')
 #: what MMSeg configs keep of an RGB data set that a spike set has not
-RGB_KEYS = ('img_ratios', 'tta_pipeline', 'tta_model')
+RGB_KEYS = ('img_ratios', )
 #: the package's dataset base, under its configs
 DATASET_BASE = osp.join('_base_', 'datasets', 'spike_cityscapes.py')
 
@@ -71,6 +72,12 @@ def spike_config(config: Union[str, Any], enhancer: Optional[dict] = None,
               if key not in DATA_KEYS + RGB_KEYS}
     merged.update({key: base[key] for key in DATA_KEYS})
     model = merged['model']
+    if not isinstance(model.get('decode_head'), (dict, list, tuple)):
+        from .cross_checks import ModelFitError
+        raise ModelFitError(
+            f'{getattr(cfg, "filename", config)}: its model '
+            f'({model.get("type")}) has no decode_head: not a segmentor '
+            f'that spike segmentation can train')
     model['data_preprocessor'] = dict(base['spike_data_preprocessor'],
                                       enhancer=enhancer)
     for head in _heads(model):
