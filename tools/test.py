@@ -1,15 +1,19 @@
 """Evaluate a checkpoint on spike streams (MMSeg's tools/test.py, for spikes).
 
     python tools/test.py CONFIG CHECKPOINT [--work-dir DIR] [--out DIR]
+        [--show-dir DIR] [--show] [--wait-time S] [--tta]
         [--cfg-options num_steps=41 data_root=DIR ...]
 
-Prints mIoU, mAcc and aAcc (MMSeg's IoUMetric).
+Prints mIoU, mAcc and aAcc (MMSeg's IoUMetric). As MMSeg's: ``--show-dir``
+saves every window's clip (a TFP image) under its prediction, ``--show``
+shows them, ``--tta`` tests with the config's test-time augmentation
+(``tta_model``, ``tta_pipeline``: the dataset base's flips).
 """
 import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.arguments import Path
+from wgse_mmseg.core.arguments import Number, Path
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
@@ -21,14 +25,49 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('checkpoint', type=Path(), help='checkpoint file')
     parser.add_argument('--out', type=Path(),
                         help='directory to save the predicted masks')
+    parser.add_argument('--show-dir', type=Path(),
+                        help='directory to save the drawn results in')
+    parser.add_argument('--show', action='store_true',
+                        help='show the drawn results in a window')
+    parser.add_argument('--wait-time', type=Number(0, 3600), default=2,
+                        help='seconds each shown result stays')
+    parser.add_argument('--tta', action='store_true',
+                        help='test-time augmentation (the config\'s '
+                        'tta_model and tta_pipeline)')
     add_runner_arguments(parser)
     return parser
+
+
+def apply_test_options(cfg, args) -> None:
+    """``--show``, ``--show-dir`` and ``--tta`` as MMSeg's tools/test.py
+    applies them: the visualisation hook draws every test sample, to the
+    visualiser's ``save_dir`` and on screen; the test loader runs
+    ``tta_pipeline`` into ``tta_model`` around the model."""
+    if args.show or args.show_dir:
+        hook = cfg.default_hooks.get('visualization')
+        if hook is None:
+            raise ValueError('--show/--show-dir need a visualization hook '
+                             'in default_hooks (the shipped configs\' '
+                             'SpikeVisualizationHook)')
+        hook['draw'] = True
+        hook['show'] = args.show
+        hook['wait_time'] = args.wait_time
+        if args.show_dir:
+            cfg.visualizer['save_dir'] = args.show_dir
+    if args.tta:
+        if 'tta_model' not in cfg or 'tta_pipeline' not in cfg:
+            raise ValueError(f'--tta: {args.config} has no tta_model and '
+                             f'tta_pipeline (the spike dataset base has '
+                             f'both)')
+        cfg.test_dataloader.dataset.pipeline = cfg.tta_pipeline
+        cfg.tta_model.module = cfg.model
+        cfg.model = cfg.tta_model
 
 
 @keeps_inputs
 def main():
     args = build_parser().parse_args()
-    check_tool_outputs(args, 'out')
+    check_tool_outputs(args, 'out', 'show_dir')
     # torch and OpenMMLab once the arguments are read (--help answers at once)
     from wgse_mmseg.core.io import SpikeFileError
     from wgse_mmseg.utils.checkpoint import read_checkpoint
@@ -37,6 +76,7 @@ def main():
         if args.out is not None:
             cfg.test_evaluator['output_dir'] = args.out
             cfg.test_evaluator['keep_results'] = True
+        apply_test_options(cfg, args)
         runner = build_runner(cfg)
         # Strict: a checkpoint made for another T (or model) must not be
         # scored with some layers left at random initialisation.

@@ -58,8 +58,7 @@ def load_config(path: str, cfg_options: dict = None):
     'data_root': DIR}``) applied, the spike settings given to every field
     that carries them (the loaders, the data preprocessor, the backbone's
     stem, whatever the backbone), the MMSeg layer set up. Pass the result
-    to ``mmseg.apis.init_model`` for the model ``tools/test.py`` builds
-    (:func:`wgse_mmseg.utils.config.load_config`)."""
+    to ``mmseg.apis.init_model`` for the model ``tools/test.py`` builds."""
     from .utils.config import load_config as load
     return load(path, cfg_options)
 
@@ -70,8 +69,8 @@ def spike_config(config, enhancer: dict = None, cfg_options: dict = None):
     mmengine would refuse to combine with the spike dataset base) with the
     spike dataset's data, its model taking spikes (the spike data
     preprocessor with ``enhancer``, T to the stem, the heads' classes to
-    the data's) and ``cfg_options`` applied
-    (:func:`wgse_mmseg.utils.spike_model.spike_config`)."""
+    the data's) and ``cfg_options`` applied. The result trains and tests
+    as a shipped config does; ``cfg.dump(path)`` writes it for the tools."""
     from .utils.spike_model import spike_config as combine
     return combine(config, enhancer, cfg_options)
 

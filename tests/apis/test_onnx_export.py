@@ -253,7 +253,9 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys,
         tool.main([config, checkpoint, '--shape', '5', str(H), str(W),
                    '--out', str(tmp_path / 'a.onnx'), '--cfg-options',
                    f'num_steps={T}'])
-    with pytest.raises(SystemExit, match='model.pth: does not fit'):
+    with pytest.raises(SystemExit, match='model.pth: the weights were '
+                       'trained with num_steps=9, the model is built for '
+                       'num_steps=5'):
         tool.main([config, checkpoint, '--shape', '5', str(H), str(W),
                    '--out', str(tmp_path / 'b.onnx'), '--cfg-options',
                    'num_steps=5'])

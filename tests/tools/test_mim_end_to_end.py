@@ -80,6 +80,17 @@ def test_mim_in_the_readme_install_mode(tiny_spike_dataset, tiny_run_options,
                '--launcher', 'none', '--work-dir', str(tmp_path / 'test')] +
               options(), cwd=ROOT, env=env)
     assert re.search(r'mIoU: [\d.]+', log), log[-3000:]
+    # MMSeg's test habits: every window drawn, test-time flips
+    shown = tmp_path / 'shown'
+    log = run([mim, 'test', 'wgse_mmseg', CONFIG,
+               '--checkpoint', str(work_dir / 'epoch_1.pth'), '--gpus', '0',
+               '--launcher', 'none', '--work-dir', str(tmp_path / 'tta'),
+               '--show-dir', str(shown), '--tta'] + options(), cwd=ROOT,
+              env=env)
+    assert re.search(r'mIoU: [\d.]+', log), log[-3000:]
+    drawn = sorted(p.name for p in shown.rglob('*.png'))
+    samples = sorted(osp.basename(p) for p in data.glob('spike/val/*/*'))
+    assert len(drawn) == len(samples) > 0, (drawn, samples)
     log = run([mim, 'run', 'wgse_mmseg', 'benchmark_wgse', '--impls',
                'torch', '--shapes', '1x12x3x4', '--repeat', '1'],
               cwd=tmp_path, env=env)

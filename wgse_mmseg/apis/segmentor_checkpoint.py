@@ -17,7 +17,8 @@ from torch import nn  # noqa: E402
 
 from mmseg.registry import MODELS  # noqa: E402
 from ..datasets import SpikeCityscapesDataset  # noqa: E402
-from ..models.data_preprocessor import SpikeModelMismatchError  # noqa: E402
+from ..models.data_preprocessor import (SpikeModelMismatchError,  # noqa
+                                        unfit_weights)
 from ..utils.checkpoint import (CheckpointError, check_dataset_meta,  # noqa
                                 checkpoint_state_dict, read_checkpoint)
 
@@ -63,8 +64,5 @@ def load_segmentor(cfg, checkpoint: str) -> Tuple[nn.Module, dict]:
     except SpikeModelMismatchError as err:
         raise SpikeModelMismatchError(f'{checkpoint}: {err}') from None
     except RuntimeError as err:
-        raise ValueError(
-            f'{checkpoint}: does not fit the model built from the config '
-            f'(num_steps={cfg.get("num_steps")}; a checkpoint trained with '
-            f'another T needs --cfg-options num_steps=T): {err}') from err
+        raise unfit_weights(checkpoint, cfg.get('num_steps'), err) from err
     return model.eval(), dataset_meta

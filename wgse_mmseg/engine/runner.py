@@ -30,7 +30,8 @@ from .._openmmlab import prepare_mmseg_layer
 from ..core.output_folder import (OutputFolderError, discard, own_folder,
                                   unshare)
 from ..utils.checkpoint import CheckpointError, load_error
-from ..models.data_preprocessor import SpikeModelMismatchError
+from ..models.data_preprocessor import (SpikeModelMismatchError,
+                                        unfit_weights)
 from ..utils.cross_checks import check_model_fits, check_training_fits
 from ..utils.distributed import fit_to_cpus, fit_workers
 from ..utils.spike_settings import apply_spike_settings
@@ -74,10 +75,8 @@ class SpikeRunner(Runner):
     MMSeg layer (as :func:`wgse_mmseg.register_all_modules` does, once per
     process) and applies the config's spike settings first (also those
     ``--cfg-options`` of MMSeg's own tools merged in), fits the config to a
-    machine without GPUs (SyncBN as BN,
-    :func:`~wgse_mmseg.utils.distributed.fit_to_cpus`) and to
-    ``num_workers=0`` (:func:`~wgse_mmseg.utils.distributed.fit_workers`),
-    and formats the
+    machine without GPUs (every SyncBN of the model as BN) and to
+    ``num_workers=0`` (``persistent_workers`` off), and formats the
     config's text once for all its uses, whose :meth:`train` first checks
     that the crop and the batch fit the model
     (:class:`~wgse_mmseg.utils.cross_checks.ModelFitError` where not) and
@@ -173,6 +172,11 @@ class SpikeRunner(Runner):
             checkpoint = super().load_checkpoint(filename, *args, **kwargs)
         except SpikeModelMismatchError as err:
             raise SpikeModelMismatchError(f'{filename}: {err}') from None
+        except RuntimeError as err:
+            if 'size mismatch' not in str(err):
+                raise
+            raise unfit_weights(filename, self.cfg.get('num_steps'),
+                                err) from err
         except pickle.UnpicklingError as err:
             raise CheckpointError(
                 f'{filename}: refused: it holds objects that weights-only '

@@ -38,7 +38,9 @@ def spike_clip_image(path: str, num_steps: Optional[int] = None,
 class SpikeVisualizationHook(SegVisualizationHook):
     """:class:`~mmseg.engine.hooks.SegVisualizationHook` for spike files.
 
-    Every ``interval``-th validation or test batch, each sample's clip is
+    Every test sample, and in validation the first batch and every
+    ``interval``-th after it (as MMSeg's hook, which draws a whole test
+    set and samples validation), each sample's clip is
     read again as the test pipeline reads it (``num_steps`` frames centred on
     the stream; ``height``/``width`` for ``.dat`` files without a side file),
     drawn as a grey TFP image with exposure normalisation, and handed with
@@ -91,8 +93,8 @@ class SpikeVisualizationHook(SegVisualizationHook):
                     mode: str = 'val') -> None:
         if self.draw is False or mode == 'train':
             return
-        if not self.every_n_inner_iters(batch_idx, self.interval):
-            return
+        if mode == 'val' and batch_idx % self.interval:
+            return  # validation: the first batch, then every interval-th
         for output in outputs:
             image = self.clip_image(output.img_path,
                                     runner.cfg.get('num_steps'))

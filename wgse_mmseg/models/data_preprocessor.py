@@ -18,6 +18,18 @@ class SpikeModelMismatchError(ValueError):
     """Weights made for another T or enhancer than the model's."""
 
 
+def unfit_weights(source: str, num_steps: Optional[int],
+                  err: Exception) -> SpikeModelMismatchError:
+    """The one message for weights that do not fit a spike model's
+    shapes (weights saved without a record of their T): what the loader
+    said, after what to change."""
+    return SpikeModelMismatchError(
+        f'{source}: does not fit the model built from the config '
+        f'(num_steps={num_steps}; weights trained with another T need '
+        f'--cfg-options num_steps=T, from Python wgse_mmseg.load_config('
+        f"config, {{'num_steps': T}})): {err}")
+
+
 def encode_record(num_steps: Optional[int],
                   enhancer: Optional[str]) -> torch.Tensor:
     """T and the enhancer's class name as one int64 tensor (a state dict

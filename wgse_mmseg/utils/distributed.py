@@ -88,9 +88,10 @@ def fit_to_cpus(cfg: Config) -> None:
     for _, norm in found:
         norm['type'] = 'BN'
     if found and os.environ.get('RANK', '0') == '0':
+        named = ', '.join(path for path, _ in found[:4])
         warnings.warn(
             f'SyncBN needs GPUs: on this CPU machine {len(found)} norm '
-            f'layers of type SyncBN are BN ({", ".join(p for p, _ in found[:4])}'
+            f'layers of type SyncBN are BN ({named}'
             f'{", ..." if len(found) > 4 else ""})')
 
 

@@ -94,7 +94,8 @@ SPIKE_SETTINGS = (
                 'model.num_steps',  # SpikeReconstructor
                 *_loaders('num_steps',  # SimulatedSpikeImageDataset
                           f'{_T_STEPS}.num_steps'),
-                f'train_{_T_STEPS}.num_steps', f'test_{_T_STEPS}.num_steps')),
+                f'train_{_T_STEPS}.num_steps', f'test_{_T_STEPS}.num_steps',
+                f'tta_{_T_STEPS}.num_steps')),
     _SpikeSetting('data_root', Path(), hint='DIR',
                   fields=_loaders('data_root')),
     _SpikeSetting(

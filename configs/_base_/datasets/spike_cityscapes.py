@@ -35,6 +35,18 @@ test_pipeline = [
     dict(type='LoadAnnotations'),
     dict(type='PackSegInputs'),
 ]
+# Test-time augmentation (tools/test.py --tta): the stream as it is and
+# flipped left-right, the two predictions' class probabilities averaged
+# (tta_model: MMSeg's SegTTAModel, in MMSeg's default runtime; the flipped
+# prediction is flipped back first).
+tta_pipeline = [
+    dict(type='LoadSpikeFromFile', num_steps=num_steps),
+    dict(type='TestTimeAug', transforms=[
+        [dict(type='SpikeRandomFlip', prob=0.0),
+         dict(type='SpikeRandomFlip', prob=(1.0, 0.0))],
+        [dict(type='LoadAnnotations')],
+        [dict(type='PackSegInputs')]]),
+]
 train_dataloader = dict(
     batch_size=4,
     num_workers=2,
