@@ -518,6 +518,12 @@ def test_tiny_grid_end_to_end_and_resume(tmp_path, capsys):
     assert cli.main(arguments) == 0
     assert 'done before, skipped' in capsys.readouterr().out
     assert json.loads((run_dir / 'result.json').read_text()) == result
+    # --cfg-options reach every run: a finished run made without them is
+    # not mixed in
+    with pytest.raises(SystemExit, match=r'made with other settings \('
+                       r'train_dataloader\.batch_size differ\)'):
+        cli.main(arguments + ['--cfg-options',
+                              'train_dataloader.batch_size=2'])
 
     # a report over more entries and seeds than have run trains nothing,
     # and needs no dataset (reporting where the data is not)
@@ -568,3 +574,10 @@ def test_a_run_another_process_runs_is_not_run_twice(tmp_path, capsys,
     assert 'segformer_b0_tfp seed 0: FAILED' in printed
     assert f'another process is writing this output (process ' \
         f'{os.getpid()}' in printed
+
+
+def test_the_time_left_is_the_mean_run_times_the_runs_left():
+    assert cli.time_left([], 3) == ''
+    assert cli.time_left([10.0, 20.0], 0) == ''
+    assert cli.time_left([10.0, 20.0], 2) == ', about 30 s left'
+    assert cli.time_left([100.0, 140.0], 3) == ', about 6 min left'

@@ -4,13 +4,17 @@
         --work-dir DIR [--seeds 0 1 2] [--epochs N | --max-iters N]
         [--only NAME ...] [--report-dir DIR] [--keep-checkpoints] [--list]
         [--report-only] [--benchmark] [--deployment FILE]
+        [--cfg-options KEY=VALUE ...]
 
 GRID (e.g. configs/experiments/grid_cpu.py) lists models and enhancers; each
 entry ``<model>_<enhancer>`` is the model's config with
 ``model.data_preprocessor.enhancer`` overridden. Each (entry, seed) run
 trains with tools/train.py and evaluates its final checkpoint with
 tools/test.py, each in its own process with the grid's ``--cfg-options``,
-then times batch-1 inference on a validation-sized stream. A run is done
+then times batch-1 inference on a validation-sized stream; ``--cfg-options``
+goes to every run after the grid's own (a run made with other options is
+not mixed in: it is refused, naming what differs). Each finished run prints
+the time the remaining runs will take at the mean so far. A run is done
 when ``WORK_DIR/<entry>/seed_<seed>/result.json`` exists (written
 atomically): re-running the command skips finished runs and resumes an
 interrupted one from its last checkpoint. A run another process is running
@@ -37,6 +41,7 @@ from wgse_mmseg.core.arguments import EPOCHS, ITERATIONS, SEED, Path, Text
 from wgse_mmseg.core.output_folder import (OutputFolderError,
                                            check_tool_outputs, keeps_inputs,
                                            own_folder)
+from wgse_mmseg.utils.config import add_config_options
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -78,7 +83,18 @@ def build_parser() -> argparse.ArgumentParser:
                         help='JSON of tools/analysis_tools/'
                         'benchmark_deployment.py: the report gains its '
                         'windows per second (torch eager, ONNX Runtime)')
+    add_config_options(parser)
     return parser
+
+
+def time_left(seconds: list, remaining: int) -> str:
+    """``'about N min left'`` for ``remaining`` runs at the mean of the
+    finished runs' ``seconds`` (none yet: ``''``)."""
+    if not seconds or not remaining:
+        return ''
+    left = sum(seconds) / len(seconds) * remaining
+    return (f', about {left / 60:.0f} min left' if left >= 90 else
+            f', about {left:.0f} s left')
 
 
 def parse_args(argv=None):
@@ -135,6 +151,7 @@ def main(argv=None):
     command = shlex.join(['python', osp.relpath(__file__, os.getcwd())] +
                          list(sys.argv[1:] if argv is None else argv))
     grid, entries = experiments.load_grid(args.grid)
+    grid.cfg_options.update(args.cfg_options)
     try:
         settings = settings_from(args, grid)
     except ValueError as error:  # ArgumentError included
@@ -159,7 +176,8 @@ def main(argv=None):
         done = [experiments.finished(run) for run in runs]
     except experiments.StaleRunError as error:
         raise SystemExit(str(error)) from None
-    failures = []
+    failures, seconds = [], []
+    to_run = sum(not skip for skip in done)
     for index, (run, skip) in enumerate(zip(runs, done), 1):
         prefix = f'[{index}/{len(runs)}] {run.entry.name} seed {run.seed}:'
         if skip:
@@ -175,12 +193,15 @@ def main(argv=None):
                 result = experiments.run_one(
                     run, settings.keep_checkpoints, grid.latency)
         except (experiments.RunFailed, OutputFolderError) as error:
+            seconds.append(time.perf_counter() - start)
             print(f'{prefix} FAILED: {error}', flush=True)
             failures.append(f'{run.entry.name} seed {run.seed}')
             continue
+        seconds.append(time.perf_counter() - start)
+        left = time_left(seconds, to_run - len(seconds))
         print(f"{prefix} mIoU {result['mIoU']:.2f}, "
               f"{result['ms_per_image']['median']:.1f} ms/image, "
-              f'{time.perf_counter() - start:.0f} s', flush=True)
+              f'{seconds[-1]:.0f} s{left}', flush=True)
     if settings.benchmark:
         failures += measure_entries(runs, grid, settings.work_dir)
     experiments.report(entries, settings, grid, command)
