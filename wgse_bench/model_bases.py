@@ -27,7 +27,8 @@ from typing import Any, Dict, List, Optional
 __all__ = ['model_bases', 'try_model_base']
 
 #: what an install without an optional package raises where a base needs it
-_NEEDS = ((r'mmcv\._ext|MissingCompiledOp|compiled op', 'compiled mmcv ops'),
+_NEEDS = ((r'mmcv\._ext|MissingCompiledOp|compiled op|install onedl-mmcv',
+           'compiled mmcv ops'),
           (r'mmdet|got an unexpected keyword argument', 'MMDetection'),
           (r'mmpretrain|mmpretrain\.', 'MMPretrain'),
           (r'text_encoder required', 'a vocabulary and CLIP weights '

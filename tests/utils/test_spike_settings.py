@@ -45,7 +45,8 @@ def test_a_child_config_sets_t_once(tmp_path, base):
         **{f'{split}_dataloader.dataset.pipeline[0].num_steps': 129
            for split in ('train', 'val', 'test')},
         # MMSeg's copies (mmseg.apis.inference_model reads test_pipeline)
-        'train_pipeline[0].num_steps': 129, 'test_pipeline[0].num_steps': 129}
+        'train_pipeline[0].num_steps': 129, 'test_pipeline[0].num_steps': 129,
+        'tta_pipeline[0].num_steps': 129}
     assert cfg.test_pipeline[0].num_steps == 41
     assert _t_values(cfg) == dict(in_channels=41, preprocessor=41,
                                   loaders={41})
