@@ -206,11 +206,9 @@ def install_mmcv_ops_fallback() -> bool:
     mmcv.ops = package
     placeholders = sorted(needed - set(loaded))
     _notice_once(
-        f'wgse_mmseg: mmcv has no compiled ops here; mmcv.ops holds only what '
-        f'MMSeg imports: {", ".join(loaded) or "nothing"} from mmcv\'s '
-        f'pure-Python code, and {", ".join(placeholders) or "nothing"} '
-        f'raising MissingCompiledOpError when used. For them, '
-        f'{_INSTALL_HINT}.')
+        f'wgse_mmseg: mmcv without compiled ops: '
+        f'{", ".join(placeholders) or "none"} fail when used '
+        f'(docs/install.md, "mmcv ops")')
     return True
 
 
