@@ -104,8 +104,25 @@ def _pm(row: Dict[str, Any], key: str, scale: float = 1,
 LOSS_PLOT = 'loss_curves.png'
 
 
-def _total_hours(rows: List[Dict[str, Any]]) -> float:
-    return sum(r['train_seconds_mean'] * r['seeds'] for r in rows) / 3600
+def _total_training(rows: List[Dict[str, Any]]) -> str:
+    """The training processes' wall time of all runs, summed, in the unit
+    that shows it (seconds, minutes or hours)."""
+    seconds = sum(r['train_seconds_mean'] * r['seeds'] for r in rows)
+    if seconds < 120:
+        return f'{seconds:.0f} s'
+    if seconds < 2 * 3600:
+        return f'{seconds / 60:.1f} min'
+    return f'{seconds / 3600:.1f} hours'
+
+
+def _loads(rows: List[Dict[str, Any]]) -> str:
+    """The range of the 1-minute load averages the runs recorded."""
+    loads = [r.get('environment', {}).get('load_average') for r in rows]
+    loads = [load for load in loads if load is not None]
+    if not loads:
+        return 'not recorded'
+    low, high = min(loads), max(loads)
+    return f'{low:.1f}' if high - low < 0.05 else f'{low:.1f}-{high:.1f}'
 
 
 def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
@@ -164,8 +181,9 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
         'standard deviation over seeds.',
         '- train time: wall time of the training process, start-up '
         'included; mean ± standard deviation over seeds. All runs of the '
-        f'table trained for {_total_hours(rows):.1f} hours in all (their '
-        'training processes\' wall time, summed).',
+        f'table trained for {_total_training(rows)} in all (their '
+        'training processes\' wall time, summed), at a 1-minute load '
+        f'average of {_loads(rows)} (the machine\'s, as each run ended).',
         '- final loss: the mean logged training loss over the last quarter '
         'of the iterations; loss change: that mean against the quarter '
         'before (-5.0: still 5 % lower), the measure of how flat the curve '
@@ -174,8 +192,9 @@ def write_markdown(rows: List[Dict[str, Any]], path: str, command: str,
         '(peak, MB): the package\'s benchmark '
         '(`wgse_bench.segmentation.benchmark_config`, as '
         '`tools/analysis_tools/benchmark.py`) of each entry at the training '
-        'crop and batch size, measured once per entry (`--benchmark`) '
-        'with nothing else running; `-`: not measured.',
+        'crop and batch size, measured once per entry (`--benchmark`; '
+        'run it with nothing else loading the machine); `-`: not '
+        'measured.',
         *_deployment_note(deployed), '',
         f'![mIoU against ms per image]({plot_name})', '',
         f'![Training loss curves]({LOSS_PLOT})'
@@ -293,15 +312,20 @@ def plot_loss_curves(rows: List[Dict[str, Any]], path: str) -> None:
     for axis, model in zip(axes[0], models):
         model_rows = [r for r in rows if r['model'] == model]
         colours = plt.get_cmap('tab10')
+        drawn = 0
         for index, row in enumerate(model_rows):
             curves = [dict(c) for c in row['loss_curves'] if c]
             if not curves:
                 continue
             steps = sorted(set.intersection(*(set(c) for c in curves)))
+            if not steps:
+                continue
             losses = np.array([[c[s] for s in steps] for c in curves])
             colour = colours(index % 10)
+            drawn += 1
             axis.plot(steps, losses.mean(0), color=colour, linewidth=1.2,
                       linestyle=('-', '--', ':')[index // 10 % 3],
+                      marker='o' if len(steps) < 5 else None, markersize=3,
                       label=row['name'][len(model) + 1:])
             axis.fill_between(steps, losses.min(0), losses.max(0),
                               color=colour, alpha=0.15, linewidth=0)
@@ -309,7 +333,12 @@ def plot_loss_curves(rows: List[Dict[str, Any]], path: str) -> None:
         axis.set_xlabel('iteration')
         axis.set_ylabel('loss')
         axis.grid(True, alpha=0.3)
-        axis.legend(fontsize=7, ncol=2)
+        if drawn:
+            axis.legend(fontsize=7, ncol=2)
+        else:  # no run logged a loss: say why instead of an empty panel
+            axis.text(0.5, 0.5, 'no training loss logged: the runs were\n'
+                      'shorter than default_hooks.logger.interval',
+                      ha='center', va='center', transform=axis.transAxes)
     figure.tight_layout()
     with atomic_output(path) as f:
         figure.savefig(f, format='png', dpi=120)
