@@ -176,8 +176,9 @@ def format_rows(rows: List[Dict[str, Any]], machine: Dict[str, Any],
             f'{trains} of {len(rows)} model bases train with spikes '
             f'here; machine: {machine["cpu"]}, {machine["cpu_count"]} '
             f'CPUs, torch {machine["torch"]}, mmseg '
-            f'{machine["mmsegmentation"]}, mmcv {machine["mmcv"]}.\n\n'
-            f'{table}\n')
+            f'{machine["mmsegmentation"]}, mmcv {machine["mmcv"]}; 1-minute '
+            f'load average {machine["load_average"]} when the sweep ended '
+            f'(the step times are slower under load).\n\n{table}\n')
 
 
 def build_parser() -> argparse.ArgumentParser:
