@@ -14,7 +14,8 @@ import threading
 import pytest
 
 from wgse_mmseg.core import output_folder
-from wgse_mmseg.core.output_folder import (OutputFolderError, discard,
+from wgse_mmseg.core.output_folder import (MANIFEST_NAME, OutputFolderError,
+                                           discard,
                                            open_append, own_folder)
 
 #: a process that owns FOLDER (job JOB, or None), says 'held', and keeps it
@@ -71,7 +72,8 @@ def test_a_second_writer_is_refused_naming_the_first(tmp_path):
     assert f'process {first.pid}' in second.stderr.read()
     first.communicate('', timeout=60)
     assert log.read_text() == 'start first\nend first\n'
-    assert os.listdir(folder) == []  # the lock file goes with its writer
+    # the lock file goes with its writer
+    assert os.listdir(folder) == [MANIFEST_NAME]
     with own_folder(str(folder)):  # free again
         pass
 
@@ -87,7 +89,7 @@ def test_with_wait_the_second_writer_follows_the_first(tmp_path):
     assert second.wait(60) == 0, second.stderr.read()
     assert log.read_text().splitlines() == [
         'start first', 'end first', 'start second', 'end second']
-    assert os.listdir(folder) == []
+    assert os.listdir(folder) == [MANIFEST_NAME]
 
 
 def test_jobs_of_one_folder_run_together_and_exclude_their_twins(tmp_path):
@@ -109,7 +111,7 @@ def test_a_killed_writer_leaves_no_lock_held(tmp_path):
     first.wait(60)
     with own_folder(str(folder)):  # the kernel released it
         pass
-    assert os.listdir(folder) == []
+    assert os.listdir(folder) == [MANIFEST_NAME]
 
 
 def test_many_threads_and_processes_one_at_a_time(tmp_path):
@@ -152,27 +154,30 @@ def test_a_link_at_the_lock_is_not_followed(tmp_path):
         record = json.loads((folder / '.lock').read_text())
         assert record['pid'] == os.getpid()
     assert outside.read_text() == 'keep me'
-    assert os.listdir(folder) == []
+    assert os.listdir(folder) == [MANIFEST_NAME]
     os.mkfifo(folder / '.lock')  # opened, it would not be a lock file
     with own_folder(str(folder)):
         assert os.path.isfile(folder / '.lock')
-    assert os.listdir(folder) == []
+    assert os.listdir(folder) == [MANIFEST_NAME]
 
 
-def test_a_folder_the_package_names_replaces_a_link_or_file(tmp_path):
+def test_a_folder_the_package_names_refuses_a_link_or_file(tmp_path):
     outside = tmp_path / 'elsewhere'
     outside.mkdir()
     (outside / 'data').write_text('keep me')
     state = tmp_path / 'walk.mp4.partial'
     os.symlink(outside, state)
-    with own_folder(str(state), replace=True) as owned:
-        assert os.path.isdir(state) and not os.path.islink(state)
-        assert owned.root == str(state)
-    assert (outside / 'data').read_text() == 'keep me'
-    discard(str(state))
+    with pytest.raises(OutputFolderError, match='partial: a link or file'):
+        with own_folder(str(state), named=True):
+            pass
+    assert os.path.islink(state)
+    assert sorted(os.listdir(outside)) == ['data']
+    os.unlink(state)
     state.write_text('a file')
-    with own_folder(str(state), replace=True):
-        assert os.path.isdir(state)
+    with pytest.raises(OutputFolderError, match='partial: a link or file'):
+        with own_folder(str(state), named=True):
+            pass
+    assert state.read_text() == 'a file'
     # a folder the user names is followed, not replaced
     target = tmp_path / 'target'
     target.mkdir()
@@ -181,7 +186,7 @@ def test_a_folder_the_package_names_replaces_a_link_or_file(tmp_path):
         owned.file(os.path.join(owned.root, 'a', 'b.txt'))
     assert (target / 'a').is_dir()
     (tmp_path / 'plain').write_text('x')
-    with pytest.raises(OutputFolderError, match='plain: cannot be made'):
+    with pytest.raises(OutputFolderError, match='plain: not a folder'):
         with own_folder(str(tmp_path / 'plain')):
             pass
 

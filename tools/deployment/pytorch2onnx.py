@@ -111,7 +111,7 @@ def main(argv=None) -> int:
 
     try:
         with own_folder(osp.dirname(osp.abspath(out)), osp.basename(out),
-                        args.wait):
+                        args.wait, claim=False):
             export_onnx(graph, out, num_steps, height, width,
                         opset=args.opset, dataset_meta=dataset_meta,
                         check=None if args.no_verify else compare)
