@@ -568,3 +568,20 @@ def test_a_run_another_process_runs_is_not_run_twice(tmp_path, capsys,
     assert 'segformer_b0_tfp seed 0: FAILED' in printed
     assert f'another process is writing this output (process ' \
         f'{os.getpid()}' in printed
+
+
+def test_only_the_runs_own_checkpoints_are_removed(tmp_path):
+    """A run's folder after training: the checkpoints its training wrote
+    (in the manifest) go, with ``last_checkpoint`` naming one; a ``.pth``
+    the user put there stays."""
+    from wgse_mmseg.core.io import write_bytes
+    from wgse_mmseg.core.output_folder import own_folder
+    from wgse_bench.experiments.runner import _remove_checkpoints
+    run_dir = tmp_path / 'seed_0'
+    with own_folder(str(run_dir)):
+        with own_folder(str(run_dir), job='train', claim=False):
+            write_bytes(str(run_dir / 'iter_1.pth'), b'weights')
+        (run_dir / 'last_checkpoint').write_text(str(run_dir / 'iter_1.pth'))
+        (run_dir / 'mine.pth').write_bytes(b'the user\'s')
+        _remove_checkpoints(str(run_dir))
+    assert sorted(os.listdir(run_dir)) == ['.wgse-output', 'mine.pth']

@@ -549,3 +549,82 @@ def test_a_video_path_that_is_not_utf8_is_refused_before_the_walk():
     from wgse_mmseg.core.recording_walk import walk_outputs
     with pytest.raises(ValueError, match='not UTF-8, which OpenCV cannot'):
         walk_outputs(os.fsdecode(b'/tmp/walk\xff.mp4'))
+
+
+@pytest.mark.parametrize('folder', ['walk_frames', 'walk.gif.partial',
+                                    'walk_frames/deep/er'])
+def test_a_recording_inside_the_walks_folders_is_refused_before_any_work(
+        tmp_path, folder):
+    """The recording inside the frames folder or the state folder (at any
+    depth): refused naming both before the model runs; it stays."""
+    (tmp_path / folder).mkdir(parents=True)
+    path = _recording(str(tmp_path / folder / 'rec.dat'), 300)
+    before = open(path, 'rb').read()
+    model = RateModel()
+    with pytest.raises(OutputFolderError, match='holds the input'):
+        walk_recording(path, str(tmp_path / 'walk.gif'), model, rate_frame,
+                       LENGTH, 20, save_frames=True, progress=False)
+    assert model.batches == []
+    assert open(path, 'rb').read() == before
+    assert not (tmp_path / 'walk.gif').exists()
+
+
+def test_a_frames_folder_keeps_the_users_files(tmp_path):
+    """An existing frames folder the package did not make is refused
+    before any work; one it made, with a file the user added, has its old
+    frames replaced by a shorter walk's and keeps the user's file."""
+    path = _recording(str(tmp_path / 'rec.dat'), 600)
+    frames = tmp_path / 'walk_frames'
+    frames.mkdir()
+    (frames / 'notes.txt').write_text('mine')
+    model = RateModel()
+    with pytest.raises(OutputFolderError, match='walk_frames: an existing '
+                       'folder this package did not make'):
+        walk_recording(path, str(tmp_path / 'walk.gif'), model, rate_frame,
+                       LENGTH, 20, save_frames=True, progress=False)
+    assert model.batches == [] and os.listdir(frames) == ['notes.txt']
+    os.remove(frames / 'notes.txt')
+    walk_recording(path, str(tmp_path / 'walk.gif'), RateModel(), rate_frame,
+                   LENGTH, 20, save_frames=True, progress=False)
+    many = len(plan_walk(600, LENGTH, 20).centres)
+    assert len(_frame_names(frames)) == many
+    (frames / 'notes.txt').write_text('mine')
+    walk_recording(path, str(tmp_path / 'walk.gif'), RateModel(), rate_frame,
+                   LENGTH, 100, save_frames=True, progress=False)
+    assert _frame_names(frames) == [
+        f'{i:06d}.png' for i in range(len(plan_walk(600, LENGTH, 100)
+                                          .centres))] and many > 6
+    assert (frames / 'notes.txt').read_text() == 'mine'
+    assert not (tmp_path / 'walk.gif.partial').exists()
+
+
+def test_a_file_the_user_adds_to_the_state_folder_is_kept(tmp_path,
+                                                          capsys):
+    """An interrupted walk's state folder, with a file the user put in:
+    the resumed walk ends as an uninterrupted one and the state folder
+    stays with only that file, named on stderr."""
+    path, video, partial = _interrupted(tmp_path, 'cut')
+    with open(os.path.join(partial, 'notes.txt'), 'w') as f:
+        f.write('mine')
+    report = _resume(path, video)
+    assert report.resumed == 15
+    _same_walk(tmp_path / 'whole', tmp_path / 'cut')
+    assert os.listdir(partial) == ['notes.txt']
+    assert 'partial: kept: it holds files this package did not write' in \
+        capsys.readouterr().err
+
+
+def test_a_walk_to_a_fifo_or_device_is_refused_before_any_work(tmp_path):
+    """A walk's CSV and state folder lie beside its video: a FIFO at the
+    video's path (a shell's ``>(cat)``) is refused naming it, before the
+    model runs, and stays a FIFO."""
+    path = _recording(str(tmp_path / 'rec.dat'), 300)
+    fifo = tmp_path / 'walk.mp4'
+    os.mkfifo(fifo)
+    model = RateModel()
+    with pytest.raises(OutputFolderError, match='walk.mp4: a fifo'):
+        walk_recording(path, str(fifo), model, rate_frame, LENGTH, 20,
+                       progress=False)
+    assert model.batches == []
+    assert sorted(os.listdir(tmp_path)) == ['rec.dat', 'rec.dat.json',
+                                            'walk.mp4']

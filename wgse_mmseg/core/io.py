@@ -155,7 +155,7 @@ def atomic_path(path: str) -> Iterator[str]:
 def _naming(path: str, err: OSError) -> OSError:
     """``err``, an error of writing ``path``, as one that names it: the
     same errno, so the same ``OSError`` subclass."""
-    if err.filename is not None:
+    if err.filename is not None or path in str(err.strerror):
         return err
     return OSError(err.errno, f'{path}: cannot be written: '
                    f'{err.strerror or err}')

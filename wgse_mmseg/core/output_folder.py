@@ -471,6 +471,19 @@ class OwnedFolder:
                     names.add(name)
         return names
 
+    def discard_written(self, paths: Iterable[str]) -> List[str]:
+        """Remove those of ``paths`` (inside the folder) that its manifest
+        lists (:func:`discard`), leaving the others; the removed ones."""
+        written = self.written()
+        removed = []
+        for path in paths:
+            if osp.relpath(osp.join(osp.realpath(osp.dirname(
+                    osp.abspath(path))), osp.basename(path)),
+                    osp.realpath(self.root)) in written:
+                discard(path)
+                removed.append(path)
+        return removed
+
     def clear(self) -> None:
         """Remove the files the package wrote in the folder, as its
         manifest lists them (each checked: :func:`discard`), and the
