@@ -174,3 +174,24 @@ def test_a_file_size_limit_leaves_no_temporary_and_names_the_file(
     assert info.value.errno == errno.EFBIG
     assert f'{target}: cannot be written: File too large' in str(info.value)
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.skipif(not os.path.isdir('/proc/self/fd'),
+                    reason='no /proc file descriptors')
+def test_a_descriptor_link_to_a_regular_file_is_refused(tmp_path):
+    """``/dev/stdout`` redirected to a file is a link through
+    ``/proc/<pid>/fd``: a rename would replace the link, so the write is
+    refused naming it, before anything is made; the file keeps its
+    content."""
+    target = tmp_path / 'redirected.txt'
+    target.write_bytes(b'earlier')
+    with open(target, 'ab') as f:
+        for path in (f'/proc/self/fd/{f.fileno()}',
+                     f'/dev/fd/{f.fileno()}'):
+            if not os.path.exists(path):
+                continue
+            with pytest.raises(OutputFolderError,
+                               match=f'{path}: names an open file'):
+                write_bytes(path, b'new')
+    assert target.read_bytes() == b'earlier'
+    assert os.listdir(tmp_path) == ['redirected.txt']

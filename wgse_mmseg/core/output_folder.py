@@ -260,6 +260,11 @@ def check_output_kind(path, streamed: bool = True) -> Optional[str]:
     except (OSError, ValueError):
         return None
     if stat.S_ISREG(mode):
+        if _through_descriptor(path):
+            raise OutputFolderError(
+                f'{path}: names an open file of a process (a link through '
+                f'/proc/.../fd/, as /dev/stdout redirected to a file); a '
+                f'rename would replace the link: give the file\'s own path')
         return None
     kind = ('fifo' if stat.S_ISFIFO(mode) else 'character device'
             if stat.S_ISCHR(mode) else 'folder' if stat.S_ISDIR(mode)
@@ -272,6 +277,27 @@ def check_output_kind(path, streamed: bool = True) -> Optional[str]:
            'it is neither replaced nor written through')
     raise OutputFolderError(f'{path}: a {kind} where the output file goes; '
                             f'{how}: give the path of a file')
+
+
+def _through_descriptor(path: str) -> bool:
+    """Whether ``path``, or a folder on its way, is a link that leads
+    through a process's open file descriptors (``/dev/stdout``,
+    ``/dev/fd/N``: ``/proc/<pid>/fd/N``)."""
+    current = osp.abspath(os.fspath(path))
+    for _ in range(40):  # the kernel's own bound on a chain of links
+        if current.startswith('/proc/') and '/fd/' in current:
+            return True
+        parent = osp.dirname(current)
+        real_parent = osp.realpath(parent)
+        if real_parent != parent:
+            if real_parent.startswith('/proc/') and '/fd' in real_parent:
+                return True
+            current = osp.join(real_parent, osp.basename(current))
+            continue
+        if not osp.islink(current):
+            return False
+        current = osp.normpath(osp.join(parent, os.readlink(current)))
+    return False
 
 
 def _real_parents(path: str) -> Iterator[Tuple[int, int]]:
