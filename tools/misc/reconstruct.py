@@ -122,8 +122,7 @@ def walk(args) -> None:
     from wgse_mmseg.core.recording_walk import walk_outputs, walk_recording
     from wgse_mmseg.models.reconstruction import (load_reconstructor,
                                                   reconstruction_method)
-    # a wrong extension or a refused output fails before loading
-    walk_outputs(args.out, args.save_frames, [args.spikes])
+    walk_outputs(args.out, args.save_frames, [args.spikes])  # before loading
     if args.method == 'wgse':
         model = load_reconstructor(args.checkpoint, args.device)
         reconstruct, length = model.reconstruct_windows, model.num_steps
