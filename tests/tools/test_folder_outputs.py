@@ -77,3 +77,30 @@ def test_a_converter_refuses_an_output_folder_holding_its_input(
     assert 'out: an existing folder this package did not make (it holds ' \
         'data' in str(stop.value.code)
     assert os.listdir(out) == ['data']
+
+
+def test_reconstruct_writes_its_images_into_a_folder_it_owns(tmp_path,
+                                                             load_tool):
+    """Without ``--stride``, ``--out`` is a folder of PNGs: one holding
+    the recording, or files of the user's, is refused before any work; a
+    new one is made, and taken again by the next run."""
+    path = _recording(str(tmp_path / 'rec.npy'))
+    tool = load_tool('tools/misc/reconstruct.py')
+    argv = ['--method', 'tfp', '--num-steps', '9']
+    with pytest.raises(SystemExit) as stop:
+        tool.main([path, '--out', str(tmp_path)] + argv)
+    assert f'holds the input {path}' in str(stop.value.code)
+    assert sorted(os.listdir(tmp_path)) == ['rec.npy', 'rec.npy.json']
+    out = tmp_path / 'out'
+    tool.main([path, '--out', str(out)] + argv)
+    tool.main([path, '--out', str(out), '--frames', '20,30'] + argv)
+    assert sorted(n for n in os.listdir(out) if n.endswith('.png')) == [
+        'rec_20.png', 'rec_30.png', 'rec_60.png']
+    mine = tmp_path / 'mine'
+    mine.mkdir()
+    (mine / 'notes.txt').write_text('mine')
+    with pytest.raises(SystemExit) as stop:
+        tool.main([path, '--out', str(mine)] + argv)
+    assert 'mine: an existing folder this package did not make' in str(
+        stop.value.code)
+    assert os.listdir(mine) == ['notes.txt']
