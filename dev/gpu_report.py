@@ -77,7 +77,7 @@ def main(argv=None) -> int:
     plan = gpu_report.SMOKE if args.smoke else gpu_report.GPU
     command = 'python dev/gpu_report.py' + (
         ' --smoke' if args.smoke else '')
-    with own_folder(args.out_dir, 'gpu_report'):
+    with own_folder(args.out_dir, 'gpu_report', claim=False):
         earlier = None
         path = osp.join(args.out_dir, 'gpu.json')
         if args.resume and osp.exists(path):

@@ -202,7 +202,7 @@ def walk(args, cfg) -> None:
     from wgse_mmseg.core.io import spike_shape
     from wgse_mmseg.core.recording_walk import (plan_recording_walk,
                                                 walk_outputs, walk_recording)
-    walk_outputs(args.out_file)  # a wrong extension fails before loading
+    walk_outputs(args.out_file, args.save_frames, [args.spikes])  # first
     pipeline = build_pipeline(cfg, args.height, args.width, args.layout)
     length = pipeline_loader(pipeline).num_steps
     if length is None:

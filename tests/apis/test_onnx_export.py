@@ -277,7 +277,7 @@ def test_the_tool_exports_a_checkpoint_and_checks_it(tmp_path, capsys,
                    '--out-file', str(video), '--save-frames', '--opacity',
                    '1', '--cfg-options', f'num_steps={T}'])
         frames[backend] = [cv2.imread(str(p)) for p in sorted(
-            (recording.parent / f'{backend}_frames').iterdir())]
+            (recording.parent / f'{backend}_frames').glob('*.png'))]
     assert len(frames['onnxruntime']) == len(frames['pytorch']) >= 2
     for got, expected in zip(frames['onnxruntime'], frames['pytorch']):
         assert (got == expected).all(-1).mean() >= MIN_ARGMAX_AGREEMENT

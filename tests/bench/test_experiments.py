@@ -590,3 +590,20 @@ def test_the_time_left_is_the_mean_run_times_the_runs_left():
     assert cli.time_left([10.0, 20.0], 0) == ''
     assert cli.time_left([10.0, 20.0], 2) == ', about 30 s left'
     assert cli.time_left([100.0, 140.0], 3) == ', about 6 min left'
+
+
+def test_only_the_runs_own_checkpoints_are_removed(tmp_path):
+    """A run's folder after training: the checkpoints its training wrote
+    (in the manifest) go, with ``last_checkpoint`` naming one; a ``.pth``
+    the user put there stays."""
+    from wgse_mmseg.core.io import write_bytes
+    from wgse_mmseg.core.output_folder import own_folder
+    from wgse_bench.experiments.runner import _remove_checkpoints
+    run_dir = tmp_path / 'seed_0'
+    with own_folder(str(run_dir)):
+        with own_folder(str(run_dir), job='train', claim=False):
+            write_bytes(str(run_dir / 'iter_1.pth'), b'weights')
+        (run_dir / 'last_checkpoint').write_text(str(run_dir / 'iter_1.pth'))
+        (run_dir / 'mine.pth').write_bytes(b'the user\'s')
+        _remove_checkpoints(str(run_dir))
+    assert sorted(os.listdir(run_dir)) == ['.wgse-output', 'mine.pth']

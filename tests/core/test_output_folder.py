@@ -14,7 +14,9 @@ import threading
 import pytest
 
 from wgse_mmseg.core import output_folder
-from wgse_mmseg.core.output_folder import (OutputFolderError, discard,
+from wgse_mmseg.core.io import write_bytes
+from wgse_mmseg.core.output_folder import (MANIFEST_NAME, OutputFolderError,
+                                           discard,
                                            open_append, own_folder)
 
 #: a process that owns FOLDER (job JOB, or None), says 'held', and keeps it
@@ -71,7 +73,8 @@ def test_a_second_writer_is_refused_naming_the_first(tmp_path):
     assert f'process {first.pid}' in second.stderr.read()
     first.communicate('', timeout=60)
     assert log.read_text() == 'start first\nend first\n'
-    assert os.listdir(folder) == []  # the lock file goes with its writer
+    # the lock file goes with its writer
+    assert os.listdir(folder) == [MANIFEST_NAME]
     with own_folder(str(folder)):  # free again
         pass
 
@@ -87,7 +90,7 @@ def test_with_wait_the_second_writer_follows_the_first(tmp_path):
     assert second.wait(60) == 0, second.stderr.read()
     assert log.read_text().splitlines() == [
         'start first', 'end first', 'start second', 'end second']
-    assert os.listdir(folder) == []
+    assert os.listdir(folder) == [MANIFEST_NAME]
 
 
 def test_jobs_of_one_folder_run_together_and_exclude_their_twins(tmp_path):
@@ -109,7 +112,7 @@ def test_a_killed_writer_leaves_no_lock_held(tmp_path):
     first.wait(60)
     with own_folder(str(folder)):  # the kernel released it
         pass
-    assert os.listdir(folder) == []
+    assert os.listdir(folder) == [MANIFEST_NAME]
 
 
 def test_many_threads_and_processes_one_at_a_time(tmp_path):
@@ -152,27 +155,30 @@ def test_a_link_at_the_lock_is_not_followed(tmp_path):
         record = json.loads((folder / '.lock').read_text())
         assert record['pid'] == os.getpid()
     assert outside.read_text() == 'keep me'
-    assert os.listdir(folder) == []
+    assert os.listdir(folder) == [MANIFEST_NAME]
     os.mkfifo(folder / '.lock')  # opened, it would not be a lock file
     with own_folder(str(folder)):
         assert os.path.isfile(folder / '.lock')
-    assert os.listdir(folder) == []
+    assert os.listdir(folder) == [MANIFEST_NAME]
 
 
-def test_a_folder_the_package_names_replaces_a_link_or_file(tmp_path):
+def test_a_folder_the_package_names_refuses_a_link_or_file(tmp_path):
     outside = tmp_path / 'elsewhere'
     outside.mkdir()
     (outside / 'data').write_text('keep me')
     state = tmp_path / 'walk.mp4.partial'
     os.symlink(outside, state)
-    with own_folder(str(state), replace=True) as owned:
-        assert os.path.isdir(state) and not os.path.islink(state)
-        assert owned.root == str(state)
-    assert (outside / 'data').read_text() == 'keep me'
-    discard(str(state))
+    with pytest.raises(OutputFolderError, match='partial: a link or file'):
+        with own_folder(str(state), named=True):
+            pass
+    assert os.path.islink(state)
+    assert sorted(os.listdir(outside)) == ['data']
+    os.unlink(state)
     state.write_text('a file')
-    with own_folder(str(state), replace=True):
-        assert os.path.isdir(state)
+    with pytest.raises(OutputFolderError, match='partial: a link or file'):
+        with own_folder(str(state), named=True):
+            pass
+    assert state.read_text() == 'a file'
     # a folder the user names is followed, not replaced
     target = tmp_path / 'target'
     target.mkdir()
@@ -181,7 +187,7 @@ def test_a_folder_the_package_names_replaces_a_link_or_file(tmp_path):
         owned.file(os.path.join(owned.root, 'a', 'b.txt'))
     assert (target / 'a').is_dir()
     (tmp_path / 'plain').write_text('x')
-    with pytest.raises(OutputFolderError, match='plain: cannot be made'):
+    with pytest.raises(OutputFolderError, match='plain: not a folder'):
         with own_folder(str(tmp_path / 'plain')):
             pass
 
@@ -412,3 +418,162 @@ def test_unshare_keeps_other_names_content_before_an_in_place_write(
     for name in ('hard', 'soft', 'own', 'missing'):
         assert (tmp_path / name).read_text() == 'new'
         assert not (tmp_path / name).is_symlink()
+
+
+def test_an_existing_folder_of_other_files_is_refused_before_any_work(
+        tmp_path):
+    """A folder with files and no manifest (one the package did not make)
+    is refused naming some of them, before anything is made in it; an
+    empty folder is taken, and one the package made is taken again."""
+    out = tmp_path / 'out'
+    out.mkdir()
+    for index in range(5):
+        (out / f'notes{index}.txt').write_text('mine')
+    with pytest.raises(OutputFolderError,
+                       match=r'out: an existing folder this package did not '
+                       r'make \(it holds notes0.txt, notes1.txt, notes2.txt '
+                       r'and 2 more'):
+        with own_folder(str(out)):
+            pass
+    assert sorted(os.listdir(out)) == [f'notes{i}.txt' for i in range(5)]
+    empty = tmp_path / 'empty'
+    empty.mkdir()
+    with own_folder(str(empty)) as owned:
+        assert owned.claimed
+        write_bytes(str(empty / 'a.bin'), b'a')
+    (empty / 'notes.txt').write_text('added later')
+    with own_folder(str(empty)) as owned:  # the package's: taken again
+        assert owned.written() == {'a.bin'}
+    # a lock alone, beside a file the user keeps, claims nothing
+    with own_folder(str(out), 'job', claim=False) as owned:
+        assert not owned.claimed
+    assert sorted(os.listdir(out)) == [f'notes{i}.txt' for i in range(5)]
+
+
+def test_removal_takes_only_what_the_manifest_lists(tmp_path, guarded,
+                                                    capsys):
+    """clear and remove take the files the package wrote (at any depth)
+    and the folders that leaves empty; a file the user added, a folder of
+    the user's, and a listed name the user made a hard link of an input
+    stay, and the folder stays with them, named on stderr."""
+    source = tmp_path / 'recording.npy'
+    source.write_bytes(b'user data')
+    output_folder.note_input(str(source))
+    out = tmp_path / 'out'
+    with own_folder(str(out)) as owned:
+        for name in ('a.bin', 'deep/er/b.bin', 'mixed/c.bin', 'linked.bin'):
+            owned.file(str(out / name))
+            write_bytes(str(out / name), b'package')
+        assert owned.written() == {'a.bin', 'deep/er/b.bin', 'mixed/c.bin',
+                                   'linked.bin'}
+        (out / 'notes.txt').write_text('mine')
+        (out / 'mixed' / 'mine.txt').write_text('mine')
+        (out / 'theirs').mkdir()
+        os.remove(out / 'linked.bin')
+        os.link(source, out / 'linked.bin')
+        owned.clear()
+        assert sorted(os.listdir(out)) == [
+            '.lock', MANIFEST_NAME, 'linked.bin', 'mixed', 'notes.txt',
+            'theirs']
+        assert os.listdir(out / 'mixed') == ['mine.txt']
+        assert owned.written() == set()
+        write_bytes(str(out / 'again.bin'), b'package')
+        owned.remove()
+    assert sorted(os.listdir(out)) == ['linked.bin', 'mixed', 'notes.txt',
+                                       'theirs']
+    assert source.read_bytes() == b'user data'
+    assert 'out: kept: it holds files this package did not write' in \
+        capsys.readouterr().err
+    # nothing left of the user's: the folder goes
+    only = tmp_path / 'only'
+    with own_folder(str(only)) as owned:
+        write_bytes(str(only / 'x' / 'y.bin'), b'package')
+        owned.remove()
+    assert not only.exists()
+
+
+def test_no_folder_is_removed_as_a_tree(tmp_path):
+    folder = tmp_path / 'folder'
+    (folder / 'inner').mkdir(parents=True)
+    (folder / 'inner' / 'mine.txt').write_text('mine')
+    with pytest.raises(OutputFolderError, match='folder: a folder'):
+        discard(str(folder))
+    assert (folder / 'inner' / 'mine.txt').read_text() == 'mine'
+
+
+@pytest.mark.parametrize('where', ['top', 'depth 4', 'symbolic link to it',
+                                   'folder given as a link',
+                                   'through a linked parent'])
+def test_an_input_inside_an_output_folder_is_refused(tmp_path, guarded,
+                                                     where):
+    """An input anywhere under the output folder (at any depth, named
+    through a link to it or to a folder above it, the output folder
+    itself given through a link) is refused naming both, before anything
+    is made; the input is untouched."""
+    out = tmp_path / 'out'
+    inside = out / 'a' / 'b' / 'c' if where == 'depth 4' else out
+    inside.mkdir(parents=True)
+    (out / MANIFEST_NAME).write_bytes(output_folder.MANIFEST_HEADER)
+    source = inside / 'rec.npy'
+    source.write_bytes(b'user data')
+    given, folder = source, out
+    if where == 'symbolic link to it':
+        given = tmp_path / 'rec-link.npy'
+        given.symlink_to(source)
+    elif where == 'folder given as a link':
+        folder = tmp_path / 'out-link'
+        folder.symlink_to(out)
+    elif where == 'through a linked parent':
+        (tmp_path / 'via').symlink_to(out)
+        given = tmp_path / 'via' / 'rec.npy'
+    output_folder.note_input(str(given))
+    with pytest.raises(OutputFolderError,
+                       match=f'{folder}: this output folder holds the input '
+                       f'{given}'):
+        with own_folder(str(folder)):
+            pass
+    with pytest.raises(OutputFolderError, match='holds the input'):
+        output_folder.check_output_folder(str(folder), [str(given)])
+    assert source.read_bytes() == b'user data'
+    assert not (out / '.lock').exists()
+
+
+def test_a_hard_link_of_an_input_is_never_replaced_or_removed(tmp_path,
+                                                              guarded):
+    """A hard link of an input inside an output folder, at a name the
+    package writes: the write is refused naming the input, and the
+    folder's clearing leaves it."""
+    source = tmp_path / 'rec.npy'
+    source.write_bytes(b'user data')
+    output_folder.note_input(str(source))
+    out = tmp_path / 'out'
+    with own_folder(str(out)) as owned:
+        write_bytes(str(out / 'frame.png'), b'package')
+        os.remove(out / 'frame.png')
+        os.link(source, out / 'frame.png')
+        with pytest.raises(OutputFolderError, match='the input'):
+            write_bytes(str(out / 'frame.png'), b'package')
+        owned.clear()
+    assert (out / 'frame.png').read_bytes() == b'user data'
+    assert os.stat(source).st_nlink == 2
+
+
+def test_a_tools_folder_outputs_are_checked_before_any_work(tmp_path):
+    import argparse
+    out = tmp_path / 'out'
+    out.mkdir()
+    (out / 'notes.txt').write_text('mine')
+    data = tmp_path / 'data'
+    (data / 'deep').mkdir(parents=True)
+    (data / 'deep' / 'image.png').write_bytes(b'png')
+    args = argparse.Namespace(out_dir=str(out), root=str(data))
+    with pytest.raises(OutputFolderError, match='did not make'):
+        output_folder.check_tool_outputs(args, folders=['out_dir'])
+    # the input file inside the output folder, at depth
+    args = argparse.Namespace(out_dir=str(data),
+                              image=str(data / 'deep' / 'image.png'))
+    with pytest.raises(OutputFolderError, match='holds the input'):
+        output_folder.check_tool_outputs(args, folders=['out_dir'])
+    args = argparse.Namespace(out_dir=str(tmp_path / 'new'),
+                              root=str(data))
+    output_folder.check_tool_outputs(args, folders=['out_dir'])

@@ -19,12 +19,18 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from wgse_mmseg.core.io import load_spikes, save_spikes, to_uint8
+from wgse_mmseg.core.output_folder import OutputFolderError
 from wgse_mmseg.core.recording_walk import (CSV_COLUMNS, WalkError,
                                             plan_walk, read_windows,
                                             walk_outputs, walk_recording)
 
 HEIGHT, WIDTH = 32, 48
 LENGTH, HALF = 41, 20
+
+
+def _frame_names(folder):
+    """The PNGs in a frames folder (beside them: the package's manifest)."""
+    return sorted(n for n in os.listdir(folder) if n.endswith('.png'))
 
 
 def _recording(path, steps, seed=0, height=HEIGHT, width=WIDTH):
@@ -161,7 +167,7 @@ def test_walk_of_a_recording_many_batches_long(tmp_path, extension):
                                                for i in range(len(rows))]
     assert all(float(r['time_ms']) >= 0 for r in rows)
 
-    frames = sorted(os.listdir(tmp_path / 'out' / 'walk_frames'))
+    frames = _frame_names(tmp_path / 'out' / 'walk_frames')
     assert frames == [f'{i:06d}.png' for i in range(len(centres))]
     for index in (0, 1, len(centres) - 1):
         saved = cv2.imread(str(tmp_path / 'out' / 'walk_frames' /
@@ -223,8 +229,8 @@ def _same_walk(one, other):
                                                            'batch')}
                 for row in _rows(folder / 'walk.csv')]
     assert rows(one) == rows(other)
-    names = sorted(os.listdir(one / 'walk_frames'))
-    assert names == sorted(os.listdir(other / 'walk_frames'))
+    names = _frame_names(one / 'walk_frames')
+    assert names == _frame_names(other / 'walk_frames')
     for name in names:
         assert (one / 'walk_frames' / name).read_bytes() == \
             (other / 'walk_frames' / name).read_bytes()
@@ -434,7 +440,14 @@ def test_a_damaged_frame_is_made_again(tmp_path, damage):
     elif damage == 'other frame':
         shutil.copy(os.path.join(partial, '000008.png'), frame)
     elif damage == 'folder':
+        # not the package's: refused naming it, kept, never removed
         os.mkdir(frame)
+        (tmp_path / 'cut' / 'walk.mp4.partial' / '000007.png' /
+         'mine.txt').write_text('keep me')
+        with pytest.raises(OutputFolderError, match='000007.png: a folder'):
+            _resume(path, video)
+        assert open(os.path.join(frame, 'mine.txt')).read() == 'keep me'
+        shutil.rmtree(frame)
     else:
         os.symlink(os.path.join(partial, '000008.png'), frame)
     report = _resume(path, video)
@@ -482,6 +495,11 @@ def test_unreadable_settings_start_the_walk_over(tmp_path, damage):
         os.symlink(outside, settings_file)
     elif damage == 'folder':
         os.mkdir(settings_file)
+        with pytest.raises(OutputFolderError,
+                           match='settings.json: a folder'):
+            _resume(path, video)
+        assert os.path.isdir(settings_file)  # not the package's: kept
+        os.rmdir(settings_file)
     report = _resume(path, video)
     assert report.resumed == 0
     assert outside.read_text() == '{"not": "mine"}'
@@ -489,19 +507,27 @@ def test_unreadable_settings_start_the_walk_over(tmp_path, damage):
 
 
 def test_links_at_the_state_folder_and_outputs_are_not_followed(tmp_path):
-    """The state folder, the frames folder and the video made links to
-    folders and files outside: nothing outside changes, the walk's files
-    are real files and folders."""
+    """The state folder or the frames folder made a link to a folder
+    outside: refused naming it before any work, the link and what it
+    leads to kept; the video and the CSV made links to a file outside:
+    replaced by the walk's files, the file outside untouched."""
     path = _recording(str(tmp_path / 'rec.dat'), 600)
     outside = tmp_path / 'outside'
     outside.mkdir()
     (outside / 'keep.txt').write_text('keep me')
     out = tmp_path / 'out'
     out.mkdir()
-    for name in ('walk.mp4.partial', 'walk_frames', 'walk.mp4', 'walk.csv'):
-        target = outside if name in ('walk.mp4.partial', 'walk_frames') \
-            else outside / 'keep.txt'
-        os.symlink(target, out / name)
+    for name in ('walk.mp4.partial', 'walk_frames'):
+        os.symlink(outside, out / name)
+        model = RateModel()
+        with pytest.raises(OutputFolderError, match=f'{name}: a link or file'):
+            walk_recording(path, str(out / 'walk.mp4'), model, rate_frame,
+                           LENGTH, 40, batch_size=4, save_frames=True,
+                           progress=False)
+        assert model.batches == [] and os.path.islink(out / name)
+        os.unlink(out / name)
+    for name in ('walk.mp4', 'walk.csv'):
+        os.symlink(outside / 'keep.txt', out / name)
     walk_recording(path, str(out / 'walk.mp4'), RateModel(), rate_frame,
                    LENGTH, 40, batch_size=4, save_frames=True,
                    progress=False)
@@ -509,7 +535,7 @@ def test_links_at_the_state_folder_and_outputs_are_not_followed(tmp_path):
     assert (outside / 'keep.txt').read_text() == 'keep me'
     for name in ('walk_frames', 'walk.mp4', 'walk.csv'):
         assert not os.path.islink(out / name)
-    assert len(os.listdir(out / 'walk_frames')) == len(
+    assert len(_frame_names(out / 'walk_frames')) == len(
         plan_walk(600, LENGTH, 40).centres)
     (out / 'walk.csv').unlink()
     (out / 'walk.csv').mkdir()
@@ -523,3 +549,82 @@ def test_a_video_path_that_is_not_utf8_is_refused_before_the_walk():
     from wgse_mmseg.core.recording_walk import walk_outputs
     with pytest.raises(ValueError, match='not UTF-8, which OpenCV cannot'):
         walk_outputs(os.fsdecode(b'/tmp/walk\xff.mp4'))
+
+
+@pytest.mark.parametrize('folder', ['walk_frames', 'walk.gif.partial',
+                                    'walk_frames/deep/er'])
+def test_a_recording_inside_the_walks_folders_is_refused_before_any_work(
+        tmp_path, folder):
+    """The recording inside the frames folder or the state folder (at any
+    depth): refused naming both before the model runs; it stays."""
+    (tmp_path / folder).mkdir(parents=True)
+    path = _recording(str(tmp_path / folder / 'rec.dat'), 300)
+    before = open(path, 'rb').read()
+    model = RateModel()
+    with pytest.raises(OutputFolderError, match='holds the input'):
+        walk_recording(path, str(tmp_path / 'walk.gif'), model, rate_frame,
+                       LENGTH, 20, save_frames=True, progress=False)
+    assert model.batches == []
+    assert open(path, 'rb').read() == before
+    assert not (tmp_path / 'walk.gif').exists()
+
+
+def test_a_frames_folder_keeps_the_users_files(tmp_path):
+    """An existing frames folder the package did not make is refused
+    before any work; one it made, with a file the user added, has its old
+    frames replaced by a shorter walk's and keeps the user's file."""
+    path = _recording(str(tmp_path / 'rec.dat'), 600)
+    frames = tmp_path / 'walk_frames'
+    frames.mkdir()
+    (frames / 'notes.txt').write_text('mine')
+    model = RateModel()
+    with pytest.raises(OutputFolderError, match='walk_frames: an existing '
+                       'folder this package did not make'):
+        walk_recording(path, str(tmp_path / 'walk.gif'), model, rate_frame,
+                       LENGTH, 20, save_frames=True, progress=False)
+    assert model.batches == [] and os.listdir(frames) == ['notes.txt']
+    os.remove(frames / 'notes.txt')
+    walk_recording(path, str(tmp_path / 'walk.gif'), RateModel(), rate_frame,
+                   LENGTH, 20, save_frames=True, progress=False)
+    many = len(plan_walk(600, LENGTH, 20).centres)
+    assert len(_frame_names(frames)) == many
+    (frames / 'notes.txt').write_text('mine')
+    walk_recording(path, str(tmp_path / 'walk.gif'), RateModel(), rate_frame,
+                   LENGTH, 100, save_frames=True, progress=False)
+    assert _frame_names(frames) == [
+        f'{i:06d}.png' for i in range(len(plan_walk(600, LENGTH, 100)
+                                          .centres))] and many > 6
+    assert (frames / 'notes.txt').read_text() == 'mine'
+    assert not (tmp_path / 'walk.gif.partial').exists()
+
+
+def test_a_file_the_user_adds_to_the_state_folder_is_kept(tmp_path,
+                                                          capsys):
+    """An interrupted walk's state folder, with a file the user put in:
+    the resumed walk ends as an uninterrupted one and the state folder
+    stays with only that file, named on stderr."""
+    path, video, partial = _interrupted(tmp_path, 'cut')
+    with open(os.path.join(partial, 'notes.txt'), 'w') as f:
+        f.write('mine')
+    report = _resume(path, video)
+    assert report.resumed == 15
+    _same_walk(tmp_path / 'whole', tmp_path / 'cut')
+    assert os.listdir(partial) == ['notes.txt']
+    assert 'partial: kept: it holds files this package did not write' in \
+        capsys.readouterr().err
+
+
+def test_a_walk_to_a_fifo_or_device_is_refused_before_any_work(tmp_path):
+    """A walk's CSV and state folder lie beside its video: a FIFO at the
+    video's path (a shell's ``>(cat)``) is refused naming it, before the
+    model runs, and stays a FIFO."""
+    path = _recording(str(tmp_path / 'rec.dat'), 300)
+    fifo = tmp_path / 'walk.mp4'
+    os.mkfifo(fifo)
+    model = RateModel()
+    with pytest.raises(OutputFolderError, match='walk.mp4: a fifo'):
+        walk_recording(path, str(fifo), model, rate_frame, LENGTH, 20,
+                       progress=False)
+    assert model.batches == []
+    assert sorted(os.listdir(tmp_path)) == ['rec.dat', 'rec.dat.json',
+                                            'walk.mp4']

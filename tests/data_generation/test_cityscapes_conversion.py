@@ -18,6 +18,7 @@ from wgse_mmseg.data_generation.cityscapes_conversion import (
     convert_cityscapes, find_samples, labelids_to_trainids, load_scene,
     resize_nearest, sample_effects)
 from wgse_mmseg.core.io import load_spikes
+from wgse_mmseg.core.output_folder import MANIFEST_NAME, own_folder
 from wgse_mmseg.core.seeding import derive_seed
 from wgse_mmseg.data_generation.shards import WHOLE, Shard
 from wgse_mmseg.core import simulation  # the converter calls it there
@@ -81,7 +82,8 @@ def make_cityscapes(root):
 def _files(out_dir):
     return sorted(
         osp.relpath(osp.join(d, f), out_dir)
-        for d, _, files in os.walk(out_dir) for f in files)
+        for d, _, files in os.walk(out_dir) for f in files
+        if f != MANIFEST_NAME)
 
 
 def _expected_files():
@@ -579,6 +581,8 @@ def test_shards_on_a_slurm_array_equal_one_run(tmp_path, cityscapes,
     single = str(tmp_path / 'single')
     convert_cityscapes(root, single, settings, progress=False)
     out = str(tmp_path / 'sharded')
+    with own_folder(out):  # killed runs' folder, with their temporaries
+        pass
     city = osp.join(out, 'spike', 'val', 'bonn')
     os.makedirs(city)
     stale = osp.join(city, '.tmp-bonn_000000_000019_spike.spk.abc_12.spk')

@@ -2,12 +2,14 @@
 import os
 
 from wgse_mmseg.core.io import load_spikes, spike_shape
+from wgse_mmseg.core.output_folder import MANIFEST_NAME
 from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
 
 
 def _tree(out):
     return sorted(os.path.relpath(os.path.join(d, f), out)
-                  for d, _, files in os.walk(out) for f in files)
+                  for d, _, files in os.walk(out) for f in files
+                  if f != MANIFEST_NAME)
 
 
 def test_resume_keeps_done_samples_and_redoes_stale_ones(tmp_path):
@@ -43,6 +45,8 @@ def test_the_dataset_folder_is_owned(tmp_path):
                 progress=False)
     outside = tmp_path / 'precious.spk'
     outside.write_bytes(b'keep me')
+    with own_folder(str(out)):  # a run killed before any sample
+        pass
     folder = out / 'spike' / 'train' / 'synth'
     folder.mkdir(parents=True)
     spike = folder / 'synth_000000_000019_spike.spk'
@@ -51,7 +55,7 @@ def test_the_dataset_folder_is_owned(tmp_path):
     assert outside.read_bytes() == b'keep me'
     assert not os.path.islink(spike) and spike_shape(str(spike)) == (9, 16,
                                                                      32)
-    assert sorted(os.listdir(out)) == ['gtFine', 'spike']
+    assert sorted(os.listdir(out)) == [MANIFEST_NAME, 'gtFine', 'spike']
     with own_folder(str(out)):
         with pytest.raises(OutputFolderError,
                            match=f'process {os.getpid()} on host'):

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from wgse_mmseg.core.output_folder import MANIFEST_NAME
 from wgse_mmseg.data_generation import training_images
 from wgse_mmseg.data_generation.training_images import (
     SCIKIT_IMAGE_PHOTOGRAPHS, export_training_images)
@@ -68,7 +69,7 @@ def test_no_installed_source_is_an_error(tmp_path, monkeypatch):
     monkeypatch.setattr(training_images, '_package_dir', lambda name: None)
     with pytest.raises(ValueError, match='none of their packages'):
         export_training_images(str(tmp_path), ('scikit-image',))
-    assert not os.listdir(tmp_path)
+    assert os.listdir(tmp_path) == [MANIFEST_NAME]  # nothing written
 
 
 def test_the_command_line(tmp_path):
@@ -117,7 +118,7 @@ def test_a_damaged_or_linked_image_is_written_again(tmp_path):
         assert not osp.islink(path) and open(path, 'rb').read() == \
             expected[path]
     assert outside.read_bytes() == b'keep me'
-    assert sorted(os.listdir(out)) == ['matplotlib']  # no lock left
+    assert sorted(os.listdir(out)) == [MANIFEST_NAME, 'matplotlib']
     os.rename(out / 'matplotlib', tmp_path / 'moved')
     os.symlink(tmp_path / 'moved', out / 'matplotlib')
     with pytest.raises(OutputFolderError, match='matplotlib: a symbolic'):

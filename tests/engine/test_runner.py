@@ -1,6 +1,7 @@
 """SpikeRunner loads checkpoints as data: config text in one is never
 executed; a training owns its work dir."""
 import copy
+import errno
 import os
 import os.path as osp
 import sys
@@ -112,7 +113,7 @@ def test_a_second_training_into_a_work_dir_is_refused_naming_the_first(
     checkpoint there, naming the owner; the owner's lock stays."""
     work = tmp_path / 'work'
     runner = _training_runner(work)
-    with own_folder(str(work), job='train'):
+    with own_folder(str(work), job='train', claim=False):
         with pytest.raises(OutputFolderError,
                            match=rf'work: another process is writing this '
                            rf'output \(process {os.getpid()} on '):
@@ -141,7 +142,7 @@ def test_the_train_tool_stops_naming_the_owner_or_waits_with_wait(
     assert str(stop.value.code).startswith(
         f'train.py: error: {work}: another process is writing this output')
     monkeypatch.setattr(sys, 'argv', argv + ['--wait'])
-    owner = own_folder(str(work), job='train')
+    owner = own_folder(str(work), job='train', claim=False)
     owner.__enter__()
     threading.Timer(1.0, owner.__exit__, (None, None, None)).start()
     start = time.monotonic()
@@ -175,12 +176,44 @@ def test_a_training_writes_no_file_of_the_users_through_a_link(tmp_path):
     notes.write_text('notes')
     thesis.write_text('thesis')
     os.link(notes, work / 'last_checkpoint')
-    (work / '.tmp-iter_1.pth').symlink_to(thesis)
+    stale = work / '.tmp-iter_1.pth.a1b2c3.pth'  # a killed save's name
+    stale.symlink_to(thesis)
     _training_runner(work, **{'default_hooks.checkpoint.interval': 1}).train()
     assert notes.read_text() == 'notes' and thesis.read_text() == 'thesis'
     assert (work / 'last_checkpoint').read_text().endswith('iter_1.pth')
     assert (work / 'iter_1.pth').is_file()
-    assert not (work / '.tmp-iter_1.pth').exists()
+    assert not [n for n in os.listdir(work) if n.startswith('.tmp-')]
+
+
+@pytest.mark.parametrize('error', [errno.ENOSPC, errno.EFBIG, errno.EACCES])
+def test_a_failed_checkpoint_save_leaves_no_temporary_and_names_the_file(
+        tmp_path, monkeypatch, error):
+    """mmengine's write of a checkpoint fails half-way (a full disk, a
+    file-size limit, a permission): the error names the checkpoint's path,
+    keeps its errno (so its ``OSError`` subclass), and the half-written
+    temporary is gone; the previous checkpoint and ``last_checkpoint``
+    are as they were."""
+    from mmengine.fileio.backends import local_backend
+    work = tmp_path / 'work'
+    work.mkdir()
+    (work / 'last_checkpoint').write_text('earlier')
+
+    def failing_put(self, obj, filepath):
+        with open(filepath, 'wb') as f:
+            f.write(obj[:100])
+        raise OSError(error, os.strerror(error))
+
+    monkeypatch.setattr(local_backend.LocalBackend, 'put', failing_put)
+    runner = _training_runner(work, **{'default_hooks.checkpoint.interval': 1})
+    with pytest.raises(OSError) as info:
+        runner.train()
+    assert info.value.errno == error
+    assert type(info.value) is type(OSError(error, 'x'))
+    assert str(work / 'iter_1.pth') in str(info.value)
+    assert os.strerror(error) in str(info.value)
+    assert not (work / 'iter_1.pth').exists()
+    assert not [n for n in os.listdir(work) if n.startswith('.tmp-')]
+    assert (work / 'last_checkpoint').read_text() == 'earlier'
 
 
 def test_the_config_text_is_mmengines_formatted_once_per_content(

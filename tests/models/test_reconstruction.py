@@ -624,7 +624,7 @@ def test_reconstruct_cli_writes_one_png_per_frame(tmp_path, capsys, load_tool):
         np.testing.assert_array_equal(image, expected)
     assert 'exposure_gain=1\t' in capsys.readouterr().out
     with pytest.raises(SystemExit, match='centre frames 20..29 fit'):
-        tool.main([path, '--out', str(tmp_path), '--frames', '5',
+        tool.main([path, '--out', str(tmp_path / 'out'), '--frames', '5',
                    '--method', 'tfi'])
 
 

@@ -41,7 +41,7 @@ def test_a_second_export_to_one_file_is_refused(tmp_path, checkpoint,
                                                 load_tool):
     tool = load_tool('tools/deployment/pytorch2onnx.py')
     out = str(tmp_path / 'm.onnx')
-    with own_folder(str(tmp_path), 'm.onnx'):
+    with own_folder(str(tmp_path), 'm.onnx', claim=False):
         with pytest.raises(SystemExit, match=r'another process is writing '
                            rf'this output \(process {os.getpid()} on host'):
             tool.main(_arguments(checkpoint, out))

@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
 @keeps_inputs
 def main():
     args = build_parser().parse_args()
-    check_tool_outputs(args, 'out_dir')
+    check_tool_outputs(args, folders=['out_dir'])
     try:
         written = make_synthetic_dataset(
             args.out_dir, args.num_train, args.num_val, args.height,

@@ -67,7 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
 @keeps_inputs
 def main():
     args = build_parser().parse_args()
-    check_tool_outputs(args, 'out_dir')
+    check_tool_outputs(args, folders=['out_dir'])
     start = time.perf_counter()
     try:
         settings = ConversionSettings(

@@ -22,6 +22,7 @@ class are printed, and beyond ``LOGITS_TOLERANCE`` or below
 (one already at ``--out`` is left as it was).
 """
 import argparse
+import contextlib
 import os.path as osp
 import sys
 
@@ -29,7 +30,7 @@ from wgse_mmseg.apis.onnx_settings import (LOGITS_TOLERANCE,
                                            MIN_ARGMAX_AGREEMENT, OPSET, OPSETS,
                                            SHAPE_ENTRY)
 from wgse_mmseg.core.arguments import SEED, Path
-from wgse_mmseg.core.output_folder import (add_wait_option,
+from wgse_mmseg.core.output_folder import (add_wait_option, check_output_kind,
                                            check_tool_outputs, keeps_inputs,
                                            own_folder)
 from wgse_mmseg.utils.config import add_config_options
@@ -109,9 +110,13 @@ def main(argv=None) -> int:
             raise ValueError(f'{out}: not written, the exported graph does '
                              f'not agree with the torch model')
 
+    # one export to a file at a time; a FIFO or device (streamed) needs no
+    # lock, which would be a file beside it (in /dev)
+    streamed = check_output_kind(out) is not None
     try:
-        with own_folder(osp.dirname(osp.abspath(out)), osp.basename(out),
-                        args.wait):
+        with contextlib.nullcontext() if streamed else own_folder(
+                osp.dirname(osp.abspath(out)), osp.basename(out), args.wait,
+                claim=False):
             export_onnx(graph, out, num_steps, height, width,
                         opset=args.opset, dataset_meta=dataset_meta,
                         check=None if args.no_verify else compare)

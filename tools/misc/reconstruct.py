@@ -58,7 +58,8 @@ from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, Choice,
                                        check_frame_size)
 from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
 from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+from wgse_mmseg.core.output_folder import (check_tool_outputs, keeps_inputs,
+                                           own_folder)
 from wgse_mmseg.core.recording_walk import add_walk_options
 
 # torch, OpenCV and the MMSeg layer are imported where they are used, after
@@ -71,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('spikes', type=Path(),
                         help='spike file (.dat, .spk, .npy, .npz)')
     parser.add_argument('--out', type=Path(), required=True,
-                        help='output directory; with --stride the video, '
+                        help='output directory (new, empty, or one it '
+                        'made); with --stride the video, '
                         '.mp4 or .gif')
     parser.add_argument('--method', type=Choice(METHODS), default='wgse',
                         help=f'reconstruction method, of {list(METHODS)} '
@@ -108,7 +110,10 @@ def parse_args(argv=None):
     if args.stride is not None and args.frames:
         parser.error('--frames and --stride: name centre frames, or walk '
                      'every STRIDE-th one')
-    check_tool_outputs(args, 'out')
+    if args.stride is None:  # a folder of PNGs the package owns
+        check_tool_outputs(args, folders=['out'])
+    else:  # a video, with its CSV and folders beside it
+        check_tool_outputs(args, 'out')
     return args
 
 
@@ -122,7 +127,7 @@ def walk(args) -> None:
     from wgse_mmseg.core.recording_walk import walk_outputs, walk_recording
     from wgse_mmseg.models.reconstruction import (load_reconstructor,
                                                   reconstruction_method)
-    walk_outputs(args.out)  # a wrong extension fails before loading
+    walk_outputs(args.out, args.save_frames, [args.spikes])  # before loading
     if args.method == 'wgse':
         model = load_reconstructor(args.checkpoint, args.device)
         reconstruct, length = model.reconstruct_windows, model.num_steps
@@ -177,22 +182,24 @@ def main(argv=None):
     except (SpikeFileError, ValueError, FileNotFoundError) as err:
         sys.exit(f'{osp.basename(__file__)}: error: {err}')
     stem = osp.splitext(osp.basename(args.spikes))[0]
-    for frame, start in zip(frames, starts):
-        window = load_spikes(args.spikes, args.height, args.width, start,
-                             length, args.layout)
-        exposed = apply_exposure(method(window), args.exposure)
-        image = to_uint8(exposed.image)
-        path = osp.join(args.out, f'{stem}_{frame}.png')
-        try:
-            write_png(path, image)
-        except OSError as err:
-            sys.exit(f'{osp.basename(__file__)}: error: --out {args.out}: '
-                     f'cannot write {path}: {err}')
-        scores = '\t'.join(
-            f'{name.lower()}=' + ('n/a' if value is None else f'{value:.3f}')
-            for name, value in no_reference_scores(image).items())
-        print(f'{path}\texposure_gain={exposed.gain:.3g}\t{scores}\t'
-              f'exposure: {exposed.reason}')
+    with own_folder(args.out):
+        for frame, start in zip(frames, starts):
+            window = load_spikes(args.spikes, args.height, args.width, start,
+                                 length, args.layout)
+            exposed = apply_exposure(method(window), args.exposure)
+            image = to_uint8(exposed.image)
+            path = osp.join(args.out, f'{stem}_{frame}.png')
+            try:
+                write_png(path, image)
+            except OSError as err:
+                sys.exit(f'{osp.basename(__file__)}: error: --out {args.out}: '
+                         f'cannot write {path}: {err}')
+            scores = '\t'.join(
+                f'{name.lower()}='
+                + ('n/a' if value is None else f'{value:.3f}')
+                for name, value in no_reference_scores(image).items())
+            print(f'{path}\texposure_gain={exposed.gain:.3g}\t{scores}\t'
+                  f'exposure: {exposed.reason}')
 
 
 if __name__ == '__main__':

@@ -24,7 +24,7 @@ from mmengine.config import Config
 from wgse_mmseg.core.io import atomic_output
 from wgse_mmseg.core.limits import (LOG_FILE_LIMIT_BYTES, load_json_file,
                                     parse_json)
-from wgse_mmseg.core.output_folder import open_append
+from wgse_mmseg.core.output_folder import OwnedFolder, discard, open_append
 
 from ..machine import run_isolated
 from ..segmentation import benchmark_config, validation_cost
@@ -204,11 +204,23 @@ def run_one(run: Run, keep_checkpoints: bool,
         environment=cost['environment'])
     _write_json(osp.join(run.run_dir, RESULT), result)
     if not keep_checkpoints:
-        for path in glob.glob(osp.join(run.run_dir, '*.pth')) + [
-                osp.join(run.run_dir, 'last_checkpoint')]:
-            if osp.exists(path):
-                os.remove(path)
+        _remove_checkpoints(run.run_dir)
     return result
+
+
+def _remove_checkpoints(run_dir: str) -> None:
+    """Remove the checkpoints the run's training wrote in ``run_dir`` (as
+    the folder's manifest lists them: a ``.pth`` of the user's stays),
+    and ``last_checkpoint`` when it names one of them."""
+    owned = OwnedFolder(run_dir, claimed=True)
+    removed = owned.discard_written(
+        glob.glob(osp.join(glob.escape(run_dir), '*.pth')))
+    last = osp.join(run_dir, 'last_checkpoint')
+    if removed and osp.isfile(last) and not osp.islink(last):
+        with open(last, encoding='utf-8', errors='replace') as f:
+            named = f.read(4096).strip()
+        if osp.abspath(named) in map(osp.abspath, removed):
+            discard(last)
 
 
 def _benchmark_path(work_dir: str, entry: Entry) -> str:

@@ -54,6 +54,7 @@ write atomically: a temporary file beside the target, renamed into place when
 complete.
 """
 import contextlib
+import errno
 import functools
 import hashlib
 import io
@@ -63,7 +64,9 @@ import os
 import os.path as osp
 import re
 import secrets
+import shutil
 import struct
+import tempfile
 import zipfile
 from typing import (BinaryIO, Callable, Dict, Iterator, List, NamedTuple,
                     Optional, Sequence, Tuple)
@@ -73,7 +76,8 @@ import numpy as np
 from .arguments import LAYOUT, Integer, Path, declare
 from .limits import (MAX_IMAGE_SIDE, READ_LIMIT_BYTES, cut, excerpt,
                      load_json_file)
-from .output_folder import check_input_file, check_output
+from .output_folder import (check_input_file, check_output,
+                            check_output_kind, note_written)
 
 __all__ = ['SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape']
 
@@ -94,7 +98,7 @@ def atomic_path(path: str) -> Iterator[str]:
 
     The temporary file lies beside ``path``, is named after it,
     ``.tmp-<name>.<random><ext>`` (:func:`temporaries_of`), and is renamed
-    over ``path`` when the block ends without error; on error it is
+    over ``path`` when the block ends without error; on any error it is
     removed and ``path`` is untouched. It is created with the permissions
     ``open`` would give (mode ``0o666`` less the umask, applied by the
     kernel: no process-wide setting is read or changed), exclusively, never
@@ -102,28 +106,78 @@ def atomic_path(path: str) -> Iterator[str]:
     for that target can find and remove, without touching the temporaries
     of other processes writing beside it. A ``path`` that is an input of
     this process (:func:`~wgse_mmseg.core.output_folder.check_output`) is
-    refused before anything is written, and again before the rename. An
-    ``OSError`` that names no file (``No space left on device``,
-    ``Read-only file system`` while writing) is raised again naming
-    ``path``.
+    refused before anything is written, and again before the rename. A
+    file written inside a folder the package holds is recorded in its
+    manifest (:func:`~wgse_mmseg.core.output_folder.note_written`).
+
+    Where a FIFO or a character device lies at ``path`` (``/dev/null``, a
+    shell's ``>(cat)``), the temporary file is made in the system's
+    temporary folder and, once whole, its bytes are written through to
+    ``path``, which is never replaced; a FIFO no process reads is an
+    ``OSError`` naming it, not a wait. A socket, a block device or a
+    folder at ``path`` is refused before anything is written
+    (:func:`~wgse_mmseg.core.output_folder.check_output_kind`).
+
+    An ``OSError`` that names no file (``No space left on device``,
+    ``File too large``, ``Read-only file system`` while writing) is raised
+    again naming ``path``, of the same ``OSError`` subclass.
     """
     check_output(path)
-    directory = osp.dirname(osp.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    tmp = _create_temporary(directory, osp.basename(path),
-                            osp.splitext(path)[1])
+    streamed = check_output_kind(path) is not None
+    directory = (tempfile.gettempdir() if streamed else
+                 osp.dirname(osp.abspath(path)))
+    try:
+        os.makedirs(directory, exist_ok=True)
+        tmp = _create_temporary(directory, osp.basename(path),
+                                osp.splitext(path)[1])
+    except OSError as err:
+        raise _naming(path, err) from err
     try:
         yield tmp
         check_output(path)
-        os.replace(tmp, path)
+        if streamed:
+            _write_through(tmp, path)
+        else:
+            os.replace(tmp, path)
+            note_written(path)
     except BaseException as err:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(OSError):
             os.remove(tmp)
         if isinstance(err, OSError) and err.filename is None:
-            # a write's own error (disk full, read-only) names no file
-            raise OSError(err.errno, f'{path}: cannot be written: '
-                          f'{err.strerror or err}') from err
+            raise _naming(path, err) from err
         raise
+    finally:
+        if streamed:
+            with contextlib.suppress(OSError):
+                os.remove(tmp)
+
+
+def _naming(path: str, err: OSError) -> OSError:
+    """``err``, an error of writing ``path``, as one that names it: the
+    same errno, so the same ``OSError`` subclass."""
+    if err.filename is not None or path in str(err.strerror):
+        return err
+    return OSError(err.errno, f'{path}: cannot be written: '
+                   f'{err.strerror or err}')
+
+
+def _write_through(tmp: str, path: str) -> None:
+    """Write the bytes of the file ``tmp`` into ``path``, a FIFO or a
+    character device, opened without creating or truncating anything."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    except OSError as err:
+        if err.errno == errno.ENXIO:
+            raise OSError(err.errno, f'{path}: a FIFO that no process '
+                          f'reads; start its reader first') from err
+        raise
+    try:
+        os.set_blocking(fd, True)
+        with open(tmp, 'rb') as source, os.fdopen(fd, 'wb',
+                                                  closefd=False) as out:
+            shutil.copyfileobj(source, out)
+    finally:
+        os.close(fd)
 
 
 def _create_temporary(directory: str, name: str, suffix: str) -> str:

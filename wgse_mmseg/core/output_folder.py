@@ -25,8 +25,30 @@ No link followed out of the folder
     never writes through it; a state file appended to in place is opened
     by :func:`open_append`, which refuses a link or a file with other
     names. A folder the package names itself (``<video>.partial``) is
-    owned with ``replace=True``: a link or file at its path is replaced by
-    a folder.
+    owned with ``named=True``: a link or file at its path is refused,
+    never followed or removed.
+Only what the package wrote
+    A folder a tool writes as its output is claimed (:func:`own_folder`):
+    the package makes it, or takes an empty one, and keeps in it the
+    manifest :data:`MANIFEST_NAME`, the record of every file written there
+    by rename while it is held (:func:`note_written`). An existing folder
+    with other files and no manifest is refused before any work, naming
+    some of them, and so is one that holds an input of the run at any
+    depth (:func:`check_output_folder`: compared by device and inode,
+    walking up each input's real parents, links resolved). Removal
+    (:meth:`OwnedFolder.clear`, :meth:`OwnedFolder.remove`) takes only the
+    files the manifest lists, and a folder only once it is empty: a file
+    the user added is kept, and nothing is removed as a tree. A lock taken
+    in a folder the package does not own (beside an ONNX file, in a
+    training's work dir, which holds the checkpoint it resumes from)
+    claims nothing (``claim=False``).
+Outputs are files, or streamed to
+    An output path where a FIFO or a character device already lies
+    (``/dev/null``, a shell's ``>(cat)``) is written through, never
+    replaced by a regular file (:func:`~wgse_mmseg.core.io.atomic_path`);
+    a socket, a block device or a folder where a file goes is refused
+    naming it, by the tools before any work (:func:`check_tool_outputs`,
+    :func:`check_output_kind`).
 No input replaced
     While a tool runs (its ``main`` is wrapped by :func:`keeps_inputs`),
     every file the package reads as input (a spike file, an image, a
@@ -60,13 +82,12 @@ import hashlib
 import json
 import os
 import os.path as osp
-import shutil
 import socket
 import stat
 import sys
 import time
-from typing import (BinaryIO, Callable, Dict, Iterable, Iterator, Optional,
-                    Tuple)
+from typing import (BinaryIO, Callable, Dict, Iterable, Iterator, List,
+                    Optional, Set, Tuple)
 
 from .limits import cut, parse_json
 
@@ -74,6 +95,13 @@ __all__ = ['OutputFolderError']
 
 #: the lock file of a folder's (only) job; ``.lock-<job>`` for a named one
 LOCK_NAME = '.lock'
+#: the manifest of a folder the package made: its first line
+#: :data:`MANIFEST_HEADER`, then one JSON string a line, the path (relative
+#: to the folder) of each file written there
+MANIFEST_NAME = '.wgse-output'
+MANIFEST_HEADER = b'wgse_mmseg output folder; files it wrote, one a line\n'
+#: how many names of foreign files a refusal lists
+_NAMES_SHOWN = 3
 _NOFOLLOW = getattr(os, 'O_NOFOLLOW', 0)
 
 
@@ -216,6 +244,117 @@ def check_output(path, inputs: Iterable = ()) -> None:
             f'; an output never replaces an input: write it elsewhere')
 
 
+def check_output_kind(path, streamed: bool = True) -> Optional[str]:
+    """What lies at the output ``path`` (links followed): ``None`` where
+    nothing or a regular file is there, ``'fifo'`` or ``'character
+    device'`` where it is written through (``streamed``:
+    :func:`~wgse_mmseg.core.io.atomic_path` does).
+
+    Raises:
+        OutputFolderError: naming ``path``, for a folder, a socket or a
+            block device (never written, never replaced), or a FIFO or
+            character device where the output cannot be streamed.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISREG(mode):
+        if _through_descriptor(path):
+            raise OutputFolderError(
+                f'{path}: names an open file of a process (a link through '
+                f'/proc/.../fd/, as /dev/stdout redirected to a file); a '
+                f'rename would replace the link: give the file\'s own path')
+        return None
+    kind = ('fifo' if stat.S_ISFIFO(mode) else 'character device'
+            if stat.S_ISCHR(mode) else 'folder' if stat.S_ISDIR(mode)
+            else 'socket' if stat.S_ISSOCK(mode) else 'block device'
+            if stat.S_ISBLK(mode) else 'special file')
+    if streamed and kind in ('fifo', 'character device'):
+        return kind
+    how = ('this output is written to a file, not streamed'
+           if kind in ('fifo', 'character device') else
+           'it is neither replaced nor written through')
+    raise OutputFolderError(f'{path}: a {kind} where the output file goes; '
+                            f'{how}: give the path of a file')
+
+
+def _through_descriptor(path: str) -> bool:
+    """Whether ``path``, or a folder on its way, is a link that leads
+    through a process's open file descriptors (``/dev/stdout``,
+    ``/dev/fd/N``: ``/proc/<pid>/fd/N``)."""
+    current = osp.abspath(os.fspath(path))
+    for _ in range(40):  # the kernel's own bound on a chain of links
+        if current.startswith('/proc/') and '/fd/' in current:
+            return True
+        parent = osp.dirname(current)
+        real_parent = osp.realpath(parent)
+        if real_parent != parent:
+            if real_parent.startswith('/proc/') and '/fd' in real_parent:
+                return True
+            current = osp.join(real_parent, osp.basename(current))
+            continue
+        if not osp.islink(current):
+            return False
+        current = osp.normpath(osp.join(parent, os.readlink(current)))
+    return False
+
+
+def _real_parents(path: str) -> Iterator[Tuple[int, int]]:
+    """``(st_dev, st_ino)`` of every folder above ``path``'s real location
+    (links resolved), nearest first, up to the root."""
+    current = osp.realpath(path)
+    while True:
+        parent = osp.dirname(current)
+        if parent == current:
+            return
+        identity = _identity(parent)
+        if identity is not None:
+            yield identity
+        current = parent
+
+
+def check_output_folder(folder, inputs: Iterable = ()) -> None:
+    """Refuse, before any work, the output folder ``folder`` where it is
+    not one the package may write: anything but a folder at its path, a
+    folder with files and no manifest (:data:`MANIFEST_NAME`: not made by
+    the package), or one holding, at any depth, an input (one of
+    ``inputs`` or a file the running tool read: :func:`note_input`),
+    compared by device and inode. A missing ``folder`` passes.
+
+    Raises:
+        OutputFolderError: naming the folder and what is wrong.
+    """
+    folder = os.fspath(folder)
+    identity = _identity(folder)
+    if identity is None:
+        return
+    if not osp.isdir(folder):
+        raise OutputFolderError(f'{folder}: not a folder, where the output '
+                                f'folder goes; move it away')
+    given = [os.fspath(path) for path in inputs] + list(_INPUTS.values())
+    for source in given:
+        if identity == _identity(source) or identity in _real_parents(
+                source):
+            raise OutputFolderError(
+                f'{folder}: this output folder holds the input {source}; '
+                f'what an output folder holds may be replaced or removed: '
+                f'write the output elsewhere')
+    if osp.lexists(osp.join(folder, MANIFEST_NAME)):
+        return
+    foreign = sorted(name for name in os.listdir(folder)
+                     if not name.startswith(LOCK_NAME))
+    if foreign:
+        shown = ', '.join(foreign[:_NAMES_SHOWN]) + (
+            f' and {len(foreign) - _NAMES_SHOWN} more'
+            if len(foreign) > _NAMES_SHOWN else '')
+        raise OutputFolderError(
+            f'{folder}: an existing folder this package did not make '
+            f'(it holds {shown}, and no {MANIFEST_NAME}); an output folder '
+            f'holds only what the package writes: give a new or empty '
+            f'folder')
+
+
 def _paths_in(value) -> Iterator[str]:
     """The strings and paths in an argument value (a list's items too)."""
     if isinstance(value, (str, os.PathLike)):
@@ -225,17 +364,27 @@ def _paths_in(value) -> Iterator[str]:
             yield from _paths_in(item)
 
 
-def check_tool_outputs(args, *outputs: str) -> None:
+def check_tool_outputs(args, *outputs: str,
+                       folders: Iterable[str] = ()) -> None:
     """A tool's output arguments (the names of ``args``' attributes, unset
     ones skipped) against every other argument that names an existing
-    file or folder: :func:`check_output` before any work, so an output
-    given as one of the tool's inputs is refused naming both."""
+    file or folder, before any work: :func:`check_output`, so an output
+    given as one of the tool's inputs is refused naming both. Those named
+    in ``folders`` are output folders (:func:`check_output_folder`); the
+    others, files, are checked by :func:`check_output_kind` where they are
+    not folders (some tools take a folder or a file)."""
+    folders = tuple(folders)
     values = vars(args)
-    inputs = [path for name, value in values.items() if name not in outputs
+    inputs = [path for name, value in values.items()
+              if name not in outputs + folders
               for path in _paths_in(value) if osp.exists(path)]
-    for name in outputs:
+    for name in outputs + folders:
         for path in _paths_in(values.get(name)):
             check_output(path, inputs)
+            if name in folders:
+                check_output_folder(path, inputs)
+            elif not osp.isdir(path):
+                check_output_kind(path)
 
 
 def unshare(path: str) -> None:
@@ -255,9 +404,9 @@ def unshare(path: str) -> None:
 
 def discard(path: str) -> None:
     """Remove what lies at ``path`` without following a link: a file, a
-    link (never its target), a FIFO or a folder with its content; nothing
-    when nothing is there. An input of this process is refused
-    (:func:`check_output`)."""
+    link (never its target) or a FIFO; nothing when nothing is there. An
+    input of this process (:func:`check_output`) and a folder (never
+    removed as a tree: :meth:`OwnedFolder.remove`) are refused."""
     if not osp.islink(path):
         check_output(path)
     try:
@@ -265,33 +414,149 @@ def discard(path: str) -> None:
     except FileNotFoundError:
         return
     if stat.S_ISDIR(mode):
-        shutil.rmtree(path)
-    else:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(path)
+        raise OutputFolderError(f'{path}: a folder where the package '
+                                f'removes a file of its own; move it away')
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(path)
+
+
+#: the claimed folders this process holds (:func:`own_folder`), the
+#: innermost last
+_HELD: List['OwnedFolder'] = []
+
+
+def note_written(path: str) -> None:
+    """Record ``path``, a file just written, in the manifest of the
+    innermost claimed folder this process holds that contains it (none:
+    nothing), so that the folder's removal takes it
+    (:meth:`OwnedFolder.clear`)."""
+    real = osp.join(osp.realpath(osp.dirname(osp.abspath(path))),
+                    osp.basename(path))
+    for owned in reversed(_HELD):
+        relative = osp.relpath(real, osp.realpath(owned.root))
+        if relative != os.pardir and not relative.startswith(
+                os.pardir + os.sep):
+            owned.record(relative)
+            return
+
+
+def _open_manifest(path: str, flags: int) -> int:
+    """The manifest ``path`` opened with ``flags``: a regular file of one
+    name, never a link, or an :class:`OutputFolderError` naming it."""
+    try:
+        fd = os.open(path, flags | _NOFOLLOW | os.O_NONBLOCK, 0o666)
+    except OSError as err:
+        raise OutputFolderError(f'{path}: cannot open the folder\'s '
+                                f'manifest (a link?): {err.strerror}') from err
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
+        os.close(fd)
+        raise OutputFolderError(f'{path}: the folder\'s manifest is not a '
+                                f'regular file of one name; move it away')
+    return fd
 
 
 class OwnedFolder:
     """Paths inside a folder the package writes (its writer holds the
-    lock: :func:`own_folder`). ``whole``: the package named the folder and
-    everything in it is its own (a walk's state), so a folder where a file
-    belongs is removed too; ``lock``: its writer's lock file, which
-    :meth:`clear` keeps."""
+    lock: :func:`own_folder`). ``lock``: its writer's lock file;
+    ``claimed``: the folder is the package's, with a manifest of what it
+    wrote (:data:`MANIFEST_NAME`), which :meth:`clear` and :meth:`remove`
+    go by."""
 
-    def __init__(self, root: str, whole: bool = False,
-                 lock: Optional[str] = None):
+    def __init__(self, root: str, lock: Optional[str] = None,
+                 claimed: bool = False):
         #: the folder
         self.root = root
-        self.whole = whole
+        self.claimed = claimed
         self._lock = lock
+        self._manifest = osp.join(root, MANIFEST_NAME)
+
+    def record(self, relative: str) -> None:
+        """Add ``relative``, a file written in the folder, to its
+        manifest (one ``O_APPEND`` write: writers of other jobs may append
+        at the same time)."""
+        fd = _open_manifest(self._manifest, os.O_WRONLY | os.O_APPEND)
+        try:
+            os.write(fd, (json.dumps(relative) + '\n').encode())
+        finally:
+            os.close(fd)
+
+    def written(self) -> Set[str]:
+        """The paths (relative to the folder) its manifest lists; empty for
+        a folder not claimed."""
+        if not self.claimed or not osp.lexists(self._manifest):
+            return set()
+        fd = _open_manifest(self._manifest, os.O_RDONLY)
+        with os.fdopen(fd, 'rb') as f:
+            lines = f.read().split(b'\n')[1:]
+        names = set()
+        for line in lines:
+            with contextlib.suppress(ValueError):
+                name = json.loads(line)
+                if isinstance(name, str):
+                    names.add(name)
+        return names
+
+    def discard_written(self, paths: Iterable[str]) -> List[str]:
+        """Remove those of ``paths`` (inside the folder) that its manifest
+        lists (:func:`discard`), leaving the others; the removed ones."""
+        written = self.written()
+        removed = []
+        for path in paths:
+            if osp.relpath(osp.join(osp.realpath(osp.dirname(
+                    osp.abspath(path))), osp.basename(path)),
+                    osp.realpath(self.root)) in written:
+                discard(path)
+                removed.append(path)
+        return removed
 
     def clear(self) -> None:
-        """Remove everything in the folder but its writer's lock file (a
-        state that cannot be trusted, started over)."""
-        for name in os.listdir(self.root):
-            path = osp.join(self.root, name)
-            if path != self._lock:
+        """Remove the files the package wrote in the folder, as its
+        manifest lists them (each checked: :func:`discard`), and the
+        folders inside that this leaves empty; files it did not write stay
+        (a state that cannot be trusted, started over)."""
+        root = osp.realpath(self.root)
+        for relative in sorted(self.written(), reverse=True):
+            path = osp.normpath(osp.join(root, relative))
+            if osp.dirname(path) == path or not path.startswith(
+                    root + os.sep) or osp.realpath(
+                        osp.dirname(path)) != osp.dirname(path):
+                continue  # a listed name that leads out (or via a link)
+            with contextlib.suppress(OutputFolderError):
                 discard(path)
+            parent = osp.dirname(path)
+            while parent != root:
+                try:
+                    os.rmdir(parent)
+                except OSError:
+                    break  # holds other files
+                parent = osp.dirname(parent)
+        if self.claimed:
+            os.close(_open_manifest(self._manifest,
+                                    os.O_WRONLY | os.O_TRUNC))
+            fd = _open_manifest(self._manifest, os.O_WRONLY | os.O_APPEND)
+            try:
+                os.write(fd, MANIFEST_HEADER)
+            finally:
+                os.close(fd)
+
+    def remove(self) -> None:
+        """Remove the folder: the files it lists (:meth:`clear`), its
+        manifest and lock, and the folder itself if that leaves it empty;
+        else it stays, with a line on stderr naming what is in it."""
+        self.clear()
+        for path in (self._manifest, self._lock):
+            if path is not None:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(path)
+        try:
+            os.rmdir(self.root)
+        except OSError:
+            left = sorted(os.listdir(self.root))
+            print(f'{self.root}: kept: it holds files this package did not '
+                  f'write ({", ".join(left[:_NAMES_SHOWN])}'
+                  f'{" ..." if len(left) > _NAMES_SHOWN else ""})',
+                  file=sys.stderr)
 
     def _inside(self, path: str) -> str:
         """``path`` relative to the root; it must lie inside it."""
@@ -332,8 +597,7 @@ class OwnedFolder:
         (:meth:`folder`), and what lies at it removed when it is a link or
         no regular file: afterwards it is absent or a regular file, safe
         to read or replace. A folder there is an
-        :class:`OutputFolderError` naming it, unless the whole folder is
-        the package's (then it is removed)."""
+        :class:`OutputFolderError` naming it."""
         parent = osp.dirname(self._inside(path))
         if parent:
             self.folder(osp.join(self.root, parent))
@@ -341,7 +605,7 @@ class OwnedFolder:
             mode = os.lstat(path).st_mode
         except FileNotFoundError:
             return path
-        if stat.S_ISDIR(mode) and not self.whole:
+        if stat.S_ISDIR(mode):
             raise OutputFolderError(f'{path}: a folder where the output '
                                     f'folder {self.root} needs a file; '
                                     f'move it away')
@@ -401,17 +665,26 @@ def _check_lock_file(lock: str, fd: int, info: os.stat_result) -> None:
                 f'overwritten: move it away') from None
 
 
-def _take_lock(folder: str, lock: str, wait: bool, replace: bool) -> int:
+def check_named_folder(folder: str) -> None:
+    """Refuse a link or a file at ``folder``, a folder the package names
+    itself: it is neither followed nor removed."""
+    try:
+        if stat.S_ISDIR(os.lstat(folder).st_mode):
+            return
+    except FileNotFoundError:
+        return
+    raise OutputFolderError(f'{folder}: a link or file where this package '
+                            f'makes its own folder; it is not followed or '
+                            f'removed: move it away')
+
+
+def _take_lock(folder: str, lock: str, wait: bool, named: bool) -> int:
     """The open, exclusively locked lock file ``lock`` of ``folder``,
     recording this process; made again where another process removed it
     meanwhile."""
     while True:
-        if replace:
-            try:
-                if not stat.S_ISDIR(os.lstat(folder).st_mode):
-                    discard(folder)  # a link or a file where ours belongs
-            except FileNotFoundError:
-                pass
+        if named:
+            check_named_folder(folder)
         try:
             os.makedirs(folder, exist_ok=True)
         except OSError as err:
@@ -475,7 +748,8 @@ def _release(fd: int, lock: str) -> None:
 
 @contextlib.contextmanager
 def own_folder(folder: str, job: Optional[str] = None, wait: bool = False,
-               replace: bool = False) -> Iterator[OwnedFolder]:
+               named: bool = False,
+               claim: bool = True) -> Iterator[OwnedFolder]:
     """Hold ``folder`` (made if missing) for writing, for the block.
 
     Args:
@@ -486,21 +760,46 @@ def own_folder(folder: str, job: Optional[str] = None, wait: bool = False,
             folder's only job. Writers of the same job exclude each other.
         wait: wait for another writer of the job to finish instead of
             raising.
-        replace: the package names this folder itself and all in it is
-            its own: a link, file or FIFO at its path is removed and a
-            folder made instead, and a folder inside where a file belongs
-            is removed (:class:`OwnedFolder`'s ``whole``).
+        named: the package names this folder itself (beside a user's
+            output): a link or file at its path is refused, not followed.
+        claim: the folder is the package's output, with a manifest of what
+            it wrote (see the module): one with other files and no
+            manifest, or holding an input, is refused before anything is
+            made (:func:`check_output_folder`). ``False``: only the lock is
+            taken (a folder the user keeps other files in); one that has a
+            manifest is still recorded in.
 
     Raises:
         OutputFolderError: another process writes the job (naming its
-            process id, host, command and start time), or ``folder``
-            cannot be made a folder.
+            process id, host, command and start time), ``folder`` cannot
+            be made a folder, or (``claim``) it is not the package's.
     """
     folder = os.fspath(folder)
+    if named:
+        check_named_folder(folder)
+    if claim:
+        check_output_folder(folder)
     lock = _lock_path(folder, job)
-    fd = _take_lock(folder, lock, wait, replace)
+    fd = _take_lock(folder, lock, wait, named)
     try:
-        yield OwnedFolder(folder, whole=replace, lock=lock)
+        manifest = osp.join(folder, MANIFEST_NAME)
+        if claim:
+            try:
+                made = os.open(manifest, os.O_WRONLY | os.O_CREAT | os.O_EXCL
+                               | _NOFOLLOW, 0o666)
+            except FileExistsError:
+                os.close(_open_manifest(manifest, os.O_RDONLY))
+            else:
+                with os.fdopen(made, 'wb') as f:
+                    f.write(MANIFEST_HEADER)
+        owned = OwnedFolder(folder, lock, claim or osp.lexists(manifest))
+        if owned.claimed:
+            _HELD.append(owned)
+        try:
+            yield owned
+        finally:
+            if owned.claimed:
+                _HELD.remove(owned)
     finally:
         _release(fd, lock)
 

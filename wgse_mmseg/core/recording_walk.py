@@ -58,7 +58,6 @@ An MP4 of odd height or width is padded by one replicated row or column
 import json
 import os
 import os.path as osp
-import shutil
 import sys
 import time
 from typing import (TYPE_CHECKING, Any, Callable, Dict, List, NamedTuple,
@@ -73,8 +72,10 @@ from .io import (atomic_output, atomic_path, load_spikes, spike_shape,
                  write_bytes, write_png)
 from .limits import MAX_BATCH_SIZE, check_utf8_path, load_json_file
 from .markers import file_digest
-from .output_folder import (OwnedFolder, add_wait_option, discard,
-                            open_append, own_folder)
+from .output_folder import (OwnedFolder, add_wait_option, check_named_folder,
+                            check_output, check_output_folder,
+                            check_output_kind, note_written, open_append,
+                            own_folder)
 
 if TYPE_CHECKING:  # torch and OpenCV where a walk runs, not for --help
     import torch
@@ -194,19 +195,37 @@ class WalkOutputs(NamedTuple):
     partial: str
 
 
-def walk_outputs(video: str) -> WalkOutputs:
+def walk_outputs(video: str, save_frames: bool = False,
+                 inputs: Sequence[str] = ()) -> WalkOutputs:
     """``video``, its CSV ``<stem>.csv``, frames folder ``<stem>_frames``
-    and state folder ``<video>.partial``; a ``video`` that is not
+    and state folder ``<video>.partial``, checked before any work (a tool
+    calls it before it loads a model): a ``video`` that is not
     ``.mp4``/``.gif`` is a :class:`WalkError`, one whose path is not UTF-8
-    a ``ValueError``."""
+    a ``ValueError``; a video or CSV path where no regular file can go
+    (a FIFO, a device: the walk's files lie beside it), and a state or
+    (``save_frames``) frames folder the package did not make or that
+    holds an input (one of ``inputs``, the recording, or one read so far:
+    :func:`~wgse_mmseg.core.output_folder.check_output_folder`), are an
+    :class:`~wgse_mmseg.core.output_folder.OutputFolderError` naming
+    it."""
     stem, ext = osp.splitext(os.fspath(video))
     check_utf8_path(video, 'OpenCV')  # it writes the video and frames
     if ext.lower() not in VIDEO_EXTENSIONS:
         raise WalkError(f'{video}: a walk writes a video, '
                         f'{" or ".join(VIDEO_EXTENSIONS)} by the extension; '
                         f'got {ext or "no extension"!r}')
-    return WalkOutputs(video, stem + '.csv', stem + '_frames',
-                       video + '.partial')
+    outputs = WalkOutputs(video, stem + '.csv', stem + '_frames',
+                          video + '.partial')
+    for output in (outputs.video, outputs.csv):
+        if osp.isdir(output) and not osp.islink(output):
+            raise WalkError(f'{output}: a folder where the walk writes a '
+                            f'file; move it away')
+        check_output(output)
+        check_output_kind(output, streamed=False)
+    for folder in (outputs.partial, outputs.frames)[:1 + save_frames]:
+        check_named_folder(folder)
+        check_output_folder(folder, inputs)
+    return outputs
 
 
 def read_windows(path: str, plan: WalkPlan, centres: Sequence[int],
@@ -412,11 +431,12 @@ def _write_video(outputs: WalkOutputs, count: int, fps: float) -> None:
                 writer.release()
 
 
-def _finish(outputs: WalkOutputs, count: int, fps: float,
-            save_frames: bool) -> None:
+def _finish(state: OwnedFolder, outputs: WalkOutputs, count: int,
+            fps: float, save_frames: bool) -> None:
     """Video, CSV and frames of the ``count`` windows from the state
-    folder (whatever was at their paths replaced, a link never followed);
-    the folder removed."""
+    folder (a link at their paths replaced, never followed); the frames
+    folder's earlier frames removed (those the package wrote: files of
+    others stay); the state folder removed."""
     _write_video(outputs, count, fps)
     with atomic_output(outputs.csv) as out, \
             open(osp.join(outputs.partial, _PROGRESS), 'rb') as rows:
@@ -424,15 +444,15 @@ def _finish(outputs: WalkOutputs, count: int, fps: float,
         for line in rows:
             out.write(b','.join(line.split(b',')[:len(CSV_COLUMNS)]) + b'\n')
     if save_frames:
-        frames = osp.join(outputs.partial, 'frames')
-        discard(frames)
-        os.mkdir(frames)
-        for index in range(count):
-            name = _frame_name(index)
-            os.replace(osp.join(outputs.partial, name), osp.join(frames, name))
-        discard(outputs.frames)
-        os.replace(frames, outputs.frames)
-    shutil.rmtree(outputs.partial)
+        with own_folder(outputs.frames, named=True) as frames:
+            frames.clear()
+            for index in range(count):
+                name = _frame_name(index)
+                target = frames.file(osp.join(outputs.frames, name))
+                check_output(target)
+                os.replace(osp.join(outputs.partial, name), target)
+                note_written(target)
+    state.remove()
 
 
 @declare(path=Path(), video=Path(), length=NUM_STEPS, stride=STRIDE,
@@ -479,18 +499,14 @@ def walk_recording(path: str, video: str,
         OutputFolderError: another process walks into ``video``.
         SpikeFileError: for a recording that cannot be read.
     """
-    outputs = walk_outputs(video)
     plan = plan_recording_walk(path, length, stride, height, width, layout)
-    for output in (outputs.video, outputs.csv):
-        if osp.isdir(output) and not osp.islink(output):
-            raise WalkError(f'{output}: a folder where the walk writes a '
-                            f'file; move it away')
+    outputs = walk_outputs(video, save_frames, [path])
     identity = _identity(path, height, width, layout, plan, settings or {})
-    with own_folder(outputs.partial, wait=wait, replace=True) as state:
+    with own_folder(outputs.partial, wait=wait, named=True) as state:
         resumed = _open_state(state, identity, plan)
         _walk(path, outputs, model, render, plan, resumed, batch_size,
               (height, width, layout), progress)
-        _finish(outputs, len(plan.centres), fps, save_frames)
+        _finish(state, outputs, len(plan.centres), fps, save_frames)
     return WalkReport(plan, outputs, resumed, len(plan.centres) - resumed)
 
 

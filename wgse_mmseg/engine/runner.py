@@ -14,7 +14,6 @@ The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 """
 import contextlib
 import copy
-import os
 import os.path as osp
 import pickle
 
@@ -27,6 +26,7 @@ from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from .._openmmlab import prepare_mmseg_layer
+from ..core.io import atomic_path, temporaries_of
 from ..core.output_folder import (OutputFolderError, discard, own_folder,
                                   unshare)
 from ..utils.checkpoint import CheckpointError, load_error
@@ -150,7 +150,7 @@ class SpikeRunner(Runner):
             if local:
                 try:
                     owned.enter_context(own_folder(
-                        self.work_dir, job='train',
+                        self.work_dir, job='train', claim=False,
                         wait=bool(self.cfg.get('wait_for_work_dir', False))))
                 except OutputFolderError as err:
                     refusal = [str(err)]
@@ -194,20 +194,24 @@ class SpikeRunner(Runner):
     @master_only
     def save_checkpoint(self, out_dir: str, filename: str, *args, **kwargs):
         """mmengine's, but on a local ``out_dir`` written under a temporary
-        name and renamed over ``filename`` once whole: a job killed while it
+        name and renamed over ``filename`` once whole
+        (:func:`~wgse_mmseg.core.io.atomic_path`): a job killed while it
         saves leaves the previous checkpoints and ``last_checkpoint`` (which
         mmengine's checkpoint hook updates after this returns) as they were,
-        so ``--resume`` continues from the last complete checkpoint. Only
-        the main process saves, as in mmengine. Files mmengine writes in
-        place (the temporary, ``last_checkpoint``) are never written
-        through a link or into a file with other names
-        (:func:`~wgse_mmseg.core.output_folder.unshare`)."""
+        so ``--resume`` continues from the last complete checkpoint, and the
+        next save removes the temporary it left. A save that fails (a full
+        disk, a file-size limit) removes its temporary and raises an
+        ``OSError`` naming ``filename``'s path. Only the main process
+        saves, as in mmengine. ``last_checkpoint``, which mmengine writes
+        in place, is never written through a link or into a file with
+        other names (:func:`~wgse_mmseg.core.output_folder.unshare`)."""
         if not osp.isdir(out_dir):  # a remote backend: as mmengine does it
             return super().save_checkpoint(out_dir, filename, *args,
                                            **kwargs)
-        temporary = osp.join(osp.dirname(filename),
-                             f'.tmp-{osp.basename(filename)}')
-        discard(osp.join(out_dir, temporary))  # a killed save's, or a link
+        path = osp.join(out_dir, filename)
+        for stale in temporaries_of([path]):  # a killed save's, or a link
+            discard(stale)
         unshare(osp.join(out_dir, 'last_checkpoint'))
-        super().save_checkpoint(out_dir, temporary, *args, **kwargs)
-        os.replace(osp.join(out_dir, temporary), osp.join(out_dir, filename))
+        with atomic_path(path) as temporary:
+            super().save_checkpoint(out_dir, osp.relpath(temporary, out_dir),
+                                    *args, **kwargs)
