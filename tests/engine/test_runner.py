@@ -243,3 +243,18 @@ def test_the_config_text_is_mmengines_formatted_once_per_content(
     cfg.randomness = dict(seed=123)
     assert 'seed=123' in cfg.pretty_text and len(formatted) == 2
     assert cfg.pretty_text == Config(cfg.to_dict()).pretty_text
+
+
+def test_the_runs_log_leaves_out_what_no_user_can_act_on():
+    import logging
+    from wgse_mmseg.engine.runner import _Unactionable
+
+    def record(message):
+        return logging.LogRecord('mmengine', logging.WARNING, __file__, 1,
+                                 message, None, None)
+    unactionable = _Unactionable()
+    assert not unactionable.filter(record(
+        '"FileClient" will be deprecated in future. Please use io functions'))
+    assert not unactionable.filter(record(
+        'The prefix is not set in metric class IoUMetric.'))
+    assert unactionable.filter(record('crop_size=(16, 32) is below ...'))

@@ -14,6 +14,7 @@ The configs name it (``runner_type = 'SpikeRunner'``), so MMSeg's own
 """
 import contextlib
 import copy
+import logging
 import os.path as osp
 import pickle
 
@@ -69,6 +70,21 @@ class _FormattedOnce(Config):
         return formatted
 
 
+#: what mmengine logs at every run that no user can act on: the deprecation
+#: of a file client MMSeg itself uses, and a metric's empty prefix
+_UNACTIONABLE = ('"FileClient" will be deprecated',
+                 'is the alias of "LocalBackend"',
+                 'The prefix is not set in metric class')
+
+
+class _Unactionable(logging.Filter):
+    """Drops :data:`_UNACTIONABLE` records from the run's log."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        return not any(text in message for text in _UNACTIONABLE)
+
+
 @RUNNERS.register_module()
 class SpikeRunner(Runner):
     """:class:`~mmengine.runner.Runner` whose :meth:`from_cfg` sets up the
@@ -98,6 +114,14 @@ class SpikeRunner(Runner):
         if isinstance(cfg, Config):
             cfg = _FormattedOnce.of(cfg)
         return super().from_cfg(cfg)
+
+    def build_logger(self, *args, **kwargs):
+        """mmengine's logger, without the warnings no user can act on
+        (:data:`_UNACTIONABLE`)."""
+        logger = super().build_logger(*args, **kwargs)
+        if not any(isinstance(f, _Unactionable) for f in logger.filters):
+            logger.addFilter(_Unactionable())
+        return logger
 
     def train(self):
         """mmengine's, after the cross-field checks of the config against
