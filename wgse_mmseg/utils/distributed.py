@@ -56,8 +56,10 @@ def prepare_launcher(cfg: Config) -> None:
     wrapper = cfg.get('model_wrapper_cfg') or {}
     cfg.model_wrapper_cfg = dict(wrapper, type='CPUDistributedDataParallel')
     if cfg.get('sync_bn'):
-        warnings.warn(f'sync_bn={cfg.sync_bn!r} ignored: SyncBN needs GPUs, '
-                      f'this CPU run keeps per-process BN statistics')
+        if os.environ.get('RANK', '0') == '0':  # said once, not per process
+            warnings.warn(f'sync_bn={cfg.sync_bn!r} ignored: SyncBN needs '
+                          f'GPUs, this CPU run keeps per-process BN '
+                          f'statistics')
         cfg.sync_bn = None
 
 
