@@ -90,8 +90,59 @@ def test_dat_side_file(tmp_path):
         json.dump({'height': 6, 'width': 4}, f)
     np.testing.assert_array_equal(load_spikes(path), spikes)
     assert spike_shape(path) == (4, 6, 4)
-    # Explicit arguments win over the side file.
-    assert spike_shape(path, height=3, width=8) == (4, 3, 8)
+    # Arguments that agree with the side file are accepted, others refused.
+    assert spike_shape(path, height=6, width=4) == (4, 6, 4)
+    with pytest.raises(SpikeFileError, match=r'3x8 given.*b\.dat\.json'
+                                             r' says 6x4'):
+        spike_shape(path, height=3, width=8)
+
+
+@pytest.mark.parametrize('ext, record', [
+    ('.dat', 'side file'), ('.spk', 'header'), ('.npy', 'array'),
+    ('.npz', 'array')])
+@pytest.mark.parametrize('height, width', [(10, 4), (10, None), (None, 4)])
+def test_a_size_contradicting_the_files_record_is_refused(
+        tmp_path, ext, record, height, width):
+    """A 4x10 stream read as 10x4 (the same number of bytes) would be
+    other frames: every format that records its size refuses a
+    caller's size that differs, naming the file and both sizes."""
+    spikes = _random_spikes((3, 4, 10), seed=5)
+    path = str(tmp_path / ('s' + ext))
+    save_spikes(path, spikes)
+    if ext == '.dat':
+        with open(path + '.json', 'w') as f:
+            json.dump({'height': 4, 'width': 10}, f)
+    given = f'{height}x{width}'
+    for read in (load_spikes, spike_shape):
+        with pytest.raises(SpikeFileError) as info:
+            read(path, height, width)
+        message = str(info.value)
+        assert path in message and given in message
+        assert record in message and 'says 4x10' in message
+    np.testing.assert_array_equal(load_spikes(path, 4, 10), spikes)
+    np.testing.assert_array_equal(load_spikes(path, None, 10), spikes)
+
+
+def test_an_npz_rewritten_with_its_old_mtime_is_read_anew(tmp_path):
+    """The window cache keys on what a rewrite always changes: the same
+    size, the same inode and the old atime/mtime restored (as ``cp -p``,
+    ``rsync -t`` or ``tar`` leave it) still give the new frames."""
+    path = str(tmp_path / 'c.npz')
+    first = _random_spikes((5, 4, 8), seed=6)
+    second = 1 - first
+    np.savez(path, spikes=first)
+    stat = os.stat(path)
+    np.testing.assert_array_equal(load_spikes(path, layout='THW'), first)
+    np.savez(tmp_path / 'new.npz', spikes=second)
+    data = (tmp_path / 'new.npz').read_bytes()
+    assert len(data) == stat.st_size
+    with open(path, 'r+b') as f:  # in place: the same inode
+        f.write(data)
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+    after = os.stat(path)
+    assert (after.st_ino, after.st_size, after.st_mtime_ns) == (
+        stat.st_ino, stat.st_size, stat.st_mtime_ns)
+    np.testing.assert_array_equal(load_spikes(path, layout='THW'), second)
 
 
 @pytest.mark.parametrize('ext', ['.dat', '.spk', '.npy', '.npz'])

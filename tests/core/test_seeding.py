@@ -3,7 +3,7 @@ and the places that use it."""
 import os
 import subprocess
 import sys
-import zlib
+import hashlib
 
 import numpy as np
 import pytest
@@ -12,8 +12,9 @@ from hypothesis import given, settings, strategies as st
 
 from wgse_mmseg.core.arguments import ArgumentError
 from wgse_mmseg.core.limits import MAX_SEED
-from wgse_mmseg.core.seeding import (check_seed, derive_generator,
-                                     derive_seed, draw_seed)
+from wgse_mmseg.core.seeding import (_string_key_word, check_seed,
+                                     derive_generator, derive_seed,
+                                     draw_seed)
 from wgse_mmseg.core.simulation import simulate_spikes
 from wgse_mmseg.core.simulation.effect import SimulationContext
 
@@ -34,10 +35,13 @@ def test_derived_seeds_lie_in_the_one_range_and_are_accepted(seed, keys):
 
 @settings(max_examples=100, deadline=None)
 @given(seed=SEEDS, key=st.text(max_size=20))
-def test_a_string_key_enters_as_its_crc32(seed, key):
-    """The documented rule, computed here from NumPy's SeedSequence."""
+def test_a_string_key_enters_as_its_64_bit_blake2b(seed, key):
+    """The documented rule, computed here from hashlib and NumPy's
+    SeedSequence."""
+    digest = hashlib.blake2b(key.encode(), digest_size=8).digest()
     word = np.random.SeedSequence(
-        [seed, zlib.crc32(key.encode())]).generate_state(2, np.uint32)
+        [seed, int.from_bytes(digest, 'little')]).generate_state(
+            2, np.uint32)
     expected = (int(word[0]) | int(word[1]) << 32) & (2**63 - 1)
     assert derive_seed(seed, key) == expected
 
@@ -57,6 +61,20 @@ def test_keys_separate_streams():
              derive_seed(0, 1), derive_seed(0, 1, 1)}
     assert len(seeds) == 7
     assert derive_seed(5, 'x', 3) == derive_seed(5, 'x', 3)
+
+
+def test_distinct_names_give_distinct_seeds_over_a_million_names():
+    """The promise "distinct keys give unrelated seeds" where it can fail:
+    a million short names (a 32-bit checksum gives about a hundred
+    colliding pairs among them) keep a million distinct string words, and
+    names that a 32-bit checksum maps together get different seeds."""
+    names = [f'data/{i:07d}.png' for i in range(10**6)]
+    words = {_string_key_word(name) for name in names}
+    assert len(words) == len(names)
+    sample = names[::100]
+    assert len({derive_seed(3, n) for n in sample}) == len(sample)
+    assert derive_seed(0, 'data/plumless.png') != derive_seed(
+        0, 'data/buckeroo.png')
 
 
 def test_derivation_does_not_depend_on_the_interpreter():

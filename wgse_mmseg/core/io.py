@@ -264,29 +264,44 @@ def _frame_bytes(height: int, width: int) -> int:
     return (height * width + 7) // 8
 
 
+def _check_caller_size(path: str, record: str, recorded: Tuple[int, int],
+                       height: Optional[int], width: Optional[int]) -> None:
+    """Refuse a caller's ``height``/``width`` (``None``: not given) that
+    contradict the ``(H, W)`` that ``path``'s own ``record`` (its header,
+    array shape or side file) holds, naming both: reading the bytes as
+    another size would give other frames, not an error."""
+    given = (height, width)
+    if any(value is not None and value != own
+           for value, own in zip(given, recorded)):
+        raise SpikeFileError(
+            f'{path}: height/width {height}x{width} given, but {record} '
+            f'says {recorded[0]}x{recorded[1]}; give the file\'s size or '
+            f'none')
+
+
 def _dat_geometry(path: str, height: Optional[int],
                   width: Optional[int]) -> Tuple[int, int, int]:
     """``(T, H, W)`` of a ``.dat`` file, checking its size."""
-    if height is None or width is None:
-        side = path + '.json'
-        if not osp.exists(side):
-            raise SpikeFileError(
-                f'{path}: a .dat file has no header, so height and width are '
-                f'needed (arguments, or a side file {side} with '
-                f'{{"height": H, "width": W}})')
+    side = path + '.json'
+    if osp.exists(side):
         try:
             meta = load_json_file(side, 'side file')
         except (OSError, ValueError) as err:
             raise SpikeFileError(f'{path}: {err}') from err
-        for name, value in (('height', height), ('width', width)):
-            if value is None and not (isinstance(meta, dict) and
-                                      _SIDE.accepts(meta.get(name))):
-                raise SpikeFileError(
-                    f'{path}: side file {side} must hold {{"height": H, '
-                    f'"width": W}} with {_SIDE.describe()}, got '
-                    f'{excerpt(meta)}')
-        height = meta['height'] if height is None else height
-        width = meta['width'] if width is None else width
+        if not (isinstance(meta, dict) and _SIDE.accepts(meta.get('height'))
+                and _SIDE.accepts(meta.get('width'))):
+            raise SpikeFileError(
+                f'{path}: side file {side} must hold {{"height": H, '
+                f'"width": W}} with {_SIDE.describe()}, got '
+                f'{excerpt(meta)}')
+        _check_caller_size(path, f'its side file {side}',
+                           (meta['height'], meta['width']), height, width)
+        height, width = meta['height'], meta['width']
+    elif height is None or width is None:
+        raise SpikeFileError(
+            f'{path}: a .dat file has no header, so height and width are '
+            f'needed (arguments, or a side file {side} with '
+            f'{{"height": H, "width": W}})')
     if height < 1 or width < 1 or (height * width) % 8:
         raise SpikeFileError(
             f'{path}: .dat frames of {height}x{width} are not a whole number '
@@ -301,12 +316,16 @@ def _dat_geometry(path: str, height: Optional[int],
     return size // frame, height, width
 
 
-def _spk_geometry(path: str) -> Tuple[int, int, int]:
+def _spk_geometry(path: str, height: Optional[int] = None,
+                  width: Optional[int] = None) -> Tuple[int, int, int]:
+    """``(T, H, W)`` from a ``.spk`` file's checked header (a caller's
+    ``height``/``width`` must agree with it)."""
     size = osp.getsize(path)
     if size < _HEADER.size:
         raise SpikeFileError(
             f'{path}: {size} bytes is shorter than the {_HEADER.size}-byte '
             f'.spk header')
+    given = height, width
     with open(path, 'rb') as f:
         magic, version, steps, height, width = _HEADER.unpack(
             f.read(_HEADER.size))
@@ -324,6 +343,7 @@ def _spk_geometry(path: str) -> Tuple[int, int, int]:
             f'{path}: header says T={steps}, H={height}, W={width}, which '
             f'needs {expected} bytes, but the file has {size}; it is '
             f'truncated or corrupted')
+    _check_caller_size(path, 'its header', (height, width), *given)
     return steps, height, width
 
 
@@ -615,10 +635,8 @@ def _read_array_window(path: str, start: int, length: Optional[int],
     (``.npy``: memory-mapped, only the window copied; ``.npz``:
     :func:`_inflated_window`)."""
     if path.lower().endswith('.npz'):
-        stat = os.stat(path)
-        return _inflated_window(
-            path, (stat.st_ino, stat.st_size, stat.st_mtime_ns), start,
-            length, layout)
+        return _inflated_window(path, _content_identity(path), start,
+                                length, layout)
     with _array_file(path) as (f, shape, dtype, fortran):
         steps, height, width = _stream_shape(shape, layout)
         start, length = _window(path, steps, start, length,
@@ -635,8 +653,19 @@ def _read_array_window(path: str, start: int, length: Optional[int],
 _CHUNK_BYTES = 1 << 20
 
 
+def _content_identity(path: str) -> Tuple[int, ...]:
+    """What tells ``path``'s content from any earlier one, as a cache key:
+    device, inode, size, mtime and ctime (ns). Every write moves the
+    ctime, and no user can set it back (``os.utime``, ``cp -p``,
+    ``rsync -t`` and ``tar`` restore only the mtime), so a rewrite of the
+    same size with the old mtime restored is still a new key."""
+    stat = os.stat(path)
+    return (stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns,
+            stat.st_ctime_ns)
+
+
 @functools.lru_cache(maxsize=1)
-def _inflated_window(path: str, identity: Tuple[int, int, int], start: int,
+def _inflated_window(path: str, identity: Tuple[int, ...], start: int,
                      length: Optional[int], layout: str) -> np.ndarray:
     """Frames ``[start, start + length)`` of an ``.npz`` member stored in
     ``layout``, as ``(length, H, W)``, read-only.
@@ -648,7 +677,7 @@ def _inflated_window(path: str, identity: Tuple[int, int, int], start: int,
     inflate whole, :data:`_CHUNK_BYTES` at a time, keeping only each
     pixel's window. The last window read is kept, so reading it again (the
     shape, then the frames, of one sample) inflates nothing. ``identity``
-    (inode, size, mtime) makes a changed file a new key.
+    (:func:`_content_identity`) makes a changed file a new key.
     """
     with _array_file(path) as (f, shape, dtype, fortran):
         steps, height, width = _stream_shape(shape, layout)
@@ -716,10 +745,13 @@ def _read_spk(path, shape, start, length, layout):
 def _array_shape(path: str, height: Optional[int], width: Optional[int],
                  layout: str) -> Tuple[int, int, int]:
     """``(T, H, W)`` of the ``.npy``/``.npz`` array stored in ``layout``,
-    from its checked header (the array records its size:
-    ``height``/``width`` are not used)."""
+    from its checked header (the array records its size: a caller's
+    ``height``/``width`` must agree with it)."""
     with _array_file(path) as (_, shape, _, _):
-        return _stream_shape(shape, layout)
+        steps, own_height, own_width = _stream_shape(shape, layout)
+    _check_caller_size(path, f'its {layout} array of shape {shape}',
+                       (own_height, own_width), height, width)
+    return steps, own_height, own_width
 
 
 def _read_array(path, shape, start, length, layout):
@@ -801,7 +833,8 @@ SPIKE_FORMATS: Dict[str, SpikeFormat] = {fmt.extension: fmt for fmt in (
                 lambda path, height, width, layout: _dat_geometry(
                     path, height, width), _read_dat, _encode_dat),
     SpikeFormat('.spk', _frame_major,
-                lambda path, height, width, layout: _spk_geometry(path),
+                lambda path, height, width, layout: _spk_geometry(
+                    path, height, width),
                 _read_spk, _encode_spk),
     SpikeFormat('.npy', _array_layout, _array_shape, _read_array,
                 _encode_npy, side={'layout': 'THW'}),
@@ -852,7 +885,9 @@ def load_spikes(path: str, height: Optional[int] = None,
 
     Args:
         path: a spike file (``.dat``, ``.spk``, ``.npy``, ``.npz``).
-        height, width: frame size of a ``.dat`` file (others record it).
+        height, width: frame size of a ``.dat`` file without a side
+            file; other files record it, and a size given that
+            contradicts the record is an error naming both.
         start: first frame.
         length: number of frames; ``None`` reads to the end.
         layout: how an ``.npy``/``.npz`` array that does not record it is

@@ -75,30 +75,15 @@ def load_config(path: Union[str, 'Config'],
 #: brackets nested deeper than this in a ``--cfg-options`` value are refused
 MAX_OPTION_DEPTH = 32
 _CLOSING = {'[': ']', '(': ')'}
+_QUOTES = '\'"'
 
 
 def _top_level_commas(text: str) -> List[int]:
-    """Where ``text`` has a comma outside brackets and quoted strings (a
-    quote that starts an item opens one; elsewhere, as in ``John's``, it
-    is a character); raises ``ValueError`` for unbalanced brackets or an
-    unclosed quoted string."""
-    stack, quote, commas = [], None, []
-    starts_item = True
+    """Where ``text`` has a comma outside brackets (quotes do not protect
+    one, as in ``DictAction``); raises ``ValueError`` for unbalanced
+    brackets or nesting deeper than :data:`MAX_OPTION_DEPTH`."""
+    stack, commas = [], []
     for index, char in enumerate(text):
-        if quote:
-            if quote[-1:] == '\\':  # an escaped character
-                quote = quote[0]
-            elif char == '\\':
-                quote = quote + '\\'
-            elif char == quote:
-                quote = None
-            continue
-        if char in '\'"' and starts_item:
-            quote = char
-            continue
-        if char.isspace():
-            continue
-        starts_item = char in ',[('
         if char in _CLOSING:
             stack.append(_CLOSING[char])
             if len(stack) > MAX_OPTION_DEPTH:
@@ -109,63 +94,86 @@ def _top_level_commas(text: str) -> List[int]:
                 raise ValueError('unbalanced brackets')
         elif char == ',' and not stack:
             commas.append(index)
-    if stack or quote:
-        raise ValueError('unbalanced brackets or quotes')
+    if stack:
+        raise ValueError('unbalanced brackets')
     return commas
 
 
-def _scalar(text: str) -> Any:
-    """One value as typed: a number, ``True``/``False`` (any case),
-    ``None``, a string in matching quotes (what is between them; a
-    backslash before a quote or a backslash is dropped, any other kept),
-    else the text itself, spaces, quotes and unicode kept."""
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    if text.lower() in ('true', 'false'):
-        return text.lower() == 'true'
-    if text == 'None':
-        return None
-    if len(text) >= 2 and text[0] == text[-1] and text[0] in '\'"':
-        if not re.fullmatch(r'{0}(?:[^{0}\\]|\\.)*{0}'.format(text[0]),
-                            text, re.DOTALL):
-            raise ValueError(f'{excerpt(text)} is not one quoted string (an '
-                             f'inner {text[0]} needs a backslash)')
-        return re.sub(r'\\([\\\'"])', r'\1', text[1:-1])
+def _unquoted(text: str) -> str:
+    """``text`` without the spaces around it and the matching quotes
+    around that (repeatedly: ``"'3'"`` is ``3``); a quote left at either
+    end (``'abc``, ``"a,b",c`` split at its comma) is refused, where
+    ``DictAction`` would drop it."""
+    text = text.strip()
+    while len(text) >= 2 and text[0] == text[-1] and text[0] in _QUOTES:
+        text = text[1:-1].strip()
+    if text and (text[0] in _QUOTES or text[-1] in _QUOTES):
+        raise ValueError(f'unmatched quote in {excerpt(text)} (quotes do '
+                         f'not protect a comma)')
     return text
 
 
+def _scalar(text: str) -> Any:
+    """One value as ``DictAction._parse_int_float_bool`` reads it (an
+    ``int``, a ``float``, ``True``/``False`` in any case, ``None``, else
+    the text), except that the spaces inside a string are kept; a text
+    that reads otherwise without its spaces (``1 000``, ``Tr ue``) is
+    refused as ambiguous."""
+    def read(word: str) -> Any:
+        for kind in (int, float):
+            try:
+                return kind(word)
+            except ValueError:
+                pass
+        if word.lower() in ('true', 'false'):
+            return word.lower() == 'true'
+        return None if word == 'None' else word
+
+    value, squeezed = read(text), re.sub(r'\s', '', text)
+    if isinstance(value, str) and not isinstance(read(squeezed), str):
+        raise ValueError(f'{excerpt(text)} is ambiguous: a string as typed, '
+                         f'{read(squeezed)!r} without its spaces')
+    return value
+
+
 def parse_option_value(text: str) -> Any:
-    """A ``--cfg-options`` value exactly as typed (mmengine's
-    ``DictAction`` drops every space and strips quotes, so ``data_root=D/my
-    data`` would read ``D/mydata``): ``[a, b]`` a list, ``(a, b)`` a tuple,
-    ``a,b`` a list, items stripped of the spaces around them and read the
-    same way; a single value by :func:`_scalar`.
+    """A ``--cfg-options`` value as mmengine's ``DictAction`` reads it,
+    except for spaces: ``DictAction`` drops every space, so
+    ``data_root=D/my data`` would read ``D/mydata``; here only the
+    spaces around a value or an item go.
+
+    As in ``DictAction``: the quotes around a value or item are dropped
+    and what they hold is read (``"[1,2]"`` is ``[1, 2]``, ``'3'`` is
+    ``3``, ``'None'`` is ``None``); ``[a, b]`` is a list, ``(a, b)`` a
+    tuple, ``a,b`` a list (a trailing comma ends it), nested to any depth
+    up to :data:`MAX_OPTION_DEPTH`; a single value is an ``int``,
+    ``float``, ``bool`` (any case), ``None`` or the string itself.
 
     Raises:
-        ValueError: unbalanced brackets or quotes, nesting deeper than
-            :data:`MAX_OPTION_DEPTH`, or a quoted string that is not one.
+        ValueError: unbalanced brackets, an unmatched quote, nesting
+            deeper than :data:`MAX_OPTION_DEPTH`, or a string whose spaces
+            hide a number, a bool or ``None`` (``1 000``).
     """
+    text = _unquoted(text)
     commas = _top_level_commas(text)
-    stripped = text.strip()
-    if not commas and stripped[:1] in _CLOSING and \
-            stripped[-1:] == _CLOSING[stripped[0]]:
-        inner = stripped[1:-1]
-        items = _items(inner) if inner.strip() else []
-        return tuple(items) if stripped[0] == '(' else items
+    if not commas and text[:1] in _CLOSING and \
+            text[-1:] == _CLOSING[text[0]]:
+        items = _items(text[1:-1])
+        return tuple(items) if text[0] == '(' else items
     if commas:
         return _items(text)
     return _scalar(text)
 
 
 def _items(text: str) -> List[Any]:
-    """The comma-separated items of ``text`` (a trailing comma ends the
-    list), each read by :func:`parse_option_value`."""
+    """The comma-separated items of ``text`` (none in a blank text; a
+    trailing comma ends the list), each read by
+    :func:`parse_option_value`."""
+    if not text.strip():
+        return []
     bounds = [-1] + _top_level_commas(text) + [len(text)]
-    parts = [text[a + 1:b].strip() for a, b in zip(bounds, bounds[1:])]
-    if parts and parts[-1] == '' and len(parts) > 1:
+    parts = [text[a + 1:b] for a, b in zip(bounds, bounds[1:])]
+    if len(parts) > 1 and not parts[-1].strip():
         parts.pop()
     return [parse_option_value(part) for part in parts]
 
