@@ -32,7 +32,7 @@ from .band_network_backends import CHOICES, get_backend, resolve_backend
 from .first_use_check import CheckResult
 from ..arguments import (Choice, Flag, Integer, check_parameter_count,
                          declare)
-from ..checks import check_finite
+from ..checks import check_finite, check_finite_parameters
 from ..limits import MAX_CHANNELS, MAX_KERNEL_SIZE, MAX_LEVEL, MAX_NUM_BLOCKS
 from ..wavelets import (SUPPORTED_MODES, analysis_matrix, band_lengths,
                         synthesis_matrix)
@@ -139,6 +139,36 @@ class _ResidualLayer(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return F.relu(self.conv_b(F.relu(self.conv_a(x))) + x)
+
+
+def _activation_bound(network: 'BandNetwork',
+                      input_bound: torch.Tensor) -> torch.Tensor:
+    """An upper bound (a float64 scalar tensor) on every activation of
+    ``network`` given inputs of magnitude at most ``input_bound``: each
+    convolution's output is at most its largest absolute row sum of weights
+    times its input's bound plus its largest absolute bias, plus the bound
+    of the activation a residual adds (ReLU only lowers magnitudes). Not
+    finite where a weight is not; loose, but a network of sane weights
+    stays far inside float32's range (about 1e4 for PyTorch's
+    initialisation and 0/1 spikes)."""
+    bounds = [input_bound.to(torch.float64)]
+    for conv, residual in network.layers():
+        weight = conv.weight.detach().to(torch.float64).abs()
+        bound = weight.flatten(1).sum(1).max() * bounds[-1]
+        if conv.bias is not None:
+            bound = bound + conv.bias.detach().to(torch.float64).abs().max()
+        if residual is not None:
+            bound = bound + bounds[residual]
+        bounds.append(bound)
+    return torch.stack(bounds).max()
+
+
+def _largest_weight(module: nn.Module) -> Tuple[str, float]:
+    """The name and absolute value of ``module``'s largest parameter
+    value."""
+    return max(((name, float(parameter.detach().abs().max()))
+                for name, parameter in module.named_parameters()
+                if parameter.numel()), key=lambda item: item[1])
 
 
 class BandNetwork(nn.Module):
@@ -274,7 +304,7 @@ class WGSE(nn.Module):
             from to ``'torch'``; ``None`` where no check applies (the CPU
             backends, the Triton interpreter) and before the first pass.
 
-    The transform runs in float32 (float64 for float64 input) even under
+    The transform runs in float32 (float64 for a float64 module) even under
     autocast; so do the ``torch`` and ``compiled`` backends' ``dim=1``
     kernels. The Triton kernel rounds the operands of its hidden products
     to autocast's dtype (or TF32, as torch's flags allow), and the
@@ -353,29 +383,67 @@ class WGSE(nn.Module):
                 lengths)
         return self._transforms[key]
 
-    def forward(self, spikes: torch.Tensor) -> torch.Tensor:
-        """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats.
+    def _check_range(self, coeffs: torch.Tensor,
+                     synthesis: Optional[torch.Tensor]) -> None:
+        """Raise ``ValueError`` unless every activation of the band
+        networks on ``coeffs`` ``(B, C, P)`` and the output of the
+        ``synthesis`` ``(T, C)`` are bounded inside float32's range
+        (:func:`_activation_bound`): NaN or Inf weights are named by
+        :func:`~wgse_mmseg.core.checks.check_finite_parameters`, finite
+        ones that could overflow by the largest weight and input. Backends
+        differ in what an overflow gives (NaN, or zeros behind a ReLU that
+        drops NaN); inside the bound they agree. One device sync; skipped
+        while ``torch.export`` traces, as ``check_finite`` is."""
+        if torch.compiler.is_exporting():
+            return
+        data = coeffs.detach()
+        inputs = data.abs().max() if data.numel() else data.new_zeros(())
+        bound = torch.stack([_activation_bound(network, inputs)
+                             for network in self.band_networks]).max()
+        if synthesis is not None:
+            bound = bound * synthesis.detach().abs().sum(1).max().to(
+                torch.float64)
+        limit = torch.finfo(torch.float32).max
+        if bool(bound <= limit):
+            return
+        check_finite_parameters('WGSE', self)
+        name, value = _largest_weight(self)
+        raise ValueError(
+            f'WGSE: its activations could exceed float32\'s range '
+            f'({limit:.3g}): they are bounded only by {float(bound):.3g}, '
+            f'from the largest weight, {name} ({value:.3g}), and the '
+            f'largest wavelet coefficient of the input '
+            f'({float(inputs):.3g}); on overflow the backends would '
+            f'disagree. Check the checkpoint (a diverged training?) and '
+            f'that the input holds spikes (0 and 1)')
 
-        NaN or Inf in ``spikes`` raises ``ValueError`` before any backend
-        runs (:func:`~wgse_mmseg.core.checks.check_finite`), the same on
-        every backend."""
+    def forward(self, spikes: torch.Tensor) -> torch.Tensor:
+        """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats
+        of the module's dtype.
+
+        ``spikes`` of any dtype are converted to the module's (exact for
+        0/1 spikes): a ``.double()`` module computes in float64, a
+        ``.half()`` or ``.bfloat16()`` one runs its band networks in that
+        dtype (the wavelet transform stays float32) on the backends that
+        support it; the others name the backend and the dtype.
+
+        The same answer on every backend to bad numbers, before any backend
+        runs: NaN or Inf in ``spikes`` raises ``ValueError``
+        (:func:`~wgse_mmseg.core.checks.check_finite`), and so do weights
+        that are not finite (naming the parameter) or whose activations
+        could leave float32's range (:meth:`_check_range`)."""
         if spikes.dim() != 4:
             raise ValueError(
                 f'WGSE expects spikes shaped (B, T, H, W), got '
                 f'{tuple(spikes.shape)}')
         check_finite('WGSE', 'spikes', spikes)
         batch, num_steps, height, width = spikes.shape
-        dtype = (torch.float64 if spikes.dtype == torch.float64
+        module_dtype = self.band_networks[0].output_convs[-1].weight.dtype
+        dtype = (torch.float64 if module_dtype == torch.float64
                  else torch.float32)
-        weights = self.band_networks[0].output_convs[-1].weight.dtype
-        if dtype == torch.float64 and weights != torch.float64:
-            raise ValueError(
-                f'WGSE got float64 spikes but its parameters are {weights}; '
-                f'pass float32 (or integer) spikes, or convert the module '
-                f'with .double()')
         device_type = spikes.device.type
         if self.wavelet is None:
-            analysis = None
+            analysis = synthesis = None
             lengths = [num_steps]
         else:
             # int(): under a tracer (the FLOP count) a shape is a tensor;
@@ -389,10 +457,12 @@ class WGSE(nn.Module):
             with torch.autocast(device_type, enabled=False):
                 signal = spikes.to(dtype).reshape(batch, num_steps,
                                                   height * width)
-                return signal if analysis is None else \
+                coeffs = signal if analysis is None else \
                     torch.matmul(analysis, signal)
+                return coeffs.to(module_dtype)
 
         coeffs = coefficients(spikes)
+        self._check_range(coeffs, synthesis)
         backend, self.backend_check = resolve_backend(
             self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
@@ -406,8 +476,9 @@ class WGSE(nn.Module):
         del coeffs
         with torch.autocast(device_type, enabled=False):
             if self.wavelet is not None:
-                enhanced = torch.matmul(synthesis, enhanced)  # (B, T, P)
-            out = enhanced.reshape(batch, num_steps, height, width)
+                enhanced = torch.matmul(synthesis, enhanced.to(dtype))
+            out = enhanced.reshape(batch, num_steps, height, width).to(
+                module_dtype)
         if self.output_norm is not None:
             if self.output_norm.training and out.numel() < 2:
                 raise ValueError(
