@@ -771,3 +771,39 @@ def test_affine_grid_matches_torch():
     expected = torch.nn.functional.affine_grid(theta, (3, 1, 7, 9),
                                                align_corners=True)
     assert torch.allclose(affine_grid(theta, 7, 9), expected, atol=1e-6)
+
+
+_NORMAL = re.escape("in float32's normal range (0 or a magnitude in "
+                    "[1.175e-38, 3.403e+38])")
+
+
+@pytest.mark.parametrize('kwargs, match', [
+    (dict(threshold=1e-39), 'threshold must be a finite number > 0 '
+     + _NORMAL + ', got 1e-39'),
+    (dict(gain=1e39), 'gain must be a finite number >= 0 ' + _NORMAL),
+    (dict(gain=1e-40), 'gain must be'),
+    (dict(readout_hz=1e-45), 'readout_hz must be'),
+    (dict(effects={'shot_noise': {'electrons': 1e39}}),
+     'shot_noise.electrons must be a finite number > 0 ' + _NORMAL),
+    (dict(effects={'fixed_pattern': {'gain_std': 1e-42}}),
+     'fixed_pattern.gain_std must be'),
+    (dict(gain=1e30, threshold=1e-10),
+     r'gain / threshold .* is 1e\+40 for gain=1e\+30 and threshold=1e-10'),
+    (dict(gain=1e30, effects={'shot_noise': {'electrons': 1e38}}),
+     r'charge value\(s\) of a step are NaN: the product of the gain'),
+])
+def test_float32_overflow_and_underflow_are_refused(kwargs, match):
+    frames = np.zeros((1, 4, 4), np.uint8)
+    frames[0, :2] = 255
+    with pytest.raises(ValueError, match=match):
+        simulate_spikes(frames, 8, **kwargs)
+
+
+def test_saturating_parameters_fire_only_where_there_is_light():
+    """The largest charge float32 holds saturates the lit pixels, every
+    step, and leaves the black ones dark."""
+    frames = np.zeros((1, 4, 4), np.uint8)
+    frames[0, :2] = 255
+    spikes, _ = simulate_spikes(frames, 8, gain=3e38, threshold=1.0,
+                                effects={'shot_noise': {'electrons': 1.0}})
+    assert spikes[:, :2].all() and not spikes[:, 2:].any()
