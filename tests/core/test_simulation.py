@@ -13,6 +13,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from wgse_mmseg.core.constants import READOUT_HZ
+from wgse_mmseg.core.limits import check_allocation
 from wgse_mmseg.core.simulation import (EFFECTS, frames_to_intensity,
                                         initial_charge, parse_effects,
                                         simulate_spikes)
@@ -807,3 +808,25 @@ def test_saturating_parameters_fire_only_where_there_is_light():
     spikes, _ = simulate_spikes(frames, 8, gain=3e38, threshold=1.0,
                                 effects={'shot_noise': {'electrons': 1.0}})
     assert spikes[:, :2].all() and not spikes[:, 2:].any()
+
+
+def test_the_stream_is_bounded_as_a_product(monkeypatch):
+    """Each factor within its limit, the product is checked as a whole
+    before the stream is allocated; the limit is the user's to raise."""
+    monkeypatch.delenv('WGSE_MMSEG_ALLOCATION_LIMIT', raising=False)
+    with pytest.raises(ValueError, match=re.escape(
+            'a 4096 x 4096 x 4096 stream would take 68719476736 bytes '
+            '(64 GiB), more than the allocation limit of 8589934592 bytes '
+            '(8 GiB): lower T, or raise the limit with '
+            'WGSE_MMSEG_ALLOCATION_LIMIT=<bytes>')):
+        check_allocation(4096 ** 3, 'a 4096 x 4096 x 4096 stream', 'T')
+    frames = np.zeros((1, 8, 8), np.uint8)
+    monkeypatch.setenv('WGSE_MMSEG_ALLOCATION_LIMIT', '2048')
+    assert simulate_spikes(frames, 32)[0].shape == (32, 8, 8)
+    with pytest.raises(ValueError, match=r'simulate_spikes: the 33 x 8 x 8 '
+                       r'uint8 spike stream would take 2112 bytes'):
+        simulate_spikes(frames, 33)
+    monkeypatch.setenv('WGSE_MMSEG_ALLOCATION_LIMIT', '8 GiB')
+    with pytest.raises(ValueError, match='WGSE_MMSEG_ALLOCATION_LIMIT must '
+                       r"be a positive integer \(bytes\), got '8 GiB'"):
+        simulate_spikes(frames, 33)

@@ -7,6 +7,7 @@ import torch
 from ..arguments import (FLOAT32_RANGE, NUM_STEPS, SEED, Choice, Number,
                          declare)
 from ..constants import READOUT_HZ
+from ..limits import check_allocation
 from .effect import SimulationContext
 from .fixed_point import CHOICES, MAX_BLOCK_STEPS, Integrator, quantise
 from .intensity import frames_to_intensity
@@ -93,6 +94,10 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
     device = torch.device(device)
     intensity = frames_to_intensity(frames, torch.float32, device)
     count, height, width = intensity.shape
+    check_allocation(int(num_steps) * height * width,
+                     f'simulate_spikes: the {int(num_steps)} x {height} x '
+                     f'{width} uint8 spike stream', 'num_steps or the frame '
+                     'size')
     context = SimulationContext(height, width, count, int(num_steps),
                                 threshold, gain, readout_hz, seed, device)
 
