@@ -141,26 +141,46 @@ class _ResidualLayer(nn.Module):
         return F.relu(self.conv_b(F.relu(self.conv_a(x))) + x)
 
 
-def _activation_bound(network: 'BandNetwork',
+def _activation_bound(networks: nn.ModuleList,
                       input_bound: torch.Tensor) -> torch.Tensor:
-    """An upper bound (a float64 scalar tensor) on every activation of
-    ``network`` given inputs of magnitude at most ``input_bound``: each
-    convolution's output is at most its largest absolute row sum of weights
-    times its input's bound plus its largest absolute bias, plus the bound
-    of the activation a residual adds (ReLU only lowers magnitudes). Not
-    finite where a weight is not; loose, but a network of sane weights
-    stays far inside float32's range (about 2e2 for one block and 4e4
-    for two at PyTorch's initialisation and 0/1 spikes)."""
-    bounds = [input_bound.to(torch.float64)]
-    for conv, residual in network.layers():
-        weight = conv.weight.detach().to(torch.float64).abs()
-        bound = weight.flatten(1).sum(1).max() * bounds[-1]
-        if conv.bias is not None:
-            bound = bound + conv.bias.detach().to(torch.float64).abs().max()
+    """An upper bound (a scalar tensor) on every activation of the
+    ``networks`` (alike: :class:`BandNetwork` of the same arguments) given
+    inputs of magnitude at most ``input_bound``: each convolution's output
+    is at most its largest absolute row sum of weights times its input's
+    bound plus its largest absolute bias, plus the bound of the activation
+    a residual adds (ReLU only lowers magnitudes). Not finite where a
+    weight is not; loose, but a network of sane weights stays far inside
+    float32's range (about 2e2 for one block and 4e4 for two at PyTorch's
+    initialisation and 0/1 spikes). The networks' layers are stacked, a
+    few operations a layer whatever the number of bands."""
+    plans = [network.layers() for network in networks]
+    bounds = [input_bound.detach().float().expand(len(plans))]
+    for position, (_, residual) in enumerate(plans[0]):
+        convs = [plan[position][0] for plan in plans]
+        weights = torch.stack([conv.weight.detach() for conv in convs])
+        bound = weights.float().abs().flatten(2).sum(2).amax(1) * bounds[-1]
+        biases = [conv.bias.detach() for conv in convs
+                  if conv.bias is not None]
+        if biases:
+            bound = bound + torch.stack(biases).float().abs().amax(1)
         if residual is not None:
             bound = bound + bounds[residual]
         bounds.append(bound)
     return torch.stack(bounds).max()
+
+
+def _magnitude(tensor: torch.Tensor) -> torch.Tensor:
+    """The largest absolute value of ``tensor`` as a float32 scalar tensor
+    (0 if empty, NaN if it holds NaN)."""
+    tensor = tensor.detach()
+    if not tensor.numel():
+        return tensor.new_zeros((), dtype=torch.float32)
+    if tensor.dtype == torch.bool:
+        return tensor.any().float()
+    if tensor.is_floating_point():
+        return tensor.abs().amax().float()
+    return torch.maximum(tensor.amax().float().abs(),
+                         tensor.amin().float().abs())
 
 
 def _largest_weight(module: nn.Module) -> Tuple[str, float]:
@@ -383,39 +403,45 @@ class WGSE(nn.Module):
                 lengths)
         return self._transforms[key]
 
-    def _check_range(self, coeffs: torch.Tensor,
+    def _check_range(self, spikes: torch.Tensor,
+                     analysis: Optional[torch.Tensor],
                      synthesis: Optional[torch.Tensor]) -> None:
-        """Raise ``ValueError`` unless every activation of the band
-        networks on ``coeffs`` ``(B, C, P)`` and the output of the
-        ``synthesis`` ``(T, C)`` are bounded inside float32's range
-        (:func:`_activation_bound`): NaN or Inf weights are named by
+        """Raise ``ValueError`` unless ``spikes`` ``(B, T, H, W)`` are
+        finite and every activation of the band networks on their wavelet
+        coefficients (``analysis`` ``(C, T)``, ``None`` without wavelets),
+        and the output of the ``synthesis`` ``(T, C)``, are bounded inside
+        float32's range (:func:`_activation_bound`). NaN or Inf spikes are
+        named by :func:`~wgse_mmseg.core.checks.check_finite`, NaN or Inf
+        weights by
         :func:`~wgse_mmseg.core.checks.check_finite_parameters`, finite
         ones that could overflow by the largest weight and input. Backends
         differ in what an overflow gives (NaN, or zeros behind a ReLU that
-        drops NaN); inside the bound they agree. One device sync; skipped
+        drops NaN); inside the bound they agree. One pass over the spikes
+        (the one a finiteness check makes) and one device sync; skipped
         while ``torch.export`` traces, as ``check_finite`` is."""
         if torch.compiler.is_exporting():
             return
-        data = coeffs.detach()
-        inputs = data.abs().max() if data.numel() else data.new_zeros(())
-        bound = torch.stack([_activation_bound(network, inputs)
-                             for network in self.band_networks]).max()
+        inputs = _magnitude(spikes)
+        bound = inputs
+        if analysis is not None:
+            bound = bound * analysis.detach().abs().sum(1).max().float()
+        bound = _activation_bound(self.band_networks, bound)
         if synthesis is not None:
-            bound = bound * synthesis.detach().abs().sum(1).max().to(
-                torch.float64)
+            bound = bound * synthesis.detach().abs().sum(1).max().float()
         limit = torch.finfo(torch.float32).max
         if bool(bound <= limit):
             return
+        check_finite('WGSE', 'spikes', spikes)
         check_finite_parameters('WGSE', self)
         name, value = _largest_weight(self)
         raise ValueError(
             f'WGSE: its activations could exceed float32\'s range '
             f'({limit:.3g}): they are bounded only by {float(bound):.3g}, '
             f'from the largest weight, {name} ({value:.3g}), and the '
-            f'largest wavelet coefficient of the input '
-            f'({float(inputs):.3g}); on overflow the backends would '
-            f'disagree. Check the checkpoint (a diverged training?) and '
-            f'that the input holds spikes (0 and 1)')
+            f'largest magnitude of the spikes ({float(inputs):.3g}); on '
+            f'overflow the backends would disagree. Check the checkpoint '
+            f'(a diverged training?) and that the input holds spikes (0 '
+            f'and 1)')
 
     def forward(self, spikes: torch.Tensor) -> torch.Tensor:
         """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats
@@ -436,7 +462,6 @@ class WGSE(nn.Module):
             raise ValueError(
                 f'WGSE expects spikes shaped (B, T, H, W), got '
                 f'{tuple(spikes.shape)}')
-        check_finite('WGSE', 'spikes', spikes)
         batch, num_steps, height, width = spikes.shape
         module_dtype = self.band_networks[0].output_convs[-1].weight.dtype
         dtype = (torch.float64 if module_dtype == torch.float64
@@ -461,8 +486,8 @@ class WGSE(nn.Module):
                     torch.matmul(analysis, signal)
                 return coeffs.to(module_dtype)
 
+        self._check_range(spikes, analysis, synthesis)
         coeffs = coefficients(spikes)
-        self._check_range(coeffs, synthesis)
         backend, self.backend_check = resolve_backend(
             self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
