@@ -13,6 +13,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from wgse_mmseg.core.constants import READOUT_HZ
+from wgse_mmseg.core.limits import check_allocation
 from wgse_mmseg.core.simulation import (EFFECTS, frames_to_intensity,
                                         initial_charge, parse_effects,
                                         simulate_spikes)
@@ -771,3 +772,61 @@ def test_affine_grid_matches_torch():
     expected = torch.nn.functional.affine_grid(theta, (3, 1, 7, 9),
                                                align_corners=True)
     assert torch.allclose(affine_grid(theta, 7, 9), expected, atol=1e-6)
+
+
+_NORMAL = re.escape("in float32's normal range (0 or a magnitude in "
+                    "[1.175e-38, 3.403e+38])")
+
+
+@pytest.mark.parametrize('kwargs, match', [
+    (dict(threshold=1e-39), 'threshold must be a finite number > 0 '
+     + _NORMAL + ', got 1e-39'),
+    (dict(gain=1e39), 'gain must be a finite number >= 0 ' + _NORMAL),
+    (dict(gain=1e-40), 'gain must be'),
+    (dict(readout_hz=1e-45), 'readout_hz must be'),
+    (dict(effects={'shot_noise': {'electrons': 1e39}}),
+     'shot_noise.electrons must be a finite number > 0 ' + _NORMAL),
+    (dict(effects={'fixed_pattern': {'gain_std': 1e-42}}),
+     'fixed_pattern.gain_std must be'),
+    (dict(gain=1e30, threshold=1e-10),
+     r'gain / threshold .* is 1e\+40 for gain=1e\+30 and threshold=1e-10'),
+    (dict(gain=1e30, effects={'shot_noise': {'electrons': 1e38}}),
+     r'charge value\(s\) of a step are NaN: the product of the gain'),
+])
+def test_float32_overflow_and_underflow_are_refused(kwargs, match):
+    frames = np.zeros((1, 4, 4), np.uint8)
+    frames[0, :2] = 255
+    with pytest.raises(ValueError, match=match):
+        simulate_spikes(frames, 8, **kwargs)
+
+
+def test_saturating_parameters_fire_only_where_there_is_light():
+    """The largest charge float32 holds saturates the lit pixels, every
+    step, and leaves the black ones dark."""
+    frames = np.zeros((1, 4, 4), np.uint8)
+    frames[0, :2] = 255
+    spikes, _ = simulate_spikes(frames, 8, gain=3e38, threshold=1.0,
+                                effects={'shot_noise': {'electrons': 1.0}})
+    assert spikes[:, :2].all() and not spikes[:, 2:].any()
+
+
+def test_the_stream_is_bounded_as_a_product(monkeypatch):
+    """Each factor within its limit, the product is checked as a whole
+    before the stream is allocated; the limit is the user's to raise."""
+    monkeypatch.delenv('WGSE_MMSEG_ALLOCATION_LIMIT', raising=False)
+    with pytest.raises(ValueError, match=re.escape(
+            'a 4096 x 4096 x 4096 stream would take 68719476736 bytes '
+            '(64 GiB), more than the allocation limit of 8589934592 bytes '
+            '(8 GiB): lower T, or raise the limit with '
+            'WGSE_MMSEG_ALLOCATION_LIMIT=<bytes>')):
+        check_allocation(4096 ** 3, 'a 4096 x 4096 x 4096 stream', 'T')
+    frames = np.zeros((1, 8, 8), np.uint8)
+    monkeypatch.setenv('WGSE_MMSEG_ALLOCATION_LIMIT', '2048')
+    assert simulate_spikes(frames, 32)[0].shape == (32, 8, 8)
+    with pytest.raises(ValueError, match=r'simulate_spikes: the 33 x 8 x 8 '
+                       r'uint8 spike stream would take 2112 bytes'):
+        simulate_spikes(frames, 33)
+    monkeypatch.setenv('WGSE_MMSEG_ALLOCATION_LIMIT', '8 GiB')
+    with pytest.raises(ValueError, match='WGSE_MMSEG_ALLOCATION_LIMIT must '
+                       r"be a positive integer \(bytes\), got '8 GiB'"):
+        simulate_spikes(frames, 33)

@@ -1,9 +1,14 @@
 """The embedded synthetic street-scene dataset: layout, resume, settings."""
 import os
 
+import numpy as np
+import pytest
+
 from wgse_mmseg.core.io import load_spikes, spike_shape
 from wgse_mmseg.core.output_folder import MANIFEST_NAME
-from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
+from wgse_mmseg.data_generation.synthetic import (make_synthetic_dataset,
+                                                  render_street_scene)
+from wgse_mmseg.data_generation.views import render_trajectory
 
 
 def _tree(out):
@@ -68,3 +73,19 @@ def test_the_dataset_folder_is_owned(tmp_path):
                        match=r'gtFine/val: a symbolic link'):
         make_synthetic_dataset(str(out), **dict(args, num_steps=11))
     assert len(os.listdir(elsewhere / 'val' / 'synth')) == 1
+
+
+def test_the_frames_of_a_scene_are_bounded_as_a_product(monkeypatch):
+    monkeypatch.setenv('WGSE_MMSEG_ALLOCATION_LIMIT', str(5 * 16 * 24 * 8))
+    rng = np.random.default_rng(0)
+    frames, _ = render_street_scene(rng, 16, 24, 5)
+    assert frames.shape == (5, 16, 24)
+    with pytest.raises(ValueError, match=r'the 6 x 16 x 24 float64 frames '
+                       r'of a synthetic scene would take 18432 bytes'):
+        render_street_scene(rng, 16, 24, 6)
+    image = np.zeros((32, 32), np.float32)
+    monkeypatch.setenv('WGSE_MMSEG_ALLOCATION_LIMIT', str(7 * 8 * 8 * 4))
+    assert render_trajectory(image, (8, 8), 7, rng).shape == (7, 8, 8)
+    with pytest.raises(ValueError, match=r'the 9 x 8 x 8 float32 frames of '
+                       r'a trajectory would take 2304 bytes'):
+        render_trajectory(image, (8, 8), 9, rng)

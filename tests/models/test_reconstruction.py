@@ -919,3 +919,30 @@ def test_every_classical_method_is_a_reconstruction_method():
         assert reconstruction_method(name) is function
         assert function(spikes).shape == (2, 3)
     assert set(METHODS) == {'wgse'} | set(CLASSICAL_METHODS)
+
+
+@pytest.mark.parametrize('pred, gt, match', [
+    (torch.rand(3, 16, 16), None,
+     r"sample 1 \(d/b.dat\): pred_image is shaped \(3, 16, 16\); expected "
+     r"one grey image, \(1, H, W\) or \(H, W\)"),
+    (torch.rand(16), None, r'pred_image is shaped \(16,\)'),
+    (torch.rand(1, 0, 16), None, r'pred_image is shaped \(1, 0, 16\)'),
+    (torch.rand(1, 16, 16), torch.rand(2, 1, 16, 16),
+     r'gt_image is shaped \(2, 1, 16, 16\)'),
+    (torch.rand(1, 16, 16), torch.rand(1, 16, 12),
+     'pred_image is 16x16 but gt_image is 16x12'),
+    (torch.full((1, 16, 16), float('nan')), None,
+     'pred_image holds 256 non-finite'),
+    (torch.rand(1, 8, 8), torch.rand(8, 8), 'SSIM needs images of at least'),
+])
+def test_reconstruction_metric_names_the_sample_and_shape(pred, gt, match):
+    good = dict(pred_image=dict(data=torch.rand(1, 16, 16)), img_path='a')
+    bad = dict(pred_image=dict(data=pred), img_path='d/b.dat')
+    if gt is not None:
+        bad['gt_image'] = dict(data=gt)
+    metric = ReconstructionMetric()
+    with pytest.raises(ValueError,
+                       match=r'ReconstructionMetric: sample 1 \(d/b.dat\)'):
+        metric.process(None, [good, bad])
+    with pytest.raises(ValueError, match=match):
+        ReconstructionMetric().process(None, [good, bad])

@@ -156,20 +156,33 @@ class Integer(Argument):
         return int(text)
 
 
+#: the magnitudes of a normal float32: ``Number(float32=True)`` accepts 0
+#: and these, for what enters float32 arithmetic (below, a value is
+#: denormal and loses its digits; above, it is Inf)
+FLOAT32_RANGE = (2.0 ** -126, (2 - 2.0 ** -23) * 2.0 ** 127)
+
+
 class Number(Argument):
     """A finite real number (not ``bool``) in ``[minimum, maximum]``, or
-    ``(minimum, maximum]`` where ``strict_minimum=True``."""
+    ``(minimum, maximum]`` where ``strict_minimum=True``; with
+    ``float32=True``, also 0 or a normal float32 (magnitude in
+    :data:`FLOAT32_RANGE`)."""
 
     def __init__(self, minimum: Optional[float] = None,
                  maximum: Optional[float] = None,
-                 strict_minimum: bool = False, optional: bool = False):
+                 strict_minimum: bool = False, optional: bool = False,
+                 float32: bool = False):
         super().__init__(optional)
         self.minimum, self.maximum = minimum, maximum
         self.strict_minimum = strict_minimum
+        self.float32 = float32
 
     def accepts(self, value):
         if isinstance(value, bool) or not isinstance(value, Real) or \
                 not math.isfinite(value):
+            return False
+        if self.float32 and value != 0 and not (
+                FLOAT32_RANGE[0] <= abs(value) <= FLOAT32_RANGE[1]):
             return False
         if self.minimum is not None and (
                 value < self.minimum or
@@ -179,7 +192,10 @@ class Number(Argument):
 
     def describe(self):
         bound = _bound(self.minimum, self.maximum, self.strict_minimum)
-        return 'a finite number' + (f' {bound}' if bound else '')
+        return 'a finite number' + (f' {bound}' if bound else '') + (
+            f" in float32's normal range (0 or a magnitude in "
+            f'[{FLOAT32_RANGE[0]:.4g}, {FLOAT32_RANGE[1]:.4g}])'
+            if self.float32 else '')
 
     def convert(self, text):
         return float(text)

@@ -30,3 +30,27 @@ def check_finite(owner: str, name: str, tensor: torch.Tensor) -> None:
         f'{tensor.numel()} ({nan} NaN, {bad - nan} +-Inf); spike streams '
         f'hold 0 and 1, and no enhancer gives a meaningful result for NaN '
         f'or Inf')
+
+
+def check_finite_parameters(owner: str, module: torch.nn.Module) -> None:
+    """Raise ``ValueError`` naming the first float parameter or buffer of
+    ``module`` that holds NaN or +-Inf (as a diverged training leaves), and
+    how many of its values are not finite; return if all are finite.
+
+    One reduction per tensor: for the diagnosis once a cheaper check (such
+    as WGSE's activation bound) has found something wrong, not for every
+    forward pass.
+    """
+    tensors = list(module.named_parameters()) + list(module.named_buffers())
+    for name, tensor in tensors:
+        if not tensor.is_floating_point():
+            continue
+        finite = torch.isfinite(tensor.detach())
+        if bool(finite.all()):
+            continue
+        nan = int(torch.isnan(tensor.detach()).sum())
+        bad = tensor.numel() - int(finite.sum())
+        raise ValueError(
+            f'{owner}: {name} is not finite ({nan} NaN, {bad - nan} +-Inf '
+            f'of {tensor.numel()} values); the weights are broken (a '
+            f'diverged training leaves them so): load a good checkpoint')

@@ -21,6 +21,13 @@ quotes at most :data:`EXCERPT_CHARS` characters of an offending value:
 ``TEXT_FILE_LIMIT_BYTES``
     the largest side file, marker or scene file (JSON/YAML) read (1 MiB;
     a converter's marker is a few kB).
+``ALLOCATION_LIMIT_BYTES``
+    the most one array whose size the user's numbers decide as a product
+    (a simulation's ``T x H x W`` spikes) may take, checked as a whole by
+    :func:`check_allocation` before it is made: each factor within its own
+    limit, the product may not be (8 GiB; a 4096 x 4096 still for 4096
+    steps asks for 64 GiB). Raise it with the environment variable
+    ``WGSE_MMSEG_ALLOCATION_LIMIT`` (bytes).
 ``MAX_JSON_DEPTH``
     the deepest nesting of arrays and objects any JSON the package reads
     may have (:func:`parse_json`; the package writes at most 4 levels), so
@@ -76,6 +83,11 @@ MAX_TILE_SCALE = 64
 
 #: bytes one spike read may allocate (a window, an ``.npz`` member)
 READ_LIMIT_BYTES = 2**31
+#: bytes one allocation decided by a product of the user's numbers may
+#: take, unless ``WGSE_MMSEG_ALLOCATION_LIMIT`` says otherwise
+ALLOCATION_LIMIT_BYTES = 2**33
+#: the environment variable that raises (or lowers) it, in bytes
+ALLOCATION_LIMIT_ENV = 'WGSE_MMSEG_ALLOCATION_LIMIT'
 #: bytes of a side file, marker or scene file
 TEXT_FILE_LIMIT_BYTES = 2**20
 #: bytes of a log or result file of a training run the package reads back
@@ -200,3 +212,35 @@ def load_json_file(path: str, what: str,
 
 
 __all__ = []
+
+
+def allocation_limit() -> int:
+    """The allocation limit in bytes: ``WGSE_MMSEG_ALLOCATION_LIMIT`` where
+    set (a positive integer, else ``ValueError`` naming it), else
+    :data:`ALLOCATION_LIMIT_BYTES`."""
+    text = os.environ.get(ALLOCATION_LIMIT_ENV)
+    if text is None:
+        return ALLOCATION_LIMIT_BYTES
+    try:
+        limit = int(text.strip())
+    except ValueError:
+        limit = 0
+    if limit < 1:
+        raise ValueError(
+            f'{ALLOCATION_LIMIT_ENV} must be a positive integer (bytes), '
+            f'got {excerpt(text)}')
+    return limit
+
+
+def check_allocation(nbytes: int, what: str, fields: str) -> None:
+    """Raise ``ValueError`` before allocating ``nbytes`` bytes for ``what``
+    if that is more than :func:`allocation_limit`; ``fields`` names the
+    numbers whose product it is, and the message says how to raise the
+    limit."""
+    limit = allocation_limit()
+    if nbytes > limit:
+        raise ValueError(
+            f'{what} would take {nbytes} bytes ({nbytes / 2**30:.3g} GiB), '
+            f'more than the allocation limit of {limit} bytes '
+            f'({limit / 2**30:.3g} GiB): lower {fields}, or raise the limit '
+            f'with {ALLOCATION_LIMIT_ENV}=<bytes>')

@@ -18,7 +18,7 @@ from tqdm import tqdm
 
 from ..core.arguments import (NUM_STEPS, SEED, SIDE, Flag, Integer, Number,
                               Path, declare)
-from ..core.limits import MAX_SAMPLES
+from ..core.limits import MAX_SAMPLES, check_allocation
 from ..core.constants import REDS_THRESHOLD
 from ..core.io import save_spikes, write_png
 from ..core.markers import invalidate, is_complete, write_marker
@@ -106,6 +106,9 @@ def render_street_scene(rng: np.random.Generator, height: int, width: int,
             x=rng.uniform(0, width), v=rng.uniform(-2, 2),
             value=rng.uniform(0.55, 0.75)))
     movers.sort(key=lambda m: m['y'])  # nearer objects drawn last
+    check_allocation(num_frames * height * width * 8,
+                     f'the {num_frames} x {height} x {width} float64 frames '
+                     f'of a synthetic scene', 'num_frames or the image size')
     frames = np.empty((num_frames, height, width), np.float64)
     label = None
     for index in range(num_frames):

@@ -14,6 +14,7 @@ import torch
 
 from ..core.folder_walk import files_under
 from ..core.images import fit_within, read_grey_image
+from ..core.limits import check_allocation
 from ..core.simulation import trajectory_source_maps
 
 __all__ = []
@@ -62,6 +63,9 @@ def render_trajectory(image: np.ndarray, size: Tuple[int, int],
         view at the trajectory's reference point.
     """
     height, width = size
+    check_allocation(num_steps * height * width * 4,
+                     f'the {num_steps} x {height} x {width} float32 frames '
+                     f'of a trajectory', 'num_steps or the crop size')
 
     def random_vector(magnitude):
         angle = rng.uniform(-np.pi, np.pi)

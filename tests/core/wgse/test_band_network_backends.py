@@ -121,11 +121,14 @@ def test_triton_on_a_cpu_tensor_outside_the_interpreter(monkeypatch):
 
 @needs_compiled
 def test_compiled_refuses_what_it_cannot_compute():
-    """float64, or a gradient for the input: a named backend does not fall
-    back; ``'auto'`` does, and says which ran."""
+    """A float64 or float16 module, or a gradient for the input: a named
+    backend does not fall back, naming the dtype; ``'auto'`` does, and says
+    which ran."""
     model = WGSE(backend='compiled')
-    with pytest.raises(ValueError, match='float32'):
-        model(torch.zeros(1, 9, 2, 2, dtype=torch.float64))
+    for dtype in (torch.float64, torch.float16):
+        with pytest.raises(ValueError, match=f'cannot run on {dtype} '
+                           f'coefficients on cpu: it runs float32'):
+            copy.deepcopy(model).to(dtype)(torch.zeros(1, 9, 2, 2))
     with pytest.raises(ValueError, match='no gradient for its input'):
         model(torch.zeros(1, 9, 2, 2, requires_grad=True))
     model.backend = 'auto'

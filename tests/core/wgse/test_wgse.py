@@ -834,3 +834,19 @@ def test_output_norm_standardises_the_output():
                 torch.sqrt(norm.running_var + norm.eps) * norm.weight +
                 norm.bias)
     torch.testing.assert_close(model(spikes), expected)
+
+
+@pytest.mark.parametrize('backend', ['auto', 'torch', 'reference'])
+@pytest.mark.parametrize('dtype', [torch.float16, torch.bfloat16,
+                                   torch.float32, torch.float64])
+def test_spikes_are_converted_to_the_module_dtype(backend, dtype):
+    model = _seeded(hidden_channels=8, backend=backend).to(dtype)
+    spikes = (torch.rand(1, 23, 3, 4) < 0.5).float()
+    expected = _seeded(hidden_channels=8, backend='reference').double()(
+        spikes.double())
+    for given in (spikes, spikes.double(), spikes.to(torch.uint8)):
+        out = model(given)
+        assert out.dtype == dtype
+        tolerance = dict(rtol=0.05, atol=0.05) if dtype in (
+            torch.float16, torch.bfloat16) else {}
+        torch.testing.assert_close(out.double(), expected, **tolerance)

@@ -76,9 +76,10 @@ def check_number(effect: str, name: str, value: Any,
                  low: Optional[float] = None, high: Optional[float] = None,
                  low_open: bool = False) -> float:
     """A finite real number in ``[low, high]`` (``(low, high]`` if
-    ``low_open``), as a float."""
-    Number(low, high, strict_minimum=low_open).check(value, _EFFECTS,
-                                                     f'{effect}.{name}')
+    ``low_open``), 0 or a normal float32 (it enters float32 arithmetic), as
+    a float."""
+    Number(low, high, strict_minimum=low_open, float32=True).check(
+        value, _EFFECTS, f'{effect}.{name}')
     return float(value)
 
 

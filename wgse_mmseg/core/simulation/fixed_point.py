@@ -128,8 +128,18 @@ def quantise(charge: torch.Tensor) -> Tuple[torch.Tensor, bool]:
         a whole threshold or more. Such a step fires whatever the pixel's
         charge, so only its fraction matters for later steps: it is kept as
         ``1 + frac(a)``, which leaves the spikes and the carried charge as
-        they are and keeps every step below two thresholds.
+        they are and keeps every step below two thresholds. Inf saturates
+        as any charge beyond a threshold does; NaN (a float32 overflow in
+        the effects' products, such as Inf - Inf) is a ``ValueError``
+        rather than a spike of every step.
     """
+    if bool(torch.isnan(charge).any()):
+        raise ValueError(
+            f'simulate_spikes: {int(torch.isnan(charge).sum())} charge '
+            f'value(s) of a step are NaN: the product of the gain, the '
+            f'threshold and the effects\' parameters overflows float32 '
+            f'({torch.finfo(torch.float32).max:.4g}); lower the largest '
+            f'of them')
     charge = charge.clamp(0, _MAX_STEP_CHARGE)
     saturated = bool(charge.max() >= 1)
     if saturated:

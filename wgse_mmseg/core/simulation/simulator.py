@@ -4,8 +4,10 @@ from typing import Any, Dict, Tuple
 import numpy as np
 import torch
 
-from ..arguments import NUM_STEPS, SEED, Choice, Number, declare
+from ..arguments import (FLOAT32_RANGE, NUM_STEPS, SEED, Choice, Number,
+                         declare)
 from ..constants import READOUT_HZ
+from ..limits import check_allocation
 from .effect import SimulationContext
 from .fixed_point import CHOICES, MAX_BLOCK_STEPS, Integrator, quantise
 from .intensity import frames_to_intensity
@@ -34,8 +36,9 @@ def _output(context: SimulationContext) -> torch.Tensor:
 
 
 @declare(num_steps=NUM_STEPS,
-         threshold=Number(0, strict_minimum=True), gain=Number(0),
-         seed=SEED, readout_hz=Number(0, strict_minimum=True),
+         threshold=Number(0, strict_minimum=True, float32=True),
+         gain=Number(0, float32=True), seed=SEED,
+         readout_hz=Number(0, strict_minimum=True, float32=True),
          backend=Choice(CHOICES))
 def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
                     gain: float = 1.0, effects=None, seed: int = 0,
@@ -79,11 +82,22 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
     """
     threshold, gain, readout_hz = (float(threshold), float(gain),
                                    float(readout_hz))
+    low, high = FLOAT32_RANGE
+    if gain and not low <= gain / threshold <= high:
+        raise ValueError(
+            f'simulate_spikes: gain / threshold (the charge white light '
+            f'collects per step, in thresholds) is {gain / threshold:.4g} '
+            f'for gain={gain!r} and threshold={threshold!r}; it must be 0 or '
+            f'of magnitude in [{low:.4g}, {high:.4g}] (a normal float32)')
     seed = int(seed)
     parsed = parse_effects(effects)
     device = torch.device(device)
     intensity = frames_to_intensity(frames, torch.float32, device)
     count, height, width = intensity.shape
+    check_allocation(int(num_steps) * height * width,
+                     f'simulate_spikes: the {int(num_steps)} x {height} x '
+                     f'{width} uint8 spike stream', 'num_steps or the frame '
+                     'size')
     context = SimulationContext(height, width, count, int(num_steps),
                                 threshold, gain, readout_hz, seed, device)
 

@@ -32,7 +32,7 @@ from .band_network_backends import CHOICES, get_backend, resolve_backend
 from .first_use_check import CheckResult
 from ..arguments import (Choice, Flag, Integer, check_parameter_count,
                          declare)
-from ..checks import check_finite
+from ..checks import check_finite, check_finite_parameters
 from ..limits import MAX_CHANNELS, MAX_KERNEL_SIZE, MAX_LEVEL, MAX_NUM_BLOCKS
 from ..wavelets import (SUPPORTED_MODES, analysis_matrix, band_lengths,
                         synthesis_matrix)
@@ -139,6 +139,56 @@ class _ResidualLayer(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return F.relu(self.conv_b(F.relu(self.conv_a(x))) + x)
+
+
+def _activation_bound(networks: nn.ModuleList,
+                      input_bound: torch.Tensor) -> torch.Tensor:
+    """An upper bound (a scalar tensor) on every activation of the
+    ``networks`` (alike: :class:`BandNetwork` of the same arguments) given
+    inputs of magnitude at most ``input_bound``: each convolution's output
+    is at most its largest absolute row sum of weights times its input's
+    bound plus its largest absolute bias, plus the bound of the activation
+    a residual adds (ReLU only lowers magnitudes). Not finite where a
+    weight is not; loose, but a network of sane weights stays far inside
+    float32's range (about 2e2 for one block and 4e4 for two at PyTorch's
+    initialisation and 0/1 spikes). The networks' layers are stacked, a
+    few operations a layer whatever the number of bands."""
+    plans = [network.layers() for network in networks]
+    bounds = [input_bound.detach().float().expand(len(plans))]
+    for position, (_, residual) in enumerate(plans[0]):
+        convs = [plan[position][0] for plan in plans]
+        weights = torch.stack([conv.weight.detach() for conv in convs])
+        bound = weights.float().abs().flatten(2).sum(2).amax(1) * bounds[-1]
+        biases = [conv.bias.detach() for conv in convs
+                  if conv.bias is not None]
+        if biases:
+            bound = bound + torch.stack(biases).float().abs().amax(1)
+        if residual is not None:
+            bound = bound + bounds[residual]
+        bounds.append(bound)
+    return torch.stack(bounds).max()
+
+
+def _magnitude(tensor: torch.Tensor) -> torch.Tensor:
+    """The largest absolute value of ``tensor`` as a float32 scalar tensor
+    (0 if empty, NaN if it holds NaN)."""
+    tensor = tensor.detach()
+    if not tensor.numel():
+        return tensor.new_zeros((), dtype=torch.float32)
+    if tensor.dtype == torch.bool:
+        return tensor.any().float()
+    if tensor.is_floating_point():
+        return tensor.abs().amax().float()
+    return torch.maximum(tensor.amax().float().abs(),
+                         tensor.amin().float().abs())
+
+
+def _largest_weight(module: nn.Module) -> Tuple[str, float]:
+    """The name and absolute value of ``module``'s largest parameter
+    value."""
+    return max(((name, float(parameter.detach().abs().max()))
+                for name, parameter in module.named_parameters()
+                if parameter.numel()), key=lambda item: item[1])
 
 
 class BandNetwork(nn.Module):
@@ -274,7 +324,7 @@ class WGSE(nn.Module):
             from to ``'torch'``; ``None`` where no check applies (the CPU
             backends, the Triton interpreter) and before the first pass.
 
-    The transform runs in float32 (float64 for float64 input) even under
+    The transform runs in float32 (float64 for a float64 module) even under
     autocast; so do the ``torch`` and ``compiled`` backends' ``dim=1``
     kernels. The Triton kernel rounds the operands of its hidden products
     to autocast's dtype (or TF32, as torch's flags allow), and the
@@ -353,29 +403,72 @@ class WGSE(nn.Module):
                 lengths)
         return self._transforms[key]
 
-    def forward(self, spikes: torch.Tensor) -> torch.Tensor:
-        """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats.
+    def _check_range(self, spikes: torch.Tensor,
+                     analysis: Optional[torch.Tensor],
+                     synthesis: Optional[torch.Tensor]) -> None:
+        """Raise ``ValueError`` unless ``spikes`` ``(B, T, H, W)`` are
+        finite and every activation of the band networks on their wavelet
+        coefficients (``analysis`` ``(C, T)``, ``None`` without wavelets),
+        and the output of the ``synthesis`` ``(T, C)``, are bounded inside
+        float32's range (:func:`_activation_bound`). NaN or Inf spikes are
+        named by :func:`~wgse_mmseg.core.checks.check_finite`, NaN or Inf
+        weights by
+        :func:`~wgse_mmseg.core.checks.check_finite_parameters`, finite
+        ones that could overflow by the largest weight and input. Backends
+        differ in what an overflow gives (NaN, or zeros behind a ReLU that
+        drops NaN); inside the bound they agree. One pass over the spikes
+        (the one a finiteness check makes) and one device sync; skipped
+        while ``torch.export`` traces, as ``check_finite`` is."""
+        if torch.compiler.is_exporting():
+            return
+        inputs = _magnitude(spikes)
+        bound = inputs
+        if analysis is not None:
+            bound = bound * analysis.detach().abs().sum(1).max().float()
+        bound = _activation_bound(self.band_networks, bound)
+        if synthesis is not None:
+            bound = bound * synthesis.detach().abs().sum(1).max().float()
+        limit = torch.finfo(torch.float32).max
+        if bool(bound <= limit):
+            return
+        check_finite('WGSE', 'spikes', spikes)
+        check_finite_parameters('WGSE', self)
+        name, value = _largest_weight(self)
+        raise ValueError(
+            f'WGSE: its activations could exceed float32\'s range '
+            f'({limit:.3g}): they are bounded only by {float(bound):.3g}, '
+            f'from the largest weight, {name} ({value:.3g}), and the '
+            f'largest magnitude of the spikes ({float(inputs):.3g}); on '
+            f'overflow the backends would disagree. Check the checkpoint '
+            f'(a diverged training?) and that the input holds spikes (0 '
+            f'and 1)')
 
-        NaN or Inf in ``spikes`` raises ``ValueError`` before any backend
-        runs (:func:`~wgse_mmseg.core.checks.check_finite`), the same on
-        every backend."""
+    def forward(self, spikes: torch.Tensor) -> torch.Tensor:
+        """Enhance ``spikes`` ``(B, T, H, W)`` into ``(B, T, H, W)`` floats
+        of the module's dtype.
+
+        ``spikes`` of any dtype are converted to the module's (exact for
+        0/1 spikes): a ``.double()`` module computes in float64, a
+        ``.half()`` or ``.bfloat16()`` one runs its band networks in that
+        dtype (the wavelet transform stays float32) on the backends that
+        support it; the others name the backend and the dtype.
+
+        The same answer on every backend to bad numbers, before any backend
+        runs: NaN or Inf in ``spikes`` raises ``ValueError``
+        (:func:`~wgse_mmseg.core.checks.check_finite`), and so do weights
+        that are not finite (naming the parameter) or whose activations
+        could leave float32's range (:meth:`_check_range`)."""
         if spikes.dim() != 4:
             raise ValueError(
                 f'WGSE expects spikes shaped (B, T, H, W), got '
                 f'{tuple(spikes.shape)}')
-        check_finite('WGSE', 'spikes', spikes)
         batch, num_steps, height, width = spikes.shape
-        dtype = (torch.float64 if spikes.dtype == torch.float64
+        module_dtype = self.band_networks[0].output_convs[-1].weight.dtype
+        dtype = (torch.float64 if module_dtype == torch.float64
                  else torch.float32)
-        weights = self.band_networks[0].output_convs[-1].weight.dtype
-        if dtype == torch.float64 and weights != torch.float64:
-            raise ValueError(
-                f'WGSE got float64 spikes but its parameters are {weights}; '
-                f'pass float32 (or integer) spikes, or convert the module '
-                f'with .double()')
         device_type = spikes.device.type
         if self.wavelet is None:
-            analysis = None
+            analysis = synthesis = None
             lengths = [num_steps]
         else:
             # int(): under a tracer (the FLOP count) a shape is a tensor;
@@ -389,9 +482,11 @@ class WGSE(nn.Module):
             with torch.autocast(device_type, enabled=False):
                 signal = spikes.to(dtype).reshape(batch, num_steps,
                                                   height * width)
-                return signal if analysis is None else \
+                coeffs = signal if analysis is None else \
                     torch.matmul(analysis, signal)
+                return coeffs.to(module_dtype)
 
+        self._check_range(spikes, analysis, synthesis)
         coeffs = coefficients(spikes)
         backend, self.backend_check = resolve_backend(
             self.backend, self.band_networks, coeffs, lengths)
@@ -406,8 +501,9 @@ class WGSE(nn.Module):
         del coeffs
         with torch.autocast(device_type, enabled=False):
             if self.wavelet is not None:
-                enhanced = torch.matmul(synthesis, enhanced)  # (B, T, P)
-            out = enhanced.reshape(batch, num_steps, height, width)
+                enhanced = torch.matmul(synthesis, enhanced.to(dtype))
+            out = enhanced.reshape(batch, num_steps, height, width).to(
+                module_dtype)
         if self.output_norm is not None:
             if self.output_norm.training and out.numel() < 2:
                 raise ValueError(
