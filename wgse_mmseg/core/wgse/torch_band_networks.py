@@ -257,8 +257,12 @@ def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
         if index == 0 and not need_input_grad:
             return None
         # Rows on the padding get values here, but the next ReLU backward
-        # (or, for the input, the slice below) discards them.
-        grad_in = scratch(('grad', index), rows, layers[index].taps.shape[1])
+        # (or, for the input, the slice below) discards them. Written into
+        # the buffer of this layer's output, which nothing reads any more
+        # (its ReLU backward is done): one activation-sized buffer less
+        # than a buffer per gradient.
+        grad_in = scratch(('act', index + 1), rows,
+                          layers[index].taps.shape[1])
         grad_in[:pad] = grad_in[rows - pad:] = 0
         _conv_rows(grad, layers[index].back_taps, grad_in[pad:rows - pad],
                    scratch)
