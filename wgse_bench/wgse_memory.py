@@ -4,8 +4,8 @@ another checkout's (an older commit's) in the same run.
 Each measurement runs in a fresh process with glibc returning large
 allocations to the system at once (:data:`ENVIRONMENT`), which makes the
 peak repeat within about 1%: one small forward+backward first (imports,
-thread pools, the first call of torch's custom ops, which imports
-``torch._dynamo``: fixed costs, not per pixel), then one at ``shape``
+thread pools, the transform's matrices: fixed costs, not per pixel),
+then one at ``shape``
 whose growth of peak RSS (``resource.getrusage``'s ``ru_maxrss``) is
 divided by its pixels, then ``repeat`` more, timed.
 

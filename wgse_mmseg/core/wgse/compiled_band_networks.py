@@ -196,8 +196,18 @@ def _residual_plan(residuals: Sequence[int]) -> List[Optional[int]]:
     return [None if r < 0 else r for r in residuals]
 
 
-@torch.library.custom_op('wgse_mmseg::compiled_band_networks',
-                         mutates_args=(), device_types='cpu')
+FORWARD_OP = 'wgse_mmseg::compiled_band_networks'
+BACKWARD_OP = 'wgse_mmseg::compiled_band_networks_backward'
+# Defined as the torch kernel's ops are (:mod:`.torch_band_networks`: no
+# torch._dynamo import at their first call).
+torch.library.define(FORWARD_OP, '(Tensor coeffs, int[] lengths, '
+                     'int[] residuals, Tensor[] params) -> Tensor')
+torch.library.define(BACKWARD_OP, '(Tensor grad_out, Tensor coeffs, '
+                     'int[] lengths, int[] residuals, Tensor[] params) '
+                     '-> Tensor[]')
+
+
+@torch.library.impl(FORWARD_OP, 'cpu')
 def _forward_op(coeffs: Tensor, lengths: List[int], residuals: List[int],
                 params: List[Tensor]) -> Tensor:
     """The kernel's forward pass as a torch custom op: ``coeffs`` ``(N,
@@ -212,13 +222,12 @@ def _forward_op(coeffs: Tensor, lengths: List[int], residuals: List[int],
     return out
 
 
-@_forward_op.register_fake
+@torch.library.register_fake(FORWARD_OP)
 def _forward_fake(coeffs, lengths, residuals, params):
     return torch.empty_like(coeffs)
 
 
-@torch.library.custom_op('wgse_mmseg::compiled_band_networks_backward',
-                         mutates_args=(), device_types='cpu')
+@torch.library.impl(BACKWARD_OP, 'cpu')
 def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
                  residuals: List[int], params: List[Tensor]
                  ) -> List[Tensor]:
@@ -247,7 +256,7 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     return grads
 
 
-@_backward_op.register_fake
+@torch.library.register_fake(BACKWARD_OP)
 def _backward_fake(grad_out, coeffs, lengths, residuals, params):
     return [torch.empty_like(p) for p in params]
 
@@ -266,11 +275,13 @@ def _backward(ctx, grad_out: Tensor):
             [False] + list(ctx.needs_input_grad[3]), ctx.lengths,
             _residual_plan(ctx.residuals), KERNEL_SIZE // 2)
         return None, None, None, grads[1:]
-    return None, None, None, _backward_op(grad_out, coeffs, ctx.lengths,
-                                          ctx.residuals, params)
+    return None, None, None, \
+        torch.ops.wgse_mmseg.compiled_band_networks_backward(
+            grad_out, coeffs, ctx.lengths, ctx.residuals, params)
 
 
-_forward_op.register_autograd(_backward, setup_context=_setup_context)
+torch.library.register_autograd(FORWARD_OP, _backward,
+                                setup_context=_setup_context)
 
 
 def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
@@ -294,5 +305,6 @@ def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
             f'{len(weights)} band networks and bands of lengths {lengths} '
             f'do not fit coefficients shaped {tuple(coeffs.shape)}')
     params = [t for band in weights for layer in band for t in layer]
-    return _forward_op(coeffs.contiguous(), list(lengths),
-                       [-1 if r is None else r for r in residuals], params)
+    return torch.ops.wgse_mmseg.compiled_band_networks(
+        coeffs.contiguous(), list(lengths),
+        [-1 if r is None else r for r in residuals], params)

@@ -341,8 +341,20 @@ def _residual_plan(residuals: Sequence[int]) -> Tuple[Optional[int], ...]:
     return tuple(None if r < 0 else r for r in residuals)
 
 
-@torch.library.custom_op('wgse_mmseg::torch_band_networks',
-                         mutates_args=(), device_types='cpu')
+FORWARD_OP = 'wgse_mmseg::torch_band_networks'
+BACKWARD_OP = 'wgse_mmseg::torch_band_networks_backward'
+# The custom ops, defined with the library's lower-level calls rather than
+# torch.library.custom_op, whose kernels import torch._dynamo on their first
+# call (seconds, 70 MiB); torch.library.impl's do not (dynamo never traces
+# into an op's kernel; it calls it).
+torch.library.define(FORWARD_OP, '(Tensor coeffs, int[] lengths, '
+                     'int[] residuals, int pad, Tensor[] params) -> Tensor')
+torch.library.define(BACKWARD_OP, '(Tensor grad_out, Tensor coeffs, '
+                     'int[] lengths, int[] residuals, int pad, '
+                     'Tensor[] params, bool input_grad) -> Tensor[]')
+
+
+@torch.library.impl(FORWARD_OP, 'cpu')
 def _forward_op(coeffs: Tensor, lengths: List[int], residuals: List[int],
                 pad: int, params: List[Tensor]) -> Tensor:
     """The forward pass of :func:`torch_band_networks` as a torch custom
@@ -366,13 +378,12 @@ def _forward_op(coeffs: Tensor, lengths: List[int], residuals: List[int],
     return out
 
 
-@_forward_op.register_fake
+@torch.library.register_fake(FORWARD_OP)
 def _forward_fake(coeffs, lengths, residuals, pad, params):
     return torch.empty_like(coeffs)
 
 
-@torch.library.custom_op('wgse_mmseg::torch_band_networks_backward',
-                         mutates_args=(), device_types='cpu')
+@torch.library.impl(BACKWARD_OP, 'cpu')
 def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
                  residuals: List[int], pad: int, params: List[Tensor],
                  input_grad: bool) -> List[Tensor]:
@@ -411,7 +422,7 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     return ([grad_coeffs] if input_grad else []) + param_grads
 
 
-@_backward_op.register_fake
+@torch.library.register_fake(BACKWARD_OP)
 def _backward_fake(grad_out, coeffs, lengths, residuals, pad, params,
                    input_grad):
     return [torch.empty_like(t) for t in ([coeffs] if input_grad else [])
@@ -433,13 +444,15 @@ def _backward(ctx, grad_out: Tensor):
             [input_grad] + list(ctx.needs_input_grad[4]), ctx.lengths,
             _residual_plan(ctx.residuals), ctx.pad)
         return grads[0], None, None, None, grads[1:]
-    grads = _backward_op(grad_out, coeffs, ctx.lengths, ctx.residuals,
-                         ctx.pad, params, input_grad)
+    grads = torch.ops.wgse_mmseg.torch_band_networks_backward(
+        grad_out, coeffs, ctx.lengths, ctx.residuals, ctx.pad, params,
+        input_grad)
     grad_coeffs = grads.pop(0) if input_grad else None
     return grad_coeffs, None, None, None, grads
 
 
-_forward_op.register_autograd(_backward, setup_context=_setup_context)
+torch.library.register_autograd(FORWARD_OP, _backward,
+                                setup_context=_setup_context)
 
 
 class _Band(NamedTuple):
@@ -500,6 +513,7 @@ def torch_band_networks(coeffs: Tensor, lengths: Sequence[int],
             f'do not fit coefficients shaped {tuple(coeffs.shape)}')
     kernel_size = weights[0][0][0].shape[2]
     params = [t for band in weights for layer in band for t in layer]
-    return _forward_op(coeffs.contiguous(), list(lengths),
-                       [-1 if r is None else r for r in residuals],
-                       kernel_size // 2, params)
+    return torch.ops.wgse_mmseg.torch_band_networks(
+        coeffs.contiguous(), list(lengths),
+        [-1 if r is None else r for r in residuals], kernel_size // 2,
+        params)
