@@ -9,6 +9,9 @@
 * :mod:`.markdown`: the reports' Markdown tables;
 * :mod:`.wgse`: WGSE forward+backward per backend against the reference
   design (``tools/analysis_tools/benchmark_wgse.py``);
+* :mod:`.wgse_memory`: peak RSS growth per pixel and time of a WGSE
+  training pass per CPU backend, beside another commit's work tree
+  (``python -m wgse_bench.wgse_memory``);
 * :mod:`.simulator`: the simulator's throughput and spike files' load time
   (``tools/analysis_tools/benchmark_simulator.py``);
 * :mod:`.gpu_report`: everything about WGSE on a GPU in one run

@@ -18,10 +18,22 @@ def check_finite(owner: str, name: str, tensor: torch.Tensor) -> None:
     of the values is data-dependent control flow, which no exported graph
     holds; what runs the exported graph checks its input instead
     (:class:`~wgse_mmseg.apis.onnx_segmentor.OnnxSpikeSegmentor`).
+    Under ``torch.compile`` the check is part of the compiled graph and
+    raises ``RuntimeError`` with the owner and name (no count).
     """
     if torch.compiler.is_exporting():
         return
-    if not tensor.is_floating_point() or bool(torch.isfinite(tensor).all()):
+    if not tensor.is_floating_point():
+        return
+    if torch.compiler.is_compiling():
+        # the same check inside the compiled graph, where a Python branch
+        # on a value would break it: a RuntimeError with this message
+        torch._assert_async(
+            torch.isfinite(tensor).all(),
+            f'{owner}: {name} holds non-finite values (NaN or +-Inf); '
+            f'spike streams hold 0 and 1')
+        return
+    if bool(torch.isfinite(tensor).all()):
         return
     bad = tensor.numel() - int(torch.isfinite(tensor).sum())
     nan = int(torch.isnan(tensor).sum())

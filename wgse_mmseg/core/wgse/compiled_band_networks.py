@@ -51,11 +51,16 @@ KERNEL_SIZE = 3
 CHANNELS = 32
 
 
+#: whether the CPU has what the extension needs (asked once, here: a call
+#: into the extension is opaque to ``torch.compile``)
+_CPU_SUPPORTED = _band_networks is not None and _band_networks.supported()
+
+
 def unavailable() -> Optional[str]:
     """Why this installation cannot run the kernel at all, or ``None``."""
     if _band_networks is None:
         return NOT_BUILT
-    if not _band_networks.supported():
+    if not _CPU_SUPPORTED:
         return 'this CPU lacks AVX2/FMA'
     return None
 
@@ -118,7 +123,7 @@ def _unpack_grads(flat: Tensor, band: Sequence[Tuple[Tensor, Tensor]]
         taps = flat[start:start + weight.numel()].view(
             kernel_size, in_channels, out_channels)
         start += weight.numel()
-        grads += [taps.permute(2, 1, 0).to(weight.dtype),
+        grads += [taps.permute(2, 1, 0).to(weight.dtype).contiguous(),
                   flat[start:start + bias.numel()].to(bias.dtype)]
         start += bias.numel()
     return grads
@@ -176,51 +181,107 @@ class _Bands:
             grad_address)
 
 
-class _CompiledBandNetworks(torch.autograd.Function):
-    """Autograd wrapper; see :func:`compiled_band_networks`."""
+def _weights_of(params: Sequence[Tensor], bands: int
+                ) -> List[List[Tuple[Tensor, Tensor]]]:
+    """``[W_1, b_1, ...]``, band after band, as per band, per layer
+    ``(weight, bias)``."""
+    per_band = len(params) // bands if bands else 0
+    return [[(params[first + i], params[first + i + 1])
+             for i in range(0, per_band, 2)]
+            for first in range(0, len(params), per_band or 1)]
 
-    @staticmethod
-    def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
-                weights: Tuple[Tuple[Tuple[Tensor, Tensor], ...], ...],
-                residuals: Tuple[Optional[int], ...],
-                *params: Tensor) -> Tensor:
-        bands = _Bands(coeffs, lengths, weights, residuals)
-        out = torch.empty_like(coeffs)
-        for_each_on_threads(lambda chunk, _: bands.run(chunk, out=out),
-                            len(bands.chunks), lambda: None)
-        ctx.bands, ctx.weights = bands, weights
-        ctx.lengths, ctx.residuals = lengths, residuals
-        ctx.save_for_backward(coeffs, *params)
-        return out
 
-    @staticmethod
-    def backward(ctx, grad_out: Tensor):
-        bands, weights = ctx.bands, ctx.weights
-        if torch.is_grad_enabled():  # create_graph=True: second order
-            coeffs, *params = ctx.saved_tensors
-            grads = differentiable_backward(
-                grad_out, coeffs, params,
-                [False] + list(ctx.needs_input_grad[4:]), ctx.lengths,
-                ctx.residuals, KERNEL_SIZE // 2)
-            return (None, None, None, None, *grads[1:])
-        grad_out = grad_out.contiguous()
-        groups = chunk_groups(len(bands.chunks))
-        sums = [None] * len(groups)
+def _residual_plan(residuals: Sequence[int]) -> List[Optional[int]]:
+    """The custom ops' ``int[]`` residual plan (``-1``: none)."""
+    return [None if r < 0 else r for r in residuals]
 
-        def backward_group(group: int, _) -> None:
-            sums[group] = torch.zeros(bands.grad_total, dtype=torch.float64)
-            for chunk in groups[group]:
-                bands.run(chunk, grad_out=grad_out, grads=sums[group])
 
-        for_each_on_threads(backward_group, len(groups), lambda: None)
-        flat = sums[0] if sums else torch.zeros(bands.grad_total,
-                                                dtype=torch.float64)
-        for more in sums[1:]:  # in group order, whatever the threads
-            flat = flat + more
-        grads = []
-        for band, where in zip(weights, bands.grad_slices):
-            grads += _unpack_grads(flat[where], band)
-        return (None, None, None, None, *grads)
+FORWARD_OP = 'wgse_mmseg::compiled_band_networks'
+BACKWARD_OP = 'wgse_mmseg::compiled_band_networks_backward'
+# Defined as the torch kernel's ops are (:mod:`.torch_band_networks`: no
+# torch._dynamo import at their first call).
+torch.library.define(FORWARD_OP, '(Tensor coeffs, int[] lengths, '
+                     'int[] residuals, Tensor[] params) -> Tensor')
+torch.library.define(BACKWARD_OP, '(Tensor grad_out, Tensor coeffs, '
+                     'int[] lengths, int[] residuals, Tensor[] params) '
+                     '-> Tensor[]')
+
+
+@torch.library.impl(FORWARD_OP, 'cpu')
+def _forward_op(coeffs: Tensor, lengths: List[int], residuals: List[int],
+                params: List[Tensor]) -> Tensor:
+    """The kernel's forward pass as a torch custom op: ``coeffs`` ``(N,
+    C)`` contiguous, ``residuals`` with ``-1`` for none, ``params``
+    ``[W_1, b_1, ...]`` band after band; ``(N, C)`` out. ``torch.compile``
+    sees one opaque call (no graph break)."""
+    bands = _Bands(coeffs, lengths, _weights_of(params, len(lengths)),
+                   _residual_plan(residuals))
+    out = torch.empty_like(coeffs)
+    for_each_on_threads(lambda chunk, _: bands.run(chunk, out=out),
+                        len(bands.chunks), lambda: None)
+    return out
+
+
+@torch.library.register_fake(FORWARD_OP)
+def _forward_fake(coeffs, lengths, residuals, params):
+    return torch.empty_like(coeffs)
+
+
+@torch.library.impl(BACKWARD_OP, 'cpu')
+def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
+                 residuals: List[int], params: List[Tensor]
+                 ) -> List[Tensor]:
+    """The kernel's backward pass of :func:`_forward_op` (activations
+    recomputed group by group): the parameters' gradients, in their
+    order, shapes and dtypes."""
+    weights = _weights_of(params, len(lengths))
+    bands = _Bands(coeffs, lengths, weights, _residual_plan(residuals))
+    grad_out = grad_out.contiguous()
+    groups = chunk_groups(len(bands.chunks))
+    sums = [None] * len(groups)
+
+    def backward_group(group: int, _) -> None:
+        sums[group] = torch.zeros(bands.grad_total, dtype=torch.float64)
+        for chunk in groups[group]:
+            bands.run(chunk, grad_out=grad_out, grads=sums[group])
+
+    for_each_on_threads(backward_group, len(groups), lambda: None)
+    flat = sums[0] if sums else torch.zeros(bands.grad_total,
+                                            dtype=torch.float64)
+    for more in sums[1:]:  # in group order, whatever the threads
+        flat = flat + more
+    grads = []
+    for band, where in zip(weights, bands.grad_slices):
+        grads += _unpack_grads(flat[where], band)
+    return grads
+
+
+@torch.library.register_fake(BACKWARD_OP)
+def _backward_fake(grad_out, coeffs, lengths, residuals, params):
+    return [torch.empty_like(p) for p in params]
+
+
+def _setup_context(ctx, inputs, output) -> None:
+    coeffs, lengths, residuals, params = inputs
+    ctx.lengths, ctx.residuals = lengths, residuals
+    ctx.save_for_backward(coeffs, *params)
+
+
+def _backward(ctx, grad_out: Tensor):
+    coeffs, *params = ctx.saved_tensors
+    if torch.is_grad_enabled():  # create_graph=True: second order
+        grads = differentiable_backward(
+            grad_out, coeffs, params,
+            [False] + list(ctx.needs_input_grad[3]), ctx.lengths,
+            _residual_plan(ctx.residuals), KERNEL_SIZE // 2)
+        return None, None, None, grads[1:]
+    return None, None, None, \
+        torch.ops.wgse_mmseg.compiled_band_networks_backward(
+            grad_out, coeffs, ctx.lengths, ctx.residuals, params)
+
+
+torch.library.register_autograd(FORWARD_OP, _backward,
+                                setup_context=_setup_context)
 
 
 def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
@@ -243,7 +304,7 @@ def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
         raise ValueError(
             f'{len(weights)} band networks and bands of lengths {lengths} '
             f'do not fit coefficients shaped {tuple(coeffs.shape)}')
-    weights = tuple(tuple((w, b) for w, b in band) for band in weights)
     params = [t for band in weights for layer in band for t in layer]
-    return _CompiledBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
-                                       weights, tuple(residuals), *params)
+    return torch.ops.wgse_mmseg.compiled_band_networks(
+        coeffs.contiguous(), list(lengths),
+        [-1 if r is None else r for r in residuals], params)

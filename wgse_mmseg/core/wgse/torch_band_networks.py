@@ -257,8 +257,12 @@ def _chunk_backward(acts: List[Tensor], grad_out: Tensor,
         if index == 0 and not need_input_grad:
             return None
         # Rows on the padding get values here, but the next ReLU backward
-        # (or, for the input, the slice below) discards them.
-        grad_in = scratch(('grad', index), rows, layers[index].taps.shape[1])
+        # (or, for the input, the slice below) discards them. Written into
+        # the buffer of this layer's output, which nothing reads any more
+        # (its ReLU backward is done): one activation-sized buffer less
+        # than a buffer per gradient.
+        grad_in = scratch(('act', index + 1), rows,
+                          layers[index].taps.shape[1])
         grad_in[:pad] = grad_in[rows - pad:] = 0
         _conv_rows(grad, layers[index].back_taps, grad_in[pad:rows - pad],
                    scratch)
@@ -331,71 +335,124 @@ def differentiable_backward(grad_out: Tensor, coeffs: Tensor,
     return [next(found) if need else None for need in needs_input_grad]
 
 
-class _TorchBandNetworks(torch.autograd.Function):
-    """Autograd wrapper; see :func:`torch_band_networks`."""
+def _residual_plan(residuals: Sequence[int]) -> Tuple[Optional[int], ...]:
+    """The custom ops' ``int[]`` residual plan (``-1``: none) as the
+    kernel's ``(index or None, ...)``."""
+    return tuple(None if r < 0 else r for r in residuals)
 
-    @staticmethod
-    def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
-                residuals: Tuple[Optional[int], ...], pad: int,
-                *params: Tensor) -> Tensor:
-        out = torch.empty_like(coeffs)
-        chunks = list(_chunks(coeffs, lengths, residuals, pad, params))
 
-        def forward_chunk(chunk: int, scratch: _Workspace) -> None:
+FORWARD_OP = 'wgse_mmseg::torch_band_networks'
+BACKWARD_OP = 'wgse_mmseg::torch_band_networks_backward'
+# The custom ops, defined with the library's lower-level calls rather than
+# torch.library.custom_op, whose kernels import torch._dynamo on their first
+# call (seconds, 70 MiB); torch.library.impl's do not (dynamo never traces
+# into an op's kernel; it calls it).
+torch.library.define(FORWARD_OP, '(Tensor coeffs, int[] lengths, '
+                     'int[] residuals, int pad, Tensor[] params) -> Tensor')
+torch.library.define(BACKWARD_OP, '(Tensor grad_out, Tensor coeffs, '
+                     'int[] lengths, int[] residuals, int pad, '
+                     'Tensor[] params, bool input_grad) -> Tensor[]')
+
+
+@torch.library.impl(FORWARD_OP, 'cpu')
+def _forward_op(coeffs: Tensor, lengths: List[int], residuals: List[int],
+                pad: int, params: List[Tensor]) -> Tensor:
+    """The forward pass of :func:`torch_band_networks` as a torch custom
+    op: ``coeffs`` ``(N, C)`` contiguous, ``residuals`` with ``-1`` for
+    none, ``params`` ``[W_1, b_1, ...]`` band after band; ``(N, C)`` out.
+    ``torch.compile`` sees one opaque call (no graph break) whose output
+    shape :func:`_forward_fake` gives."""
+    out = torch.empty_like(coeffs)
+    chunks = list(_chunks(coeffs, tuple(lengths), _residual_plan(residuals),
+                          pad, params))
+
+    def forward_chunk(chunk: int, scratch: _Workspace) -> None:
+        band, columns, rows, layers = chunks[chunk]
+        seg_len = band.length + 2 * pad
+        acts = _chunk_forward(columns[rows], layers, pad, scratch)
+        out[rows, band.offset] = acts[-1].view(
+            -1, seg_len)[:, pad:pad + band.length]
+
+    for_each_on_threads(forward_chunk, len(chunks),
+                        lambda: _Workspace(coeffs))
+    return out
+
+
+@torch.library.register_fake(FORWARD_OP)
+def _forward_fake(coeffs, lengths, residuals, pad, params):
+    return torch.empty_like(coeffs)
+
+
+@torch.library.impl(BACKWARD_OP, 'cpu')
+def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
+                 residuals: List[int], pad: int, params: List[Tensor],
+                 input_grad: bool) -> List[Tensor]:
+    """The hand-written backward pass of :func:`_forward_op` (each chunk's
+    activations recomputed): ``[d coeffs (N, C), *d params]``, without
+    ``d coeffs`` unless ``input_grad``."""
+    plan = _residual_plan(residuals)
+    grad_coeffs = torch.zeros_like(coeffs) if input_grad else None
+    grad_out = grad_out.contiguous()
+    per_band = 2 * len(plan)
+    chunks = list(_chunks(coeffs, tuple(lengths), plan, pad, params))
+    groups = chunk_groups(len(chunks))
+    sums: List[List[Tensor]] = [[] for _ in groups]
+
+    def backward_group(group: int, scratch: _Workspace) -> None:
+        sums[group] = param_grads = _zero_grads(params)
+        for chunk in groups[group]:
             band, columns, rows, layers = chunks[chunk]
-            seg_len = band.length + 2 * pad
             acts = _chunk_forward(columns[rows], layers, pad, scratch)
-            out[rows, band.offset] = acts[-1].view(
-                -1, seg_len)[:, pad:pad + band.length]
+            first = band.index * per_band
+            grad_in = _chunk_backward(
+                acts, grad_out[rows, band.offset], layers,
+                param_grads[first:first + per_band], pad, input_grad,
+                scratch)
+            if input_grad:
+                grad_coeffs[rows, band.offset] = grad_in
 
-        for_each_on_threads(forward_chunk, len(chunks),
-                            lambda: _Workspace(coeffs))
-        ctx.lengths, ctx.residuals, ctx.pad = lengths, residuals, pad
-        ctx.save_for_backward(coeffs, *params)
-        return out
+    for_each_on_threads(backward_group, len(groups),
+                        lambda: _Workspace(coeffs))
+    param_grads = sums[0] if sums else _zero_grads(params)
+    for more in sums[1:]:  # in group order
+        param_grads = [total.add_(part)
+                       for total, part in zip(param_grads, more)]
+    param_grads = [g.permute(2, 1, 0).contiguous() if g.dim() == 3 else g
+                   for g in param_grads]
+    return ([grad_coeffs] if input_grad else []) + param_grads
 
-    @staticmethod
-    def backward(ctx, grad_out: Tensor):
-        coeffs, *params = ctx.saved_tensors
-        if torch.is_grad_enabled():  # create_graph=True: second order
-            grads = differentiable_backward(
-                grad_out, coeffs, params,
-                [ctx.needs_input_grad[0]] + list(ctx.needs_input_grad[4:]),
-                ctx.lengths, ctx.residuals, ctx.pad)
-            return (grads[0], None, None, None, *grads[1:])
-        need_input_grad = ctx.needs_input_grad[0]
-        grad_coeffs = torch.zeros_like(coeffs) if need_input_grad else None
-        grad_out = grad_out.contiguous()
-        per_band = 2 * len(ctx.residuals)
-        chunks = list(_chunks(coeffs, ctx.lengths, ctx.residuals, ctx.pad,
-                              params))
 
-        groups = chunk_groups(len(chunks))
-        sums: List[List[Tensor]] = [[] for _ in groups]
+@torch.library.register_fake(BACKWARD_OP)
+def _backward_fake(grad_out, coeffs, lengths, residuals, pad, params,
+                   input_grad):
+    return [torch.empty_like(t) for t in ([coeffs] if input_grad else [])
+            + list(params)]
 
-        def backward_group(group: int, scratch: _Workspace) -> None:
-            sums[group] = param_grads = _zero_grads(params)
-            for chunk in groups[group]:
-                band, columns, rows, layers = chunks[chunk]
-                acts = _chunk_forward(columns[rows], layers, ctx.pad,
-                                      scratch)
-                first = band.index * per_band
-                grad_in = _chunk_backward(
-                    acts, grad_out[rows, band.offset], layers,
-                    param_grads[first:first + per_band], ctx.pad,
-                    need_input_grad, scratch)
-                if need_input_grad:
-                    grad_coeffs[rows, band.offset] = grad_in
 
-        for_each_on_threads(backward_group, len(groups),
-                            lambda: _Workspace(coeffs))
-        param_grads = sums[0] if sums else _zero_grads(params)
-        for more in sums[1:]:  # in group order
-            param_grads = [total.add_(part)
-                           for total, part in zip(param_grads, more)]
-        param_grads = [g.permute(2, 1, 0) if g.dim() == 3 else g
-                       for g in param_grads]
-        return (grad_coeffs, None, None, None, *param_grads)
+def _setup_context(ctx, inputs, output) -> None:
+    coeffs, lengths, residuals, pad, params = inputs
+    ctx.lengths, ctx.residuals, ctx.pad = lengths, residuals, pad
+    ctx.save_for_backward(coeffs, *params)
+
+
+def _backward(ctx, grad_out: Tensor):
+    coeffs, *params = ctx.saved_tensors
+    input_grad = ctx.needs_input_grad[0]
+    if torch.is_grad_enabled():  # create_graph=True: second order
+        grads = differentiable_backward(
+            grad_out, coeffs, params,
+            [input_grad] + list(ctx.needs_input_grad[4]), ctx.lengths,
+            _residual_plan(ctx.residuals), ctx.pad)
+        return grads[0], None, None, None, grads[1:]
+    grads = torch.ops.wgse_mmseg.torch_band_networks_backward(
+        grad_out, coeffs, ctx.lengths, ctx.residuals, ctx.pad, params,
+        input_grad)
+    grad_coeffs = grads.pop(0) if input_grad else None
+    return grad_coeffs, None, None, None, grads
+
+
+torch.library.register_autograd(FORWARD_OP, _backward,
+                                setup_context=_setup_context)
 
 
 class _Band(NamedTuple):
@@ -456,6 +513,7 @@ def torch_band_networks(coeffs: Tensor, lengths: Sequence[int],
             f'do not fit coefficients shaped {tuple(coeffs.shape)}')
     kernel_size = weights[0][0][0].shape[2]
     params = [t for band in weights for layer in band for t in layer]
-    return _TorchBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
-                                    tuple(residuals), kernel_size // 2,
-                                    *params)
+    return torch.ops.wgse_mmseg.torch_band_networks(
+        coeffs.contiguous(), list(lengths),
+        [-1 if r is None else r for r in residuals], kernel_size // 2,
+        params)

@@ -21,6 +21,7 @@ the stream, a long window average like TFP's, instead of at random;
 ``output_norm=True`` standardises the output.
 """
 import contextlib
+import functools
 from typing import Callable, List, Optional, Tuple
 
 import pywt
@@ -98,6 +99,35 @@ class _Recomputed:
 
     def __init__(self, source: torch.Tensor):
         self.source = source
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_transform(num_steps: int, wavelet: str, level: int,
+                      mode: str, device: torch.device, dtype: torch.dtype
+                      ) -> Tuple[torch.Tensor, torch.Tensor, List[int]]:
+    """The DWT's analysis ``(C, T)`` and synthesis ``(T, C)`` matrices and
+    the band lengths, for ``T = num_steps``: constants of the arguments,
+    made once (PyWavelets, NumPy)."""
+    analysis = analysis_matrix(num_steps, wavelet, level, mode)
+    lengths = list(band_lengths(num_steps, wavelet, level, mode))
+    synthesis = synthesis_matrix(lengths, wavelet, mode, length=num_steps)
+    return (torch.tensor(analysis, dtype=dtype, device=device),
+            torch.tensor(synthesis, dtype=dtype, device=device), lengths)
+
+
+def _transform(num_steps: int, wavelet: str, level: int, mode: str,
+               device: torch.device, dtype: torch.dtype
+               ) -> Tuple[torch.Tensor, torch.Tensor, List[int]]:
+    """:func:`_cached_transform`, which ``torch.compile`` calls as it is
+    and whose result it takes as a constant of the graph, instead of
+    tracing NumPy (which would break the graph) or the cache."""
+    return _cached_transform(num_steps, wavelet, level, mode, device, dtype)
+
+
+# What ``torch.compiler.assume_constant_result(_transform)`` sets, without
+# importing torch._dynamo (seconds) with the module; a test holds the two
+# equal.
+_transform._dynamo_marked_constant = True
 
 
 #: ``WGSE(init=...)``: ``'default'`` (PyTorch's initialisation of every
@@ -363,7 +393,6 @@ class WGSE(nn.Module):
         self.backend = backend
         self.backend_in_use: Optional[str] = None
         self.backend_check: Optional[CheckResult] = None
-        self._transforms = {}
         self.output_norm = nn.BatchNorm1d(1) if output_norm else None
         if init == 'lowpass':
             self.init_lowpass()
@@ -389,19 +418,8 @@ class WGSE(nn.Module):
                                                List[int]]:
         """Analysis ``(C, T)`` and synthesis ``(T, C)`` matrices, band
         sizes."""
-        key = (num_steps, device, dtype)
-        if key not in self._transforms:
-            analysis = analysis_matrix(num_steps, self.wavelet, self.level,
-                                       self.mode)
-            lengths = list(band_lengths(num_steps, self.wavelet, self.level,
-                                        self.mode))
-            synthesis = synthesis_matrix(lengths, self.wavelet, self.mode,
-                                         length=num_steps)
-            self._transforms[key] = (
-                torch.tensor(analysis, dtype=dtype, device=device),
-                torch.tensor(synthesis, dtype=dtype, device=device),
-                lengths)
-        return self._transforms[key]
+        return _transform(num_steps, self.wavelet, self.level, self.mode,
+                          device, dtype)
 
     def _check_range(self, spikes: torch.Tensor,
                      analysis: Optional[torch.Tensor],
