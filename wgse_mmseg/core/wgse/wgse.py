@@ -435,9 +435,16 @@ class WGSE(nn.Module):
         ones that could overflow by the largest weight and input. Backends
         differ in what an overflow gives (NaN, or zeros behind a ReLU that
         drops NaN); inside the bound they agree. One pass over the spikes
-        (the one a finiteness check makes) and one device sync; skipped
-        while ``torch.export`` traces, as ``check_finite`` is."""
+        (the one a finiteness check makes) and one device sync; under
+        ``torch.compile`` only the spikes' check, inside the graph (the
+        bound of the weights is eager's); skipped while ``torch.export``
+        traces, as ``check_finite`` is."""
         if torch.compiler.is_exporting():
+            return
+        if torch.compiler.is_compiling():
+            # in the graph: the spikes' check (an assertion, no sync); the
+            # weights' bound needs a branch on a value, eager only
+            check_finite('WGSE', 'spikes', spikes)
             return
         inputs = _magnitude(spikes)
         bound = inputs
