@@ -254,3 +254,18 @@ def test_a_path_that_is_not_utf8_is_named_as_such(tmp_path):
                        'holds bytes that are not UTF-8, which OpenCV cannot '
                        'open'):
         read_image(os.fsdecode(path))
+
+
+def test_an_image_is_bounded_as_a_whole_before_decoding(tmp_path,
+                                                         monkeypatch):
+    import cv2
+    from wgse_mmseg.core.images import read_image
+    from wgse_mmseg.core.limits import ALLOCATION_LIMIT_ENV
+    path = str(tmp_path / 'wide.png')
+    cv2.imwrite(path, np.zeros((40, 300), np.uint8))
+    assert read_image(path).shape == (40, 300)
+    monkeypatch.setenv(ALLOCATION_LIMIT_ENV, str(40 * 300 * 8 - 1))
+    with pytest.raises(ValueError, match=r'wide.png: decoding its 300x40 '
+                       r'image would take 96000 bytes.*WGSE_MMSEG_'
+                       r'ALLOCATION_LIMIT'):
+        read_image(path)

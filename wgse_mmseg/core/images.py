@@ -32,7 +32,7 @@ from typing import Iterator, Tuple
 
 import numpy as np
 
-from .limits import MAX_IMAGE_SIDE, check_utf8_path
+from .limits import MAX_IMAGE_SIDE, check_allocation, check_utf8_path
 from .output_folder import check_input_file
 
 __all__ = []
@@ -271,7 +271,9 @@ def read_image(path: str, flags: int = IMREAD_UNCHANGED) -> np.ndarray:
     """``cv2.imread(path, flags)`` of a file checked first: a regular file
     (a FIFO would block the reader), of a kind :func:`image_size` reads,
     at most :data:`~wgse_mmseg.core.limits.MAX_IMAGE_SIDE` pixels a side
-    by its header, not truncated; noted as an input
+    by its header and within the allocation limit as a whole
+    (:func:`~wgse_mmseg.core.limits.check_allocation`), not truncated;
+    noted as an input
     (:func:`~wgse_mmseg.core.output_folder.check_input_file`).
 
     Raises:
@@ -290,6 +292,10 @@ def read_image(path: str, flags: int = IMREAD_UNCHANGED) -> np.ndarray:
     if _truncated(path, kind):
         raise ImageFileError(f'{path}: a truncated {kind.upper()} (its end '
                              f'is missing); the file is incomplete')
+    # as a whole, before decoding: at most 4 channels of 16 bits
+    check_allocation(width * height * 4 * 2,
+                     f'{path}: decoding its {width}x{height} image',
+                     'the image size')
     import cv2
     image = cv2.imread(path, flags)
     if image is None:
