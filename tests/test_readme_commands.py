@@ -75,6 +75,7 @@ HOW = {
     'python tools/train.py $CONFIG --resume': TRAIN_TESTS,
     'python tools/test.py $CONFIG work_dirs/pspnet_wgse/epoch_100.pth':
         TRAIN_TESTS,
+    'python tools/test.py $CONFIG CKPT --show-dir vis/ --tta': TRAIN_TESTS,
     'python tools/deployment/pytorch2onnx.py configs/segformer_b0_wgse.py '
     'work_dirs/segformer_b0_wgse/epoch_100.pth --shape 129 256 512':
         'tests/apis/test_onnx_export.py::'

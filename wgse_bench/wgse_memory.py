@@ -76,13 +76,24 @@ def measure(backend: str, shape: List[int], repeat: int,
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    from wgse_mmseg.core.arguments import Integer, Path, Text
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--baseline', help='a work tree of another commit')
-    parser.add_argument('--shape', default='x'.join(map(str, SHAPE)))
-    parser.add_argument('--repeat', type=int, default=3)
-    parser.add_argument('--worker', nargs=3, help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
+    parser.add_argument('--baseline', type=Path(exists='dir'),
+                        help='a work tree of another commit')
+    parser.add_argument('--shape', type=Text(empty=False),
+                        default='x'.join(map(str, SHAPE)),
+                        help='BxTxHxW of the training pass')
+    parser.add_argument('--repeat', type=Integer(1, 1000), default=3,
+                        help='timed passes per backend')
+    # the driver's own call of a fresh process: backend, shape, repeat
+    parser.add_argument('--worker', nargs=3, type=Text(empty=False),
+                        help=argparse.SUPPRESS)
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    args = build_parser().parse_args(argv)
     if args.worker:
         backend, shape, repeat = args.worker
         print(json.dumps(worker(backend, [int(s) for s in shape.split('x')],

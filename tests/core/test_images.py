@@ -256,8 +256,8 @@ def test_a_path_that_is_not_utf8_is_named_as_such(tmp_path):
         read_image(os.fsdecode(path))
 
 
-def test_an_image_is_bounded_as_a_whole_before_decoding(tmp_path,
-                                                         monkeypatch):
+def test_an_image_is_bounded_as_a_whole_before_decoding(
+        tmp_path, monkeypatch):
     import cv2
     from wgse_mmseg.core.images import read_image
     from wgse_mmseg.core.limits import ALLOCATION_LIMIT_ENV

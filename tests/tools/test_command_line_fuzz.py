@@ -40,6 +40,7 @@ TOOL_FILES = sorted(osp.relpath(p, ROOT) for room in ('tools', 'dev')
                     for p in glob.glob(osp.join(ROOT, room, '**', '*.py'),
                                        recursive=True))
 TOOL_MODULES = ['wgse_bench.model_bases', 'wgse_bench.reconstruction',
+                'wgse_bench.wgse_memory',
                 'wgse_bench.triton_resources',
                 'wgse_mmseg.data_generation.training_images']
 TOOLS = TOOL_FILES + TOOL_MODULES

@@ -80,8 +80,10 @@ class LoadSpikeImagePair(BaseTransform):
 
     def transform(self, results: dict) -> dict:
         gt = read_grey_image(results['gt_path'])
+        # a .dat file records no frame size: the ground truth's by default
+        raw = str(results['img_path']).endswith('.dat')
         height, width = ((self.height, self.width) if self.height else
-                         gt.shape)
+                         gt.shape if raw else (None, None))
         loader = LoadSpikeFromFile(self.num_steps, height, width,
                                    results.get('gt_frame'), self.layout)
         results = loader(results)
