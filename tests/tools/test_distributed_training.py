@@ -68,9 +68,10 @@ def test_two_processes_keep_the_enhancer_in_sync(tiny_spike_dataset,
     # The two runs add the batch's gradients in different orders (an
     # all-reduce of two per-sample sums against one sum over the batch), so
     # their updates agree to float32 rounding of sums with cancellation, not
-    # to a fixed number: held to 1% of the tensor's largest update, where
-    # gradients summed rather than averaged, or not synchronised, are off
-    # by about the update itself.
+    # to a fixed number: held to 5% of the tensor's largest update (the
+    # tiny set's streams as the 64-bit seeds simulate them reach 2.3% in a
+    # 1->32 convolution's weights), where gradients summed rather than
+    # averaged, or not synchronised, are off by about the update itself.
     for name, value in rank0['after'].items():
         assert torch.equal(value, rank1['after'][name]), name
         torch.testing.assert_close(rank0['before'][name],
@@ -78,7 +79,7 @@ def test_two_processes_keep_the_enhancer_in_sync(tiny_spike_dataset,
         update = single['after'][name] - single['before'][name]
         torch.testing.assert_close(
             value - rank0['before'][name], update, rtol=0,
-            atol=1e-2 * update.abs().max().item() + 1e-9)
+            atol=5e-2 * update.abs().max().item() + 1e-9)
 
 
 @pytest.mark.long(50)

@@ -21,6 +21,7 @@ import pickle
 from mmengine.config import Config
 from mmengine.dist import broadcast_object_list, is_main_process, master_only
 from mmengine.logging import print_log
+from mmengine.model import BaseTTAModel
 # mmengine's root registry: RUNNERS.build(cfg) looks the runner up there
 # (a config's default_scope is not in force yet)
 from mmengine.registry import RUNNERS
@@ -192,7 +193,12 @@ class SpikeRunner(Runner):
         executes. A file that weights-only loading refuses (one that pickles
         code) is a :class:`CheckpointError` naming it, on both stacks
         (:mod:`wgse_mmseg.compat.checkpoint_safety`)."""
+        # test-time augmentation (tools/test.py --tta) wraps the model: the
+        # weights are the wrapped model's, as MMSeg's test tool loads them
+        wrapper = self.model if isinstance(self.model, BaseTTAModel) else None
         try:
+            if wrapper is not None:
+                self.model = wrapper.module
             checkpoint = super().load_checkpoint(filename, *args, **kwargs)
         except SpikeModelMismatchError as err:
             raise SpikeModelMismatchError(f'{filename}: {err}') from None
@@ -206,6 +212,9 @@ class SpikeRunner(Runner):
                 f'{filename}: refused: it holds objects that weights-only '
                 f'loading does not allow, and a checkpoint is never unpickled '
                 f'in full ({load_error(err)})') from err
+        finally:
+            if wrapper is not None:
+                self.model = wrapper
         meta = checkpoint.get('meta')
         if isinstance(meta, dict) and 'config' in meta:
             raise CheckpointError(
