@@ -61,6 +61,9 @@ def apply_test_options(cfg, args) -> None:
                              f'both)')
         cfg.test_dataloader.dataset.pipeline = cfg.tta_pipeline
         cfg.tta_model.module = cfg.model
+        # mmengine's TTA wrapper gives its own data preprocessor (else the
+        # runner's default: MMSeg's RGB one) to the model it builds
+        cfg.tta_model.data_preprocessor = cfg.model.data_preprocessor
         cfg.model = cfg.tta_model
 
 

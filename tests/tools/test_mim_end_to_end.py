@@ -89,7 +89,7 @@ def test_mim_in_the_readme_install_mode(tiny_spike_dataset, tiny_run_options,
               env=env)
     assert re.search(r'mIoU: [\d.]+', log), log[-3000:]
     drawn = sorted(p.name for p in shown.rglob('*.png'))
-    samples = sorted(osp.basename(p) for p in data.glob('spike/val/*/*'))
+    samples = sorted(p.name for p in data.glob('spike/val/*/*_spike.spk'))
     assert len(drawn) == len(samples) > 0, (drawn, samples)
     log = run([mim, 'run', 'wgse_mmseg', 'benchmark_wgse', '--impls',
                'torch', '--shapes', '1x12x3x4', '--repeat', '1'],
