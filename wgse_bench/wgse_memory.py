@@ -79,26 +79,25 @@ def measure(backend: str, shape: List[int], repeat: int,
 def build_parser() -> argparse.ArgumentParser:
     from wgse_mmseg.core.arguments import Integer, Path, Text
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--baseline', type=Path(exists='dir'),
+    parser.add_argument('--baseline', type=Path(exists='directory'),
                         help='a work tree of another commit')
     parser.add_argument('--shape', type=Text(empty=False),
                         default='x'.join(map(str, SHAPE)),
                         help='BxTxHxW of the training pass')
     parser.add_argument('--repeat', type=Integer(1, 1000), default=3,
                         help='timed passes per backend')
-    # the driver's own call of a fresh process: backend, shape, repeat
-    parser.add_argument('--worker', nargs=3, type=Text(empty=False),
-                        help=argparse.SUPPRESS)
     return parser
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    args = build_parser().parse_args(argv)
-    if args.worker:
-        backend, shape, repeat = args.worker
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ['--worker'] and len(argv) == 4:
+        # the driver's own call of a fresh process: backend, shape, repeat
+        backend, shape, repeat = argv[1:]
         print(json.dumps(worker(backend, [int(s) for s in shape.split('x')],
                                 int(repeat))))
         return 0
+    args = build_parser().parse_args(argv)
     shape = [int(s) for s in args.shape.split('x')]
     checkouts = [('this checkout', ROOT)]
     if args.baseline:
