@@ -27,6 +27,16 @@ EXPECTED = {
 PAGE = osp.join(ROOT, 'docs', 'models.md')
 
 
+def _made_on_this_stack():
+    """Whether docs/models.md was made with the installed mmcv."""
+    from wgse_bench.machine import machine_record
+    return f'mmcv {machine_record()["mmcv"]}' in open(
+        PAGE, encoding='utf-8').read().split('\n\n| model base')[0]
+
+
+_PAGE_STACK = _made_on_this_stack()
+
+
 def _page_status(name):
     for line in open(PAGE, encoding='utf-8'):
         if line.startswith(f'| {name} '):
@@ -52,7 +62,9 @@ def test_a_model_base_trains_with_spikes_or_is_refused_naming_why(base):
     assert row['status'] == 'trains' or row['reason'], row
     status, reason = EXPECTED.get(name, (row['status'], ''))
     assert row['status'] == status and reason in row['reason'], row
-    assert _page_status(name) == row['status'], (name, row)
+    if _PAGE_STACK:  # the page says what this stack gives (the fork's
+        # mmcv lacks what PointRend imports)
+        assert _page_status(name) == row['status'], (name, row)
 
 
 def test_the_models_page_lists_every_base():

@@ -179,8 +179,8 @@ def install_mmcv_ops_fallback() -> bool:
         return False
     needed = stand_in_names()
     if not needed:
-        _notice_once('wgse_mmseg: mmcv has no compiled ops here; what needs '
-                     f'them is unavailable. For them, {_INSTALL_HINT}.')
+        _notice_once('wgse_mmseg: mmcv without compiled ops: what needs them '
+                     'fails when used (docs/install.md, "mmcv ops")')
         return False
     ops_dir = osp.join(osp.dirname(mmcv.__file__), 'ops')
     package = types.ModuleType('mmcv.ops')
