@@ -32,7 +32,8 @@ import torch
 from torch import Tensor
 
 from ..parallel import for_each_on_threads
-from .torch_band_networks import chunk_groups, differentiable_backward
+from .torch_band_networks import (chunk_groups, differentiable_backward,
+                                  op_residuals, residual_plan)
 
 try:
     from . import _band_networks
@@ -140,8 +141,8 @@ class _Bands:
         #: first column of each band in ``coeffs``
         self.offsets = list(accumulate(self.lengths, initial=0))[:-1]
         self.params = [_pack(band) for band in weights]
-        self.residuals = torch.tensor(
-            [-1 if r is None else r for r in residuals], dtype=torch.int64)
+        self.residuals = torch.tensor(op_residuals(residuals),
+                                      dtype=torch.int64)
         self.layers = len(residuals)
         #: each band's slice of the gradient buffer (all bands side by side)
         ends = list(accumulate(_grad_size(band) for band in weights))
@@ -191,11 +192,6 @@ def _weights_of(params: Sequence[Tensor], bands: int
             for first in range(0, len(params), per_band or 1)]
 
 
-def _residual_plan(residuals: Sequence[int]) -> List[Optional[int]]:
-    """The custom ops' ``int[]`` residual plan (``-1``: none)."""
-    return [None if r < 0 else r for r in residuals]
-
-
 FORWARD_OP = 'wgse_mmseg::compiled_band_networks'
 BACKWARD_OP = 'wgse_mmseg::compiled_band_networks_backward'
 # Defined as the torch kernel's ops are (:mod:`.torch_band_networks`: no
@@ -215,7 +211,7 @@ def _forward_op(coeffs: Tensor, lengths: List[int], residuals: List[int],
     ``[W_1, b_1, ...]`` band after band; ``(N, C)`` out. ``torch.compile``
     sees one opaque call (no graph break)."""
     bands = _Bands(coeffs, lengths, _weights_of(params, len(lengths)),
-                   _residual_plan(residuals))
+                   residual_plan(residuals))
     out = torch.empty_like(coeffs)
     for_each_on_threads(lambda chunk, _: bands.run(chunk, out=out),
                         len(bands.chunks), lambda: None)
@@ -235,7 +231,7 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     recomputed group by group): the parameters' gradients, in their
     order, shapes and dtypes."""
     weights = _weights_of(params, len(lengths))
-    bands = _Bands(coeffs, lengths, weights, _residual_plan(residuals))
+    bands = _Bands(coeffs, lengths, weights, residual_plan(residuals))
     grad_out = grad_out.contiguous()
     groups = chunk_groups(len(bands.chunks))
     sums = [None] * len(groups)
@@ -273,7 +269,7 @@ def _backward(ctx, grad_out: Tensor):
         grads = differentiable_backward(
             grad_out, coeffs, params,
             [False] + list(ctx.needs_input_grad[3]), ctx.lengths,
-            _residual_plan(ctx.residuals), KERNEL_SIZE // 2)
+            residual_plan(ctx.residuals), KERNEL_SIZE // 2)
         return None, None, None, grads[1:]
     return None, None, None, \
         torch.ops.wgse_mmseg.compiled_band_networks_backward(
@@ -307,4 +303,4 @@ def compiled_band_networks(coeffs: Tensor, lengths: Sequence[int],
     params = [t for band in weights for layer in band for t in layer]
     return torch.ops.wgse_mmseg.compiled_band_networks(
         coeffs.contiguous(), list(lengths),
-        [-1 if r is None else r for r in residuals], params)
+        op_residuals(residuals), params)

@@ -335,9 +335,15 @@ def differentiable_backward(grad_out: Tensor, coeffs: Tensor,
     return [next(found) if need else None for need in needs_input_grad]
 
 
-def _residual_plan(residuals: Sequence[int]) -> Tuple[Optional[int], ...]:
+def op_residuals(plan: Sequence[Optional[int]]) -> List[int]:
+    """A residual plan ``(index or None, ...)`` as the custom ops'
+    ``int[]`` (``-1``: none); :func:`residual_plan` reads it back."""
+    return [-1 if r is None else r for r in plan]
+
+
+def residual_plan(residuals: Sequence[int]) -> Tuple[Optional[int], ...]:
     """The custom ops' ``int[]`` residual plan (``-1``: none) as the
-    kernel's ``(index or None, ...)``."""
+    kernels' ``(index or None, ...)``."""
     return tuple(None if r < 0 else r for r in residuals)
 
 
@@ -363,7 +369,7 @@ def _forward_op(coeffs: Tensor, lengths: List[int], residuals: List[int],
     ``torch.compile`` sees one opaque call (no graph break) whose output
     shape :func:`_forward_fake` gives."""
     out = torch.empty_like(coeffs)
-    chunks = list(_chunks(coeffs, tuple(lengths), _residual_plan(residuals),
+    chunks = list(_chunks(coeffs, tuple(lengths), residual_plan(residuals),
                           pad, params))
 
     def forward_chunk(chunk: int, scratch: _Workspace) -> None:
@@ -390,7 +396,7 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     """The hand-written backward pass of :func:`_forward_op` (each chunk's
     activations recomputed): ``[d coeffs (N, C), *d params]``, without
     ``d coeffs`` unless ``input_grad``."""
-    plan = _residual_plan(residuals)
+    plan = residual_plan(residuals)
     grad_coeffs = torch.zeros_like(coeffs) if input_grad else None
     grad_out = grad_out.contiguous()
     per_band = 2 * len(plan)
@@ -442,7 +448,7 @@ def _backward(ctx, grad_out: Tensor):
         grads = differentiable_backward(
             grad_out, coeffs, params,
             [input_grad] + list(ctx.needs_input_grad[4]), ctx.lengths,
-            _residual_plan(ctx.residuals), ctx.pad)
+            residual_plan(ctx.residuals), ctx.pad)
         return grads[0], None, None, None, grads[1:]
     grads = torch.ops.wgse_mmseg.torch_band_networks_backward(
         grad_out, coeffs, ctx.lengths, ctx.residuals, ctx.pad, params,
@@ -515,5 +521,5 @@ def torch_band_networks(coeffs: Tensor, lengths: Sequence[int],
     params = [t for band in weights for layer in band for t in layer]
     return torch.ops.wgse_mmseg.torch_band_networks(
         coeffs.contiguous(), list(lengths),
-        [-1 if r is None else r for r in residuals], kernel_size // 2,
+        op_residuals(residuals), kernel_size // 2,
         params)
