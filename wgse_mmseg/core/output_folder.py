@@ -440,20 +440,31 @@ def note_written(path: str) -> None:
             return
 
 
-def _open_manifest(path: str, flags: int) -> int:
-    """The manifest ``path`` opened with ``flags``: a regular file of one
-    name, never a link, or an :class:`OutputFolderError` naming it."""
+def _open_own_file(path: str, flags: int, cannot: str,
+                   not_regular: str) -> int:
+    """``path`` opened with ``flags``, never through a link and never
+    waiting on a FIFO, as a regular file of one name; else an
+    :class:`OutputFolderError` ``'{path}: {cannot} (a link?): ...'`` or
+    ``'{path}: {not_regular}'``."""
     try:
         fd = os.open(path, flags | _NOFOLLOW | os.O_NONBLOCK, 0o666)
     except OSError as err:
-        raise OutputFolderError(f'{path}: cannot open the folder\'s '
-                                f'manifest (a link?): {err.strerror}') from err
+        raise OutputFolderError(f'{path}: {cannot} (a link?): '
+                                f'{err.strerror}') from err
     info = os.fstat(fd)
     if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
         os.close(fd)
-        raise OutputFolderError(f'{path}: the folder\'s manifest is not a '
-                                f'regular file of one name; move it away')
+        raise OutputFolderError(f'{path}: {not_regular}')
     return fd
+
+
+def _open_manifest(path: str, flags: int) -> int:
+    """The manifest ``path`` opened with ``flags``: a regular file of one
+    name, never a link, or an :class:`OutputFolderError` naming it."""
+    return _open_own_file(
+        path, flags, 'cannot open the folder\'s manifest',
+        'the folder\'s manifest is not a regular file of one name; move it '
+        'away')
 
 
 class OwnedFolder:
@@ -808,18 +819,10 @@ def open_append(path: str) -> BinaryIO:
     """Open the state file ``path`` for appending: made if missing; a link
     (never followed), a file with other names (hard links) or anything but
     a regular file is an :class:`OutputFolderError` naming it."""
-    try:
-        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW
-                     | os.O_NONBLOCK, 0o666)  # a FIFO: an error, no wait
-    except OSError as err:
-        raise OutputFolderError(f'{path}: cannot append to it (a link?): '
-                                f'{err.strerror}') from err
-    info = os.fstat(fd)
-    if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
-        os.close(fd)
-        raise OutputFolderError(f'{path}: not a regular file of one name; '
-                                f'a state file is not appended to through '
-                                f'a link')
+    fd = _open_own_file(
+        path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 'cannot append to it',
+        'not a regular file of one name; a state file is not appended to '
+        'through a link')
     return os.fdopen(fd, 'ab')
 
 
