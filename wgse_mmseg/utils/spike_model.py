@@ -15,6 +15,7 @@ side)``, as MMSeg's own UNet configs set it.
 import os.path as osp
 from typing import Any, Dict, Optional, Union
 
+from .cross_checks import OWN_TARGET_HEADS, ModelFitError
 from .spike_settings import stem_fields
 
 __all__ = []
@@ -73,7 +74,6 @@ def spike_config(config: Union[str, Any], enhancer: Optional[dict] = None,
     merged.update({key: base[key] for key in DATA_KEYS})
     model = merged['model']
     if not isinstance(model.get('decode_head'), (dict, list, tuple)):
-        from .cross_checks import ModelFitError
         raise ModelFitError(
             f'{getattr(cfg, "filename", config)}: its model '
             f'({model.get("type")}) has no decode_head: not a segmentor '
@@ -81,7 +81,8 @@ def spike_config(config: Union[str, Any], enhancer: Optional[dict] = None,
     model['data_preprocessor'] = dict(base['spike_data_preprocessor'],
                                       enhancer=enhancer)
     for head in _heads(model):
-        if 'num_classes' in head and head.get('type') != 'STDCHead':
+        if 'num_classes' in head and \
+                head.get('type') not in OWN_TARGET_HEADS:
             head['num_classes'] = base['num_classes']
     test_cfg = model.get('test_cfg')
     if isinstance(test_cfg, dict) and isinstance(test_cfg.get('crop_size'),
