@@ -16,7 +16,7 @@ ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 
 #: the library's packages (and top-level modules) from the ground floor up
 FLOORS = (
-    ('version', 'core'),
+    ('version', 'errors', 'core'),
     ('data_generation',),
     ('compat',),
     ('_openmmlab',),

@@ -39,6 +39,8 @@ import re
 import stat
 from typing import Any
 
+from ..errors import EXCERPT_CHARS, cut, excerpt  # noqa: F401
+
 #: ``T``: spike frames per window (``num_steps``) a model, transform,
 #: converter or the simulator works on (0.2 s of a 20 kHz camera)
 MAX_NUM_STEPS = 4096
@@ -93,22 +95,12 @@ TEXT_FILE_LIMIT_BYTES = 2**20
 #: bytes of a log or result file of a training run the package reads back
 #: (mmengine's logs, an experiment's results)
 LOG_FILE_LIMIT_BYTES = 2**28
-#: characters of a value quoted in an error message
-EXCERPT_CHARS = 200
 #: nesting of arrays and objects in JSON read from a file or a model
 MAX_JSON_DEPTH = 32
 
 #: a JSON string literal (escapes included), whose brackets do not nest
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 _JSON_BRACKET = re.compile(r'[\[\]{}]')
-
-
-def cut(text: str, limit: int = EXCERPT_CHARS) -> str:
-    """``text``, cut to ``limit`` characters with a note of its full
-    length when longer."""
-    if len(text) <= limit:
-        return text
-    return f'{text[:limit]}... ({len(text)} characters)'
 
 
 def check_utf8_path(path, library: str) -> None:
@@ -127,11 +119,6 @@ def check_utf8_path(path, library: str) -> None:
             f'{ascii(os.fspath(path))}: the path holds bytes that are not '
             f'UTF-8, which {library} cannot open; rename the file or the '
             f'folder on its way') from None
-
-
-def excerpt(value: Any, limit: int = EXCERPT_CHARS) -> str:
-    """``repr(value)`` for an error message, :func:`cut` to ``limit``."""
-    return cut(repr(value), limit)
 
 
 def read_text_file(path: str, what: str,
