@@ -76,7 +76,7 @@ FIXTURE_FILES = {}
 @pytest.fixture(scope='module', autouse=True)
 def _files(tmp_path_factory, wrong_file_kinds):
     import cv2
-    from wgse_mmseg.core.io import save_spikes
+    from wgse_mmseg.fileio.spike_files import save_spikes
     root = tmp_path_factory.mktemp('fuzz')
     (root / 'images').mkdir()
     cv2.imwrite(str(root / 'images' / 'a.png'),

@@ -30,7 +30,7 @@ from wgse_mmseg.apis.onnx_export import (SpikeSegmentorGraph, export_onnx,
                                          random_spikes)
 from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
 from wgse_mmseg.core.arguments import Integer, declare
-from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
+from wgse_mmseg.limits import MAX_BATCH_SIZE, MAX_WORKERS
 from wgse_mmseg.utils.config import load_config
 
 from .machine import machine_record

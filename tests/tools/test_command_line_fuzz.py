@@ -29,7 +29,7 @@ from hypothesis import strategies as st
 
 from wgse_mmseg.core.arguments import (LAYOUT, Argument, Choice, Integer,
                                        Number, OneOf, Path, SequenceOf, Text)
-from wgse_mmseg.core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
+from wgse_mmseg.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
 from wgse_mmseg.data_generation.shards import Shard, ShardArgument
 from wgse_mmseg.utils.config import SPIKE_SETTING_KINDS, ConfigOptions
 

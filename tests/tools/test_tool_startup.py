@@ -36,4 +36,4 @@ def test_importing_the_package_imports_nothing_heavy(startup):
     # nor the argument declarations the tools' parsers are built from
     assert startup.heavy_imports(
         ['-c', 'import wgse_mmseg.core.arguments, '
-         'wgse_mmseg.core.recording_walk, wgse_mmseg.utils.config']) == []
+         'wgse_mmseg.apis.recording_walk, wgse_mmseg.utils.config']) == []

@@ -13,8 +13,9 @@ import argparse
 import time
 
 from wgse_mmseg.core.arguments import Text
-from wgse_mmseg.core.output_folder import (add_wait_option,
-                                           check_tool_outputs, keeps_inputs)
+from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.fileio.locks import add_wait_option
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
 from wgse_mmseg.data_generation.cityscapes_conversion import (
     ConversionSettings, convert_cityscapes, load_scene)
 from wgse_mmseg.data_generation.shards import SHARD, WHOLE

@@ -15,7 +15,7 @@ from mmengine.config import Config
 
 import wgse_mmseg
 from wgse_mmseg.core.arguments import EPOCHS, ITERATIONS, declare
-from wgse_mmseg.core.limits import excerpt
+from wgse_mmseg.errors import excerpt
 from wgse_mmseg.utils.config import parse_option_value
 
 from .settings import check_schedule

@@ -35,11 +35,11 @@ from mmengine.model import revert_sync_batchnorm
 from torch import nn
 
 from ..core.arguments import NUM_STEPS, SIDE, declare
-from ..core.io import atomic_path
 from ..core.wgse import WGSE
+from ..fileio.atomic import atomic_path
 from ..utils.cross_checks import check_input_fits
-from .onnx_segmentor import INPUT, OUTPUT, OnnxSpikeSegmentor, \
-    check_dataset_meta
+from .onnx_segmentor import (INPUT, OUTPUT, OnnxSpikeSegmentor,
+                             check_dataset_meta)
 from .onnx_settings import (LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET,
                             OPSETS)
 

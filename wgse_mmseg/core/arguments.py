@@ -28,8 +28,9 @@ from dataclasses import dataclass
 from numbers import Integral, Real
 from typing import Any, Callable, Dict, Optional, Sequence
 
-from .limits import (MAX_CLASSES, MAX_EPOCHS, MAX_IMAGE_SIDE, MAX_ITERS,
-                     MAX_NUM_STEPS, MAX_PARAMETERS, MAX_SEED, excerpt)
+from ..errors import excerpt
+from ..limits import (MAX_CLASSES, MAX_EPOCHS, MAX_IMAGE_SIDE, MAX_ITERS,
+                      MAX_NUM_STEPS, MAX_PARAMETERS, MAX_SEED)
 
 __all__ = ['ArgumentError']
 

@@ -25,7 +25,7 @@ import torch
 
 from .arguments import Integer, Number, declare
 from .constants import REDS_WHITE_RATE
-from .limits import MAX_WINDOW
+from ..limits import MAX_WINDOW
 from .representations import (TFI, TFP, SpatialMeanFilter,
                               TemporalMeanFilter)
 

@@ -40,7 +40,7 @@ from torch import nn
 
 from .checks import check_finite
 from .arguments import Integer, declare
-from .limits import MAX_WINDOW
+from ..limits import MAX_WINDOW
 
 __all__ = ['TemporalMeanFilter', 'TFP', 'TFI', 'SpatialMeanFilter']
 

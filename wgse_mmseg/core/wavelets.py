@@ -27,7 +27,7 @@ import pywt
 import torch
 
 from .arguments import Choice, Integer, declare
-from .limits import MAX_LEVEL, MAX_NUM_STEPS
+from ..limits import MAX_LEVEL, MAX_NUM_STEPS
 
 __all__ = ['wavedec', 'waverec']
 

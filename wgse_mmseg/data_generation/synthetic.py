@@ -18,11 +18,12 @@ from tqdm import tqdm
 
 from ..core.arguments import (NUM_STEPS, SEED, SIDE, Flag, Integer, Number,
                               Path, declare)
-from ..core.limits import MAX_SAMPLES, check_allocation
+from ..limits import MAX_SAMPLES, check_allocation
 from ..core.constants import REDS_THRESHOLD
-from ..core.io import save_spikes, write_png
-from ..core.markers import invalidate, is_complete, write_marker
-from ..core.output_folder import own_folder
+from ..fileio.images import write_png
+from ..fileio.spike_files import save_spikes
+from ..fileio.markers import invalidate, is_complete, write_marker
+from ..fileio.locks import own_folder
 from ..core.seeding import derive_generator, derive_seed
 
 __all__ = ['make_synthetic_dataset']

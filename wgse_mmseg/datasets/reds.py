@@ -33,8 +33,8 @@ from mmseg.registry import DATASETS, TRANSFORMS
 from ..core.arguments import (FRAME_SIZE, LAYOUT, NUM_STEPS, SEED, SIDE,
                               Integer, Number, Path, SequenceOf,
                               Text, declare)
-from ..core.folder_walk import files_under
-from ..core.limits import MAX_SAMPLES
+from ..fileio.folder_walk import files_under
+from ..limits import MAX_SAMPLES
 from ..core.seeding import derive_generator, derive_seed
 from ..core.constants import REDS_WHITE_RATE
 from ..core.simulation import simulate_spikes

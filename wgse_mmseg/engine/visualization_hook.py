@@ -12,7 +12,7 @@ from mmseg.engine.hooks import SegVisualizationHook
 from mmseg.registry import HOOKS
 from mmseg.structures import SegDataSample
 from ..core.exposure import apply_exposure
-from ..core.io import to_uint8
+from ..fileio.images import to_uint8
 from ..core.reconstruction_baselines import tfp
 from ..datasets.transforms import LoadSpikeFromFile
 

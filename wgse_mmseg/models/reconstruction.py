@@ -26,10 +26,10 @@ from mmseg.registry import MODELS
 from ..core.checks import check_finite
 from ..core.arguments import (NUM_STEPS, Integer, check_parameter_count,
                               declare)
-from ..core.io import atomic_output
+from ..fileio.atomic import atomic_output
 from ..core import reconstruction_baselines
 from ..core.constants import RECONSTRUCTION_METHODS
-from ..core.limits import MAX_CHANNELS, MAX_NUM_BLOCKS
+from ..limits import MAX_CHANNELS, MAX_NUM_BLOCKS
 from ..utils.checkpoint import CheckpointError, read_checkpoint
 from ..utils.config_data import ConfigDataError, read_config_data
 from ..utils.safe_build import build_from_file_config, check_file_config

@@ -44,7 +44,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf,
                               Path)
-from ..core.limits import excerpt
+from ..errors import excerpt
 
 __all__ = []
 

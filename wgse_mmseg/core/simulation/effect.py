@@ -28,7 +28,7 @@ from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Type
 import torch
 
 from ..arguments import Choice, Number, SequenceOf
-from ..limits import excerpt
+from ...errors import excerpt
 from ..seeding import derive_seed
 
 __all__ = []

@@ -7,7 +7,7 @@ import torch
 from ..arguments import (FLOAT32_RANGE, NUM_STEPS, SEED, Choice, Number,
                          declare)
 from ..constants import READOUT_HZ
-from ..limits import check_allocation
+from ...limits import check_allocation
 from .effect import SimulationContext
 from .fixed_point import CHOICES, MAX_BLOCK_STEPS, Integrator, quantise
 from .intensity import frames_to_intensity

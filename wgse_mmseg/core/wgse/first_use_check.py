@@ -56,7 +56,7 @@ from typing import Dict, List, NamedTuple, Optional, Sequence
 import torch
 from torch import Tensor, nn
 
-from ..limits import cut
+from ...errors import cut
 
 __all__ = ['FirstUseCheckFailed']
 

@@ -34,7 +34,7 @@ from .first_use_check import CheckResult
 from ..arguments import (Choice, Flag, Integer, check_parameter_count,
                          declare)
 from ..checks import check_finite, check_finite_parameters
-from ..limits import MAX_CHANNELS, MAX_KERNEL_SIZE, MAX_LEVEL, MAX_NUM_BLOCKS
+from ...limits import MAX_CHANNELS, MAX_KERNEL_SIZE, MAX_LEVEL, MAX_NUM_BLOCKS
 from ..wavelets import (SUPPORTED_MODES, analysis_matrix, band_lengths,
                         synthesis_matrix)
 

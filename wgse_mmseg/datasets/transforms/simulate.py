@@ -20,9 +20,10 @@ from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
 from ...core.arguments import NUM_STEPS, SEED, Choice, Number, declare
-from ...core.images import read_image
+from ...fileio.images import read_image
 from ...core.seeding import derive_seed, draw_seed
-from ...core.simulation import parse_effects, read_scene_file, simulate_spikes
+from ...core.simulation import parse_effects, simulate_spikes
+from ...fileio.scene_files import read_scene_file
 
 __all__ = ['SimulateSpikes']
 
