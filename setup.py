@@ -72,7 +72,7 @@ if __name__ == '__main__':
         include_package_data=True,
         package_data={'wgse_mmseg': ['.mim/**/*', '.mim/**/**/*',
                                      '.mim/**/**/**/*', 'weights/*.pth',
-                                     'core/quality/data/*']},
+                                     'evaluation/quality/data/*']},
         # The OpenMMLab stack is an extra, one per stack: both publish the
         # import packages mmseg, mmengine, mmcv and mim, so naming one here
         # would install it over the other (docs/install.md;
@@ -83,7 +83,8 @@ if __name__ == '__main__':
             'numpy',
             'PyWavelets>=1.4',
             'opencv-python>=4.8,<5',  # 5 rejects arrays of > 128 channels
-            'PyYAML>=6',  # core: scene files (core.simulation.scene)
+            'Pillow>=9.1',  # image headers read before decoding (fileio.images)
+            'PyYAML>=6',  # scene files (fileio.scene_files)
             'tqdm',
         ],
         extras_require={

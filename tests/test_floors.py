@@ -89,3 +89,47 @@ def test_the_check_sees_an_import_up_a_floor(tmp_path):
     module.write_text('def f():\n    from .. import engine\n')
     found = [name for _, name in _imports(str(module), 'wgse_mmseg.utils')]
     assert 'wgse_mmseg.engine' in found
+
+
+def test_the_file_plumbing_imports_no_torch():
+    """Every module of ``wgse_mmseg.fileio`` imports without torch, OpenCV
+    or OpenMMLab: the tools' readers and writers start at once."""
+    import subprocess
+    import sys
+    names = sorted(osp.basename(path)[:-3] for path in glob.glob(
+        osp.join(ROOT, 'wgse_mmseg', 'fileio', '*.py')))
+    script = ('import sys\n' + ''.join(
+        f'import wgse_mmseg.fileio.{name}\n' for name in names
+        if name != '__init__') + 'print(sorted(m for m in sys.modules if '
+        'm.split(".")[0] in ("torch", "cv2", "mmengine", "mmseg")))')
+    proc = subprocess.run([sys.executable, '-c', script], cwd=ROOT,
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split() == ['[]']
+
+
+def _package_of(name):
+    """The package a dotted module name of the library belongs to (its
+    first two parts: ``wgse_mmseg.core``)."""
+    return '.'.join(name.split('.')[:2])
+
+
+def test_no_private_module_is_imported_from_another_package():
+    """A module named ``_x`` is its package's own: the library's other
+    packages, the measurement wing, the tools and the maintainers' scripts
+    reach none."""
+    wrong = []
+    paths = [path for pattern in ('wgse_mmseg/**/*.py', 'wgse_bench/**/*.py',
+                                  'tools/**/*.py', 'dev/*.py')
+             for path in glob.glob(osp.join(ROOT, pattern), recursive=True)]
+    for path in sorted(paths):
+        parts = osp.relpath(path, ROOT)[:-3].split(osp.sep)
+        package = '.'.join(parts[:-1])
+        for line, name in _imports(path, package):
+            if not name.startswith('wgse_mmseg.'):
+                continue
+            private = [i for i, part in enumerate(name.split('.'))
+                       if part.startswith('_') and not part.startswith('__')]
+            if private and _package_of(name) != _package_of(package):
+                wrong.append(f'{osp.relpath(path, ROOT)}:{line}: {name}')
+    assert not wrong, '\n'.join(wrong)

@@ -1,12 +1,17 @@
 """wgse_mmseg: spike-camera data and WGSE for MMSegmentation.
 
-Two layers:
+Without OpenMMLab:
 
-* :mod:`wgse_mmseg.core` needs torch, NumPy, PyWavelets, OpenCV and PyYAML
-  (Triton for the GPU kernels), not OpenMMLab: spike I/O, wavelets,
-  representations, WGSE and its kernels, the simulator; and
-  :mod:`wgse_mmseg.data_generation` (converters, synthetic scenes) on top
-  of it, without OpenMMLab as well;
+* :mod:`wgse_mmseg.core`, the spike maths (torch, NumPy, PyWavelets;
+  Triton for the GPU kernels): wavelets, representations, WGSE and its
+  kernels, the simulator, the spike formats;
+* :mod:`wgse_mmseg.fileio`, the file plumbing (torch-free): spike and image
+  files, atomic writes, output folders, the input guard;
+* :mod:`wgse_mmseg.data_generation` (converters, synthetic scenes) on top
+  of both;
+
+and with it:
+
 * the MMSeg layer (:mod:`.datasets`, :mod:`.engine`, :mod:`.evaluation`,
   :mod:`.models`; :mod:`.apis` and :mod:`.utils` for the tools) registers them,
   and the datasets, transforms, data preprocessor and metrics, with MMSeg's
@@ -14,8 +19,8 @@ Two layers:
 
 Importing a module changes nothing in the process (``import wgse_mmseg``
 imports none of its subpackages, nor torch, OpenMMLab, Triton, ONNX or
-OpenCV: each subpackage is imported where it is first used, as
-``wgse_mmseg.core``; as ``import mmseg`` registers nothing). The MMSeg layer
+OpenCV; import a subpackage by name, ``import wgse_mmseg.core``; as
+``import mmseg`` registers nothing). The MMSeg layer
 needs compatibility patches (:mod:`wgse_mmseg.compat`: under mmcv-lite a
 stand-in ``mmcv.ops`` that MMSeg imports at module level; torch's
 weights-only allowlist for mmengine checkpoints; MMSeg's own deprecation
@@ -35,9 +40,6 @@ from .version import __version__
 #: the packages that register with MMSeg
 _MMSEG_LAYER = ('wgse_mmseg.datasets', 'wgse_mmseg.engine',
                 'wgse_mmseg.evaluation', 'wgse_mmseg.models')
-#: the subpackages, imported where first used (a tool's ``--help`` needs none)
-_LAZY = ('apis', 'compat', 'core', 'data_generation', 'datasets', 'engine',
-         'evaluation', 'models', 'utils')
 
 
 def register_all_modules() -> None:
@@ -73,12 +75,6 @@ def spike_config(config, enhancer: dict = None, cfg_options: dict = None):
     as a shipped config does; ``cfg.dump(path)`` writes it for the tools."""
     from .utils.spike_model import spike_config as combine
     return combine(config, enhancer, cfg_options)
-
-
-def __getattr__(name):
-    if name in _LAZY:
-        return importlib.import_module(f'{__name__}.{name}')
-    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
 __all__ = ['__version__', 'load_config', 'register_all_modules',

@@ -13,8 +13,8 @@ SCRIPT = '''
 import json, sys
 import numpy as np, torch
 import wgse_mmseg
-from wgse_mmseg.core import (TFI, TFP, WGSE, load_spikes, save_spikes,
-                             simulate_spikes, wavedec)
+from wgse_mmseg.core import TFI, TFP, WGSE, simulate_spikes, wavedec
+from wgse_mmseg.fileio import load_spikes, save_spikes
 spikes, _ = simulate_spikes(np.full((2, 6, 8), 0.5), 41, seed=0)
 save_spikes(sys.argv[1], spikes)
 stream = torch.from_numpy(load_spikes(sys.argv[1]))[None].float()
@@ -22,7 +22,7 @@ model = WGSE(backend='torch')
 out = model(stream)
 out.square().mean().backward()
 try:
-    wgse_mmseg.models
+    import wgse_mmseg.models  # noqa: F401
     error = None
 except ImportError as exc:
     error = str(exc)

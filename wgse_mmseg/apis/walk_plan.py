@@ -14,6 +14,8 @@ from ..fileio.locks import check_named_folder
 from ..fileio.output_folder import check_output_folder
 from ..fileio.spike_files import load_spikes, spike_shape
 
+__all__ = []
+
 #: the video formats, by lower-case extension of ``video``
 VIDEO_EXTENSIONS = ('.mp4', '.gif')
 

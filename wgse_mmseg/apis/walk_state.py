@@ -13,6 +13,8 @@ from ..fileio.markers import file_digest
 from ..fileio.output_folder import OwnedFolder
 from .walk_plan import WalkError, WalkPlan
 
+__all__ = []
+
 #: the CSV's columns, one row per walked window
 CSV_COLUMNS = ('window', 'centre', 'start', 'end', 'batch', 'time_ms')
 

@@ -13,6 +13,8 @@ from ..fileio.output_folder import OwnedFolder, note_written
 from .walk_plan import WalkError, WalkOutputs
 from .walk_state import CSV_COLUMNS, PROGRESS_NAME, csv_line, frame_name
 
+__all__ = []
+
 
 def png_image(frame: np.ndarray) -> np.ndarray:
     """An 8-bit grey or RGB frame as :func:`write_png` takes it (grey, or

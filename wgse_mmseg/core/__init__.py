@@ -1,71 +1,50 @@
-"""Spike data and WGSE without OpenMMLab.
+"""The spike maths, without OpenMMLab and without file plumbing.
 
-This subpackage needs torch, NumPy, PyWavelets, OpenCV and PyYAML (all in
-``install_requires``; Triton only for the GPU kernels). It imports and runs
+Needs torch, NumPy and PyWavelets (Triton only for the GPU kernels); runs
 where mmengine, mmseg and mmcv are not installed (a GPU machine without
-OpenMMLab, a notebook), and importing it changes nothing outside it.
+OpenMMLab, a notebook), reads and writes no file, and importing it changes
+nothing outside it. Files are :mod:`wgse_mmseg.fileio`'s.
 
-* :mod:`.constants`: the readout rate and the REDS intensity scale;
-  :mod:`.arguments`: the declared argument checks of the public entry
-  points; :mod:`.limits`: the stated size limits they apply;
-* :mod:`.io`: spike files (``.dat``, ``.spk``, ``.npy``, ``.npz``) and
-  atomic writes;
 * :mod:`.wavelets`: the DWT as matrices, equal to PyWavelets';
-* :mod:`.enhancers`: the one list of enhancers (WGSE and the classical
-  representations); :mod:`.seeding`: the one seed range, check and
-  derivation rule;
+* :mod:`.wgse`: WGSE, its band-network backends and kernels;
 * :mod:`.representations`: TFP, TFI and the mean filters as modules
   ``(B, T, H, W) -> (B, T, H, W)``; :mod:`.reconstruction_baselines`: TFP
   and TFI images of one window; :mod:`.exposure`: exposure normalisation
-  of such images;
-* :mod:`.wgse`: WGSE, its band-network backends and kernels;
+  of such images; :mod:`.image_values`: what an image array means;
 * :mod:`.simulation`: frames to spike streams, with sensor and camera
   effects;
-* :mod:`.parallel`: independent CPU work on torch's threads.
+* :mod:`.spike_formats`: what the bytes of each spike file format mean;
+* :mod:`.enhancers`: the one list of enhancers; :mod:`.seeding`: the one
+  seed range, check and derivation rule; :mod:`.constants`: the readout
+  rate and the REDS intensity scale; :mod:`.checks`: finite tensors;
+  :mod:`.parallel`: independent CPU work on torch's threads.
 
-The MMSeg layer (``wgse_mmseg.datasets``, ``.models``, ``.evaluation``)
-registers these with MMSeg's registries.
-
-Importing it imports none of these: each name below, and each submodule,
-is imported where it is first used, so that a command line's argument
-parser (:mod:`.arguments`, :mod:`.limits`, :mod:`.output_folder`) loads
-without torch, OpenCV or Triton.
+The names below are imported where first used, not with the package: the
+torch-free modules (:mod:`.spike_formats`, :mod:`.image_values`) are read by
+the file plumbing and the tools' argument parsers, which must start without
+torch. Every name reachable here is in ``__all__``.
 """
 import importlib
 
 #: public name -> the submodule that defines it
 _NAMES = {
-    'READOUT_HZ': 'constants', 'REDS_THRESHOLD': 'constants',
-    'REDS_WHITE_RATE': 'constants', 'apply_exposure': 'exposure',
-    'exposure_gain': 'exposure', 'SpikeFileError': 'spike_formats',
+    'SpikeFileError': 'spike_formats', 'apply_exposure': 'exposure',
     'TFI': 'representations', 'TFP': 'representations',
     'SpatialMeanFilter': 'representations',
     'TemporalMeanFilter': 'representations',
     'simulate_spikes': 'simulation', 'wavedec': 'wavelets',
-    'waverec': 'wavelets', 'WGSE': 'wgse', 'BandNetwork': 'wgse',
+    'waverec': 'wavelets', 'WGSE': 'wgse',
 }
 
-__all__ = [
-    'SpikeFileError', 'TFI',
-    'TFP', 'SpatialMeanFilter', 'TemporalMeanFilter', 'simulate_spikes',
-    'wavedec', 'waverec', 'WGSE', 'apply_exposure'
-]
+__all__ = list(_NAMES)
 
 
 def __getattr__(name):
-    if name in _NAMES:
-        module = importlib.import_module(f'{__name__}.{_NAMES[name]}')
-    elif name.startswith('__'):
-        raise AttributeError(name)
-    else:  # a submodule not imported yet
-        try:
-            return importlib.import_module(f'{__name__}.{name}')
-        except ModuleNotFoundError as err:
-            if err.name != f'{__name__}.{name}':
-                raise
-            raise AttributeError(
-                f'module {__name__!r} has no attribute {name!r}') from None
-    value = globals()[name] = getattr(module, name)
+    if name not in _NAMES:
+        raise AttributeError(
+            f'module {__name__!r} has no attribute {name!r}')
+    value = globals()[name] = getattr(
+        importlib.import_module(f'{__name__}.{_NAMES[name]}'), name)
     return value
 
 

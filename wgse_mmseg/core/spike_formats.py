@@ -34,6 +34,8 @@ import numpy as np
 
 from ..limits import READ_LIMIT_BYTES
 
+__all__ = []
+
 SPK_MAGIC = b'WGSESPK1'
 
 

@@ -13,9 +13,11 @@ OpenMMLab: the tools, the datasets and the readers use it, the spike maths
   hold only what the package wrote, one writer at a time, and no output
   over an input;
 * :mod:`.bounded_reads`: text and JSON files read within stated limits;
+  :mod:`.scene_files`: a simulation's effects from a JSON or YAML file;
 * :mod:`.markers`: completion markers of generated samples;
   :mod:`.folder_walk`: the files under a folder, links and loops handled.
 """
+from .scene_files import read_scene_file
 from .spike_files import load_spikes, save_spikes, spike_shape
 
-__all__ = ['load_spikes', 'save_spikes', 'spike_shape']
+__all__ = ['load_spikes', 'read_scene_file', 'save_spikes', 'spike_shape']

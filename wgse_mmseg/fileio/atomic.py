@@ -14,6 +14,8 @@ from typing import BinaryIO, Dict, Iterator, List, NamedTuple, Sequence
 from .input_guard import check_output, check_output_kind
 from .output_folder import note_written
 
+__all__ = []
+
 
 @contextlib.contextmanager
 def atomic_path(path: str) -> Iterator[str]:

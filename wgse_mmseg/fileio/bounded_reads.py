@@ -12,6 +12,8 @@ from typing import Any
 from ..errors import EXCERPT_CHARS, cut, excerpt  # noqa: F401
 from ..limits import MAX_JSON_DEPTH, TEXT_FILE_LIMIT_BYTES
 
+__all__ = []
+
 #: a JSON string literal (escapes included), whose brackets do not nest
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 

@@ -21,6 +21,8 @@ from .atomic import WrittenFile, write_bytes
 from .bounded_reads import check_utf8_path
 from .input_guard import check_input_file
 
+__all__ = []
+
 #: ``cv2.IMREAD_UNCHANGED``, without importing OpenCV where no image is read
 IMREAD_UNCHANGED = -1
 

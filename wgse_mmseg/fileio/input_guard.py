@@ -30,6 +30,8 @@ import stat
 import sys
 from typing import Callable, Dict, Iterable, Iterator, Optional, Tuple
 
+__all__ = ['OutputFolderError']
+
 
 class OutputFolderError(ValueError):
     """An output folder this package cannot own as asked: another process

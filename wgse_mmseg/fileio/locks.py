@@ -35,6 +35,8 @@ from .output_folder import (HELD_FOLDERS, LOCK_NAME, MANIFEST_HEADER,
                             MANIFEST_NAME, NOFOLLOW, OwnedFolder,
                             check_output_folder, discard, open_manifest)
 
+__all__ = []
+
 
 def _lock_path(folder: str, job: Optional[str]) -> str:
     if job is None:

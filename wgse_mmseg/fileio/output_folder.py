@@ -47,7 +47,7 @@ from typing import BinaryIO, Iterable, Iterator, List, Optional, Set
 from .input_guard import (NOTED_INPUTS, OutputFolderError, check_output,
                           check_output_kind, file_identity, real_parents)
 
-__all__ = ['OutputFolderError']
+__all__ = []
 
 
 #: the lock file of a folder's (only) job; ``.lock-<job>`` for a named one

@@ -22,6 +22,8 @@ from ..errors import cut, excerpt
 from ..limits import READ_LIMIT_BYTES
 from .bounded_reads import load_json_file
 
+__all__ = []
+
 
 def _npy_header(path: str, f: BinaryIO,
                 size: int) -> Tuple[Tuple[int, int, int], np.dtype, bool]:
