@@ -7,6 +7,8 @@ right."""
 import json
 import os.path as osp
 import re
+import subprocess
+import sys
 
 import pytest
 import torch
@@ -503,3 +505,44 @@ def test_no_predictor_is_no_prediction(monkeypatch):
                         raising=False)
     note = kernels.predictions({}, [1, 12, 3, 4], 'tf32')['note']
     assert note.startswith('no prediction') and "KeyError: 'sms'" in note
+
+
+#: compiles the tensor-core loop at each band kernel's TF32 tile for sm_90
+#: (no GPU needed) and prints the instruction each compiled to
+COMPILE_FOR_HOPPER = '''
+import json
+import triton
+from triton.backends.compiler import GPUTarget
+from triton.compiler import ASTSource
+from wgse_bench.gpu_report import ceilings
+from wgse_mmseg.core.wgse import triton_band_networks as tbn
+found = {}
+for kernel, entry in (('band_forward', tbn.FORWARD_CONFIGS[0]),
+                      ('band_backward', tbn.backward_configs(False,
+                                                             'tf32')[0])):
+    constants = dict(ITERATIONS=64, M=entry.block, N=32, K=32,
+                     PRECISION='tf32')
+    signature = dict(a_ptr='*fp32', b_ptr='*fp32', out_ptr='*fp32',
+                     **{name: 'constexpr' for name in constants})
+    compiled = triton.compile(
+        ASTSource(fn=ceilings._dot_loop, signature=signature,
+                  constexprs=constants), target=GPUTarget('cuda', 90, 32),
+        options=dict(num_warps=entry.num_warps))
+    found[kernel] = ceilings._instruction(compiled)
+print(json.dumps(found))
+'''
+
+
+@pytest.mark.needs_triton
+@pytest.mark.long(30)
+def test_the_tensor_core_loops_run_the_instructions_they_measure(
+        without_openmmlab):
+    """On Hopper the forward's 128-pixel tile compiles to wgmma and the
+    backward's 32-pixel tile to mma.sync, as the section's rows say: read
+    from the PTX triton compiles for sm_90 here, without a GPU."""
+    proc = subprocess.run([sys.executable, '-c', COMPILE_FOR_HOPPER],
+                          capture_output=True, text=True,
+                          env=without_openmmlab, cwd=ROOT, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == dict(
+        band_forward='wgmma', band_backward='mma.sync')
