@@ -236,9 +236,9 @@ def test_a_precision_holds_for_both_passes(precision, tf32, autocast):
     assert torch.backends.cudnn.allow_tf32 is default
 
 
-def _run(plan=sections.DRY_RUN, found=None):
+def _run(plan=sections.DRY_RUN):
     return sections.Run(plan, sections.Clock(), ROOT, sections.MODELS, {},
-                        {} if found is None else found)
+                        {}, {})
 
 
 def test_a_failing_job_is_recorded_and_the_others_run():
@@ -546,3 +546,21 @@ def test_the_tensor_core_loops_run_the_instructions_they_measure(
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert json.loads(proc.stdout.strip().splitlines()[-1]) == dict(
         band_forward='wgmma', band_backward='mma.sync')
+
+
+def test_the_predictor_is_asked_once_a_run_and_precision(monkeypatch):
+    """The band kernels' and the pass's rows read one answer (a predictor
+    may compile the kernels to answer)."""
+    from wgse_bench import triton_resources
+    calls = []
+
+    def predict(**call):
+        calls.append(call['precision'])
+        return dict(band_forward=1.0)
+
+    monkeypatch.setattr(triton_resources, 'predict_band_kernels', predict,
+                        raising=False)
+    run = _run()
+    assert [run.prediction(p)['kernels'] for p in ('tf32', 'tf32', 'bf16')
+            ] == [dict(band_forward=1.0)] * 3
+    assert calls == ['tf32', 'bf16']

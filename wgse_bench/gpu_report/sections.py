@@ -151,6 +151,16 @@ class Run(NamedTuple):
     models: Dict[str, Tuple[str, str]]
     environment: Dict[str, Any]
     sections: Dict[str, Dict[str, Any]]
+    #: the predictor's answer by precision, asked once a run
+    predicted: Dict[str, Dict[str, Any]]
+
+    def prediction(self, precision: str) -> Dict[str, Any]:
+        """The predictor's milliseconds at ``precision`` for the kernels'
+        shape (:func:`.kernels.predictions`), asked once a run."""
+        if precision not in self.predicted:
+            self.predicted[precision] = kernels.predictions(
+                self.environment, self.plan.kernel_shape, precision)
+        return self.predicted[precision]
 
 
 def status_of(rows: Sequence[Dict]) -> str:
@@ -174,8 +184,7 @@ def _band_kernels(run: Run) -> Dict[str, Dict[str, Any]]:
             f'band kernels, {precision}, {shape_text(plan.kernel_shape)}',
             kernels.time_kernels, plan.kernel_shape, plan.device, precision,
             plan.kernel_repeat)
-        predicted = kernels.predictions(run.environment, plan.kernel_shape,
-                                        precision)
+        predicted = run.prediction(precision)
         if found['status'] != 'ok':
             rows.append(dict(found, precision=precision, kernel='both'))
             continue
@@ -205,8 +214,7 @@ def _wgse(run: Run) -> Dict[str, Dict[str, Any]]:
                 kernels.time_pass, impl, precision, plan.kernel_shape,
                 plan.device, plan.kernel_repeat)
             if impl == 'triton':
-                ms = kernels.predictions(run.environment, plan.kernel_shape,
-                                         precision)['kernels'].get('pass')
+                ms = run.prediction(precision)['kernels'].get('pass')
                 row.update(predicted_ms=ms, measured_vs_predicted=ratio(
                     row.get('median_ms'), ms))
             rows.append(dict(row, impl=impl, precision=precision))
@@ -437,8 +445,9 @@ def run_report(plan: Plan, root: str, targets: Targets,
             for a resumed run. ``None``: no limit.
 
     Returns:
-        The JSON-ready report: ``plan``, ``environment``, ``sections``,
-        ``kept`` (the sections taken from ``earlier``), ``seconds``.
+        The JSON-ready report, a dict of ``plan``, ``environment``,
+        ``sections``, ``kept`` (the sections taken from ``earlier``) and
+        ``seconds``.
     """
     models = MODELS if models is None else models
     clock = Clock()
@@ -455,7 +464,7 @@ def run_report(plan: Plan, root: str, targets: Targets,
     sections.update({name: earlier['sections'][name] for name in kept})
     report = dict(plan=plan._asdict(), environment=env, sections=sections,
                   kept=kept, seconds=0.0)
-    run = Run(plan, clock, root, models, env, sections)
+    run = Run(plan, clock, root, models, env, sections, {})
     measured = False
     for step in STEPS:
         if step.names[0] in kept:
