@@ -371,12 +371,12 @@ STEPS = (
     Step(('ceilings', ), 15, _ceilings),
     Step(('band_kernels', ), 60, _band_kernels),
     Step(('wgse', ), 45, _wgse),
-    Step(('first_use', ), 60, _first_use),
+    Step(('first_use', ), 120, _first_use),
     Step(('stalls', ), 60, _stalls),
     Step(('tensor_cores', ), 20, _tensor_cores),
     Step(('profile', ), 10, _profile),
-    Step(('correctness', ), 90, _correctness),
-    Step(('segmentation', 'latency'), 150, _segmentation),
+    Step(('correctness', ), 60, _correctness),
+    Step(('segmentation', 'latency'), 120, _segmentation),
     Step(('paper', ), 45, _paper),
 )
 #: Every section of a report, 'targets' last (computed from the others).
