@@ -83,7 +83,7 @@ if __name__ == '__main__':
             'numpy',
             'PyWavelets>=1.4',
             'opencv-python>=4.8,<5',  # 5 rejects arrays of > 128 channels
-            'Pillow>=9.1',  # image headers read before decoding (fileio.images)
+            'Pillow>=9.1',  # image headers, read before decoding (fileio)
             'PyYAML>=6',  # scene files (fileio.scene_files)
             'tqdm',
         ],

@@ -20,7 +20,7 @@ pinned registry packages (it needs the registry; CI does not run it):
   unpickler that refuses every import, so no code in it can run;
 * ``LICENSE.basicsr.txt``, ``LICENSE.brisque.txt``: both Apache-2.0;
 * ``SOURCES.json``: the record: each file's SHA-256, package, archive
-  SHA-256 and member. ``tests/core/test_quality.py`` checks the shipped
+  SHA-256 and member. ``tests/evaluation/test_quality.py`` checks the shipped
   files against it.
 
 The archives are fetched with ``pip download`` (pinned version, no

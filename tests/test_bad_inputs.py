@@ -1,7 +1,8 @@
 """Bad input at the public entry points: a clear error that names the
 parameter or the file and what was expected, never an exception from deep
 inside numpy, torch, OpenCV or mmengine (readers' random bytes and
-truncations: tests/core/test_io.py; converters and tools: their tests)."""
+truncations: tests/fileio/test_spike_files.py; converters and tools: their
+tests)."""
 import re
 
 import numpy as np

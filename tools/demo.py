@@ -7,11 +7,10 @@ or walk a recording into a video of overlays.
         [--backend pytorch|onnxruntime]
         [--stride N [--batch-size 8] [--fps 10] [--save-frames]]
 
-``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.fileio.spike_files` reads
-(``.dat`` needs ``--height``/``--width`` or a side file; an ``.npy``/``.npz``
-without its layout, ``--layout``). The config's test pipeline takes the window
-of ``num_steps`` frames centred on the middle frame, as in testing
-(``--cfg-options num_steps=T`` sets the model's ``T``).
+``SPIKE_FILE`` is any stream :func:`wgse_mmseg.fileio.load_spikes` reads
+(``.dat``: ``--height``/``--width`` or a side file). The config's test
+pipeline takes the ``num_steps`` frames centred on the middle one, as in
+testing (``--cfg-options num_steps=T`` sets the model's ``T``).
 
 The prediction, in the dataset's palette, is blended (``--opacity``) over
 the window's spike rate and written as a PNG to ``--out-file`` (default

@@ -259,7 +259,7 @@ def score_recording(path: str, methods: Sequence[str] = METHODS,
     method's output at ``exposure`` (``'auto'``, ``'none'`` or a gain;
     ``gain`` is the mean gain applied), in 8 bits. ``tfp``/``tfi`` use
     ``num_steps``-frame windows, ``wgse`` its model's. ``layout``: as
-    :func:`~wgse_mmseg.fileio.spike_files.load_spikes` takes it.
+    :func:`~wgse_mmseg.fileio.load_spikes` takes it.
     """
     total, _, _ = spike_shape(path, height, width, layout)
     frames = list(frames) if frames else [total // 2]

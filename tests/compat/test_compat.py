@@ -249,6 +249,7 @@ def test_patches_are_applied_once_and_can_be_turned_off():
         'assert ours() == 0\n'
         'ops = sys.modules.get("mmcv.ops")\n'
         'assert not getattr(ops, "__wgse_fallback__", False)\n'
+        'import wgse_mmseg.core\n'
         'wgse_mmseg.core.WGSE()(torch.zeros(1, 9, 2, 2))\n',
         WGSE_MMSEG_NO_COMPAT='1')
     if NEEDS_STAND_IN:  # mmcv-lite under MMSeg 1.2.2

@@ -12,7 +12,7 @@ Prints two tables:
    kernel is built, the base model also runs on the torch path (as without
    it, and as on a GPU); both must give the same spikes.
 2. Time to load one ``--load-shape`` sample (default 129x512x1024) from
-   each format with :func:`wgse_mmseg.fileio.spike_files.load_spikes` (files
+   each format with :func:`wgse_mmseg.fileio.load_spikes` (files
    just written, so from the page cache: decoding, not the disk), against
    simulating it.
 

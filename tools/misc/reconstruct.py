@@ -8,7 +8,7 @@ walk a recording into a video.
     python tools/misc/reconstruct.py SPIKE_FILE --out VIDEO.mp4|.gif
         --stride N [--batch-size 8] [--fps 10] [--save-frames] [...]
 
-``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.fileio.spike_files` reads
+``SPIKE_FILE`` is any stream :func:`wgse_mmseg.fileio.load_spikes` reads
 (``.dat``, ``.spk``, ``.npy``, ``.npz``; a ``.dat`` needs
 ``--height``/``--width`` or a ``<file>.json`` side file). For each requested
 centre frame (default: the middle frame) the window of ``--num-steps`` frames
@@ -26,7 +26,7 @@ method's intensities; a number is a fixed gain.
 
 An ``.npy``/``.npz`` that does not record its layout needs ``--layout THW``
 (stored ``(T, H, W)``) or ``HWT`` (stored ``(H, W, T)``); it is never guessed
-(:mod:`wgse_mmseg.fileio.spike_files`).
+(:func:`wgse_mmseg.fileio.load_spikes`).
 
 ``--method wgse`` (default) runs the trained model of ``--checkpoint``: an
 mmengine checkpoint of a ``configs/reconstruction`` config or a file of

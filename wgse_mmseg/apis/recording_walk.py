@@ -29,12 +29,11 @@ The window model
     grey or ``(H, W, 3)`` RGB frame.
 Outputs, beside ``video`` (:func:`walk_outputs`)
     ``video`` (``.mp4``: OpenCV's ``mp4v``; ``.gif``: Pillow), the CSV
-    ``<video stem>.csv`` (:data:`CSV_COLUMNS`: window index, centre
-    readout, first and end readout, ``batch``: the index of the first
-    window of the model call that made it, and ``time_ms``: that call's
-    time over its windows, in milliseconds) and,
-    with ``save_frames``, ``<video stem>_frames/<window>.png``. Each appears
-    complete or not at all.
+    ``<video stem>.csv`` (:data:`~wgse_mmseg.apis.walk_state.CSV_COLUMNS`:
+    window index, centre readout, first and end readout, ``batch``: the index
+    of the first window of the model call that made it, and ``time_ms``: that
+    call's time over its windows, in milliseconds) and, with ``save_frames``,
+    ``<video stem>_frames/<window>.png``. Each appears complete or not at all.
 Resuming
     Until the walk ends, its state lies in ``<video>.partial/``, a folder
     the walk owns (:func:`~wgse_mmseg.core.output_folder.own_folder`: one
@@ -160,7 +159,7 @@ def walk_recording(path: str, video: str,
         save_frames: keep each frame as ``<video stem>_frames/NNNNNN.png``.
         height, width: frame size of a ``.dat`` file.
         layout: ``'THW'``/``'HWT'`` of an ``.npy``/``.npz`` that does not
-            record it (:func:`~wgse_mmseg.fileio.spike_files.load_spikes`).
+            record it (:func:`~wgse_mmseg.fileio.load_spikes`).
         progress: a progress bar on stderr.
         wait: wait for another walk of ``video`` to finish instead of
             raising.

@@ -158,7 +158,7 @@ def read_windows(path: str, plan: WalkPlan, centres: Sequence[int],
     ``(B, T, H, W)`` ``uint8`` array of 0/1, reading the span they cover
     once where they overlap or touch, else each on its own (``height``,
     ``width``, ``layout``: as
-    :func:`~wgse_mmseg.fileio.spike_files.load_spikes` takes them)."""
+    :func:`~wgse_mmseg.fileio.load_spikes` takes them)."""
     starts = [plan.start(c) for c in centres]
     if plan.stride <= plan.length:
         span = load_spikes(path, height, width, starts[0],

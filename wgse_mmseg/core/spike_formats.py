@@ -24,7 +24,7 @@ Formats, chosen by the file extension, each one entry of
 
 This module holds what the formats are, as pure functions on arrays and
 bytes: the ``.spk`` header, the bit packing, the encoders, the window and
-size checks; :mod:`wgse_mmseg.fileio.spike_files` reads and writes files.
+size checks; :mod:`wgse_mmseg.fileio` reads and writes files.
 """
 import io
 import struct

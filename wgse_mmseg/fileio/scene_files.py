@@ -29,10 +29,11 @@ class _SceneLoader(yaml.SafeLoader):
 
 def read_scene_file(path: Union[str, os.PathLike]) -> dict:
     """The effect mapping a ``.json``, ``.yaml`` or ``.yml`` file holds,
-    checked as :func:`wgse_mmseg.core.simulation.parse_effects` checks it.
+    checked as the simulator checks its effects.
 
-    The file may hold at most :data:`~wgse_mmseg.limits.
-    TEXT_FILE_LIMIT_BYTES`; YAML aliases are refused.
+    The file may hold at most
+    :data:`~wgse_mmseg.limits.TEXT_FILE_LIMIT_BYTES`; YAML aliases are
+    refused.
     """
     path = os.fspath(path)
     ext = osp.splitext(path)[1].lower()

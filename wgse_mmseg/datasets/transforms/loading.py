@@ -24,7 +24,7 @@ class LoadSpikeFromFile(BaseTransform):
     """Load a spike stream from ``results['img_path']``.
 
     Reads ``.dat``, ``.spk``, ``.npy`` and ``.npz`` files (see
-    :mod:`wgse_mmseg.fileio.spike_files`).
+    :func:`wgse_mmseg.fileio.load_spikes`).
 
     Args:
         num_steps: frames to load. ``None`` loads the whole stream. A longer
@@ -41,7 +41,7 @@ class LoadSpikeFromFile(BaseTransform):
             stored, ``'THW'`` ``(T, H, W)`` or ``'HWT'`` ``(H, W, T)``;
             ``None`` (default) takes the layout each file records, and a
             file that records none is an error naming it
-            (:func:`~wgse_mmseg.fileio.spike_files.load_spikes`). A config
+            (:func:`~wgse_mmseg.fileio.load_spikes`). A config
             sets it for a dataset of such files, e.g.
             ``dict(type='LoadSpikeFromFile', num_steps=41, layout='THW')``.
 

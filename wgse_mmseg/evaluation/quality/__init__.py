@@ -12,8 +12,8 @@ recordings, which have no ground truth. Needs numpy and OpenCV only.
 Each takes an ``(H, W)`` grey image of any kind
 :mod:`wgse_mmseg.core.image_values` accepts (bool, 8 or 16 bits, float in
 [0, 1]) and scores it as shown, in 8 bits, within the memory its docstring
-states (bytes per pixel, measured by ``tests/core/test_images.py``). The model
-data NIQE and BRISQUE need ships in ``data/`` (:mod:`.model_data`). The
+states (bytes per pixel, measured by ``tests/fileio/test_images.py``). The
+model data NIQE and BRISQUE need ships in ``data/`` (:mod:`.model_data`). The
 full-reference measures (PSNR, SSIM) are the MMSeg layer's
 (:mod:`wgse_mmseg.evaluation.metrics.image_quality`).
 """

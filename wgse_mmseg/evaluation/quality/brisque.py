@@ -8,7 +8,7 @@ trained on human opinion scores. Lower is better; the scale is roughly
 0-100, and very clean images can score below 0. This follows the brisque
 0.2.0 package (its features, its trained model, shipped in ``data/``) and
 matches it within 0.01 on scikit-image's photographs
-(``tests/core/test_quality.py``). Scores of other BRISQUE implementations
+(``tests/evaluation/test_quality.py``). Scores of other BRISQUE implementations
 (MATLAB's, piq's, pyiqa's) use other models and differ.
 """
 import math

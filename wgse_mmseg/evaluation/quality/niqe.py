@@ -7,7 +7,7 @@ natural). This follows the authors' MATLAB release as basicsr 1.4.2's
 ``calculate_niqe`` ports it (its pristine model, shipped in ``data/``; grey
 image, no border crop, 96x96 blocks without overlap, MATLAB's bicubic
 ``imresize`` for the half size) and matches it within 0.002 on
-scikit-image's photographs (``tests/core/test_quality.py``).
+scikit-image's photographs (``tests/evaluation/test_quality.py``).
 """
 import math
 
