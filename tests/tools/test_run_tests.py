@@ -20,7 +20,7 @@ VENVS = {'.venv': 'openmmlab', '.venv-onedl': 'onedl'}
 NODE = 'tests/test_repo_rules.py::test_the_plugin_part_is_held_short'
 
 
-@pytest.mark.long(15)
+@pytest.mark.long(20)
 def test_a_path_with_k_and_lf_run_only_those(tmp_path):
     stacks = [stack for venv, stack in VENVS.items()
               if osp.realpath(osp.join(ROOT, venv)) ==
@@ -36,7 +36,7 @@ def test_a_path_with_k_and_lf_run_only_those(tmp_path):
 
     def run(*args):
         proc = subprocess.run(
-            ['bash', 'tools/run_tests.sh', *args, '-n', '0',
+            ['bash', 'tools/run_tests.sh', *args,
              '-o', f'cache_dir={cache}', f'--basetemp={tmp_path / "base"}'],
             cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
         assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
