@@ -1,7 +1,7 @@
 """Sphinx configuration of the documentation site (``docs/``).
 
 Built with warnings as errors (``sphinx-build -W --keep-going docs
-<out>``, run by ``tests/test_docs.py``): a broken link between pages, a
+<out>``, run by ``dev/check_docs.py``): a broken link between pages, a
 stale name on the API page or a docstring Sphinx cannot read fails the
 build. The guides are the Markdown files beside this one (myst-parser);
 the API reference (``api.rst``) is generated from the docstrings.

@@ -41,7 +41,8 @@ BIN = osp.dirname(sys.executable)
 SHARED = osp.normpath(osp.join(ROOT, '..', 'shared'))
 
 RUN = 'run here'
-CI = '.ci/run runs tools/run_tests.sh, which runs tools/setup_env.sh first'
+CI = ('.ci/run runs tools/lint.sh and tools/run_tests.sh, each of which '
+      'runs tools/setup_env.sh first')
 
 
 class NotHere(NamedTuple):
@@ -53,6 +54,8 @@ class NotHere(NamedTuple):
 
 TRAIN_TESTS = 'tests/tools/test_mim_end_to_end.py::' \
     'test_mim_in_the_readme_install_mode'
+RUN_TESTS_TEST = 'tests/tools/test_run_tests.py::' \
+    'test_a_path_with_k_and_lf_run_only_those'
 DIST_TEST = 'tests/tools/test_distributed_training.py::' \
     'test_dist_train_and_dist_test_scripts_on_cpu'
 
@@ -63,6 +66,10 @@ HOW = {
     'bash tools/setup_env.sh': CI,
     'STACK=onedl bash tools/setup_env.sh': CI,
     'STACK=onedl bash tools/run_tests.sh': CI,
+    'bash tools/run_tests.sh tests/core/test_wavelets.py -k gradcheck':
+        RUN_TESTS_TEST,
+    'bash tools/run_tests.sh --lf': RUN_TESTS_TEST,
+    'bash tools/lint.sh': CI,
     'MMCV=full bash tools/setup_env.sh': NotHere(
         'compiles mmcv 2.1.0 for about 30 minutes and replaces mmcv-lite in '
         'the environment the other tests use', 'tests/compat/test_compat.py::'

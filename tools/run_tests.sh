@@ -2,8 +2,14 @@
 # The test command (what CI runs): the pinned environment, then pytest.
 #   bash tools/run_tests.sh               # OpenMMLab's final releases, in .venv
 #   STACK=onedl bash tools/run_tests.sh   # the onedl-* fork, in .venv-onedl
-# STACK, VENV and MMCV as for tools/setup_env.sh; arguments go to pytest. The
-# tests run in one pytest-xdist worker per core (`-n 0` runs them in one process).
+#   bash tools/run_tests.sh tests/core/test_wavelets.py -k gradcheck   # just those
+#   bash tools/run_tests.sh --lf          # the tests that failed last time
+# STACK, VENV and MMCV as for tools/setup_env.sh; arguments go to pytest
+# (without a test path it runs setup.cfg's testpaths, the whole suite).
+# The whole suite runs in one pytest-xdist worker per core; tests picked by a
+# path, -k, -m or --lf run in this one process, which starts in seconds
+# where workers take tens (-n auto or -n 0 chooses either way). pytest's
+# cache (what --lf reads) is .pytest_cache/ in the checkout, which git ignores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source tools/setup_env.sh  # sets VENV
@@ -12,4 +18,10 @@ source tools/setup_env.sh  # sets VENV
 # modules again (0.2 s of CPU a process on the 2-core machine): compile them
 # once, here.
 "$VENV/bin/python" -m compileall -q wgse_mmseg wgse_bench > /dev/null
-exec "$VENV/bin/python" -m pytest tests -p no:cacheprovider -n auto --dist worksteal "$@"
+workers=(-n auto --dist worksteal)
+for arg in "$@"; do
+    case "$arg" in
+        -k*|-m*|--lf|--last-failed|--deselect*|[!-]*) workers=(-n 0) ;;
+    esac
+done
+exec "$VENV/bin/python" -m pytest "${workers[@]}" "$@"

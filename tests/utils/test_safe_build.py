@@ -241,6 +241,15 @@ REVIEWED = {
     ('wgse_mmseg/compat/checkpoint_safety.py', '_resolve',
      'importlib.import_module'):
         'the fixed MMENGINE_CHECKPOINT_GLOBALS',
+    ('dev/check_references.py', '_resolve', 'importlib.import_module'):
+        'a name of the package that a docstring of the checkout references',
+    ('dev/check_references.py', 'broken_references',
+     'importlib.import_module'):
+        'the module of a file of the checkout',
+    ('dev/check_api.py', '_modules', 'importlib.import_module'):
+        'the modules of the package, as pkgutil walks them',
+    ('dev/check_api.py', 'api_problems', 'importlib.import_module'):
+        'the package, and the modules its API page names',
     ('tools/demo.py', 'build_pipeline', 'Compose'):
         'the test pipeline of the user\'s config file',
     ('tools/demo.py', 'main', 'init_default_scope'):

@@ -1,0 +1,55 @@
+"""``tools/run_tests.sh`` runs what it is given: a test path and ``-k`` only
+those tests, ``--lf`` the last run's failures from pytest's cache.
+
+Run in the checkout's own environment of this suite's stack (the README's
+install mode, as CI runs the suite); elsewhere the test skips, since the
+script would set that environment up first."""
+import json
+import os
+import os.path as osp
+import re
+import subprocess
+import sys
+
+import pytest
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+#: the checkout's environment of each stack (tools/setup_env.sh)
+VENVS = {'.venv': 'openmmlab', '.venv-onedl': 'onedl'}
+#: a test of a small module of several
+NODE = 'tests/test_repo_rules.py::test_the_plugin_part_is_held_short'
+
+
+@pytest.mark.long(20)
+def test_a_path_with_k_and_lf_run_only_those(tmp_path):
+    stacks = [stack for venv, stack in VENVS.items()
+              if osp.realpath(osp.join(ROOT, venv)) ==
+              osp.realpath(sys.prefix)]
+    if not stacks:
+        pytest.skip(f'this suite runs in {sys.prefix}, not in the '
+                    f'checkout\'s {" or ".join(VENVS)}')
+    # the inner run's own cache and temporary folders, not this run's
+    env = {name: value for name, value in os.environ.items()
+           if not name.startswith('PYTEST_')}
+    env['STACK'] = stacks[0]
+    cache = tmp_path / 'cache'
+
+    def run(*args):
+        proc = subprocess.run(
+            ['bash', 'tools/run_tests.sh', *args,
+             '-o', f'cache_dir={cache}', f'--basetemp={tmp_path / "base"}'],
+            cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+        return proc.stdout
+
+    out = run(NODE.split('::')[0], '-k', 'plugin_part')
+    assert re.search(r'= 1 passed, [1-9]\d* deselected\b', out), out[-2000:]
+    # the cache as a run in which that test failed left it
+    (cache / 'v' / 'cache').mkdir(parents=True, exist_ok=True)
+    (cache / 'v' / 'cache' / 'lastfailed').write_text(
+        json.dumps({NODE: True}))
+    out = run('--lf')
+    assert 'run-last-failure: rerun previous 1 failure' in out, out[-2000:]
+    assert re.search(r'= 1 passed\b', out), out[-2000:]
+    assert json.loads((cache / 'v' / 'cache' / 'lastfailed').read_text()) \
+        == {}
