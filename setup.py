@@ -77,7 +77,7 @@ if __name__ == '__main__':
         # import packages mmseg, mmengine, mmcv and mim, so naming one here
         # would install it over the other (docs/install.md;
         # tools/setup_env.sh pins either). The MMSeg layer says at import
-        # which is missing (wgse_mmseg._openmmlab.require_openmmlab).
+        # which is missing (wgse_mmseg.openmmlab_stack.require_openmmlab).
         install_requires=[
             'torch>=2.0',
             'numpy',

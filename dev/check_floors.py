@@ -9,8 +9,9 @@ a module may import its own package and the packages of the floors below
 its own (:data:`FLOORS`), never one above, and never ``wgse_bench``. The
 wing imports the library as any user's script would. Every package must be
 on a floor, and a private module (``_name``) is imported only from its own
-package, never from the library's others, the wing, the tools or ``dev/``. Prints each import that breaks the floors; the exit status is 1
-where there is one. ``bash tools/lint.sh`` runs it.
+package, never from the library's others, the wing, the tools or ``dev/``.
+Prints each import that breaks the floors; the exit status is 1 where there
+is one. ``bash tools/lint.sh`` runs it.
 """
 import argparse
 import ast
@@ -29,7 +30,7 @@ FLOORS = (
     ('fileio',),
     ('data_generation',),
     ('compat',),
-    ('_openmmlab',),
+    ('openmmlab_stack',),
     ('utils',),
     ('datasets', 'evaluation', 'models'),
     ('engine',),

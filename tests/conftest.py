@@ -29,8 +29,8 @@ import pytest  # noqa: E402
 import torch  # noqa: E402
 from hypothesis import settings  # noqa: E402
 
-from wgse_mmseg._openmmlab import (missing_openmmlab,  # noqa: E402
-                                   prepare_mmseg_layer)
+from wgse_mmseg.openmmlab_stack import (missing_openmmlab,  # noqa: E402
+                                        prepare_mmseg_layer)
 
 # The test process sets the MMSeg layer up as every entry point does, by an
 # explicit call before anything imports MMSeg (importing the package's

@@ -174,7 +174,7 @@ PRINTS = {
 
 def _suite_stack() -> str:
     """The stack (``STACK=`` of tools/setup_env.sh) this suite runs on."""
-    from wgse_mmseg._openmmlab import installed_stacks
+    from wgse_mmseg.openmmlab_stack import installed_stacks
     (stack,) = installed_stacks()
     return stack
 

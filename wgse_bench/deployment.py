@@ -13,7 +13,7 @@ is the batch size over the median time of a call. ``tools/analysis_tools/
 benchmark_deployment.py`` runs it per entry of an experiment grid and
 writes the JSON the experiment report reads (its deployment columns).
 """
-from wgse_mmseg._openmmlab import check_mmseg_layer
+from wgse_mmseg.openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_bench.deployment')  # before MMSeg
 

@@ -46,7 +46,7 @@ Every timing runs ``warmup`` untimed calls, then ``repeat`` timed ones
 (CUDA synchronised around each); the summary is the median and the median
 absolute deviation (MAD) of the repeats, and the raw samples are kept.
 """
-from wgse_mmseg._openmmlab import check_mmseg_layer
+from wgse_mmseg.openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_bench.segmentation')  # before MMSeg is imported
 

@@ -329,7 +329,7 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     from triton.backends.compiler import GPUTarget
     from triton.compiler import ASTSource
 
-    from wgse_mmseg.core.wgse import _triton_band_kernels as kernels
+    from wgse_mmseg.core.wgse import triton_band_kernels as kernels
     from wgse_mmseg.core.wgse.triton_band_networks import \
         conv1_on_tensor_cores
     signature = dict(_SIGNATURES[variant.kernel])

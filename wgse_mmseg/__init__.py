@@ -48,7 +48,7 @@ def register_all_modules() -> None:
     registries (its datasets, transforms, models, metrics, runner and hooks).
     Call it before importing MMSeg or a layer package; a config does the
     same by naming ``wgse_mmseg.mmseg_layer`` in ``custom_imports``."""
-    from ._openmmlab import prepare_mmseg_layer
+    from .openmmlab_stack import prepare_mmseg_layer
     prepare_mmseg_layer()
     for name in _MMSEG_LAYER:
         importlib.import_module(name)

@@ -17,7 +17,7 @@ from wgse_bench import triton_resources
 from wgse_mmseg.core.wgse import triton_band_networks
 
 _triton_band_kernels = pytest.importorskip(
-    'wgse_mmseg.core.wgse._triton_band_kernels')
+    'wgse_mmseg.core.wgse.triton_band_kernels')
 
 pytestmark = pytest.mark.needs_triton
 

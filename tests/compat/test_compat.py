@@ -377,22 +377,22 @@ def test_mmseg_bases_resolve_through_the_installed_distribution(
 def test_distributions_of_both_stacks_are_refused(monkeypatch):
     """mmsegmentation installed over onedl-mmsegmentation (what an
     install_requires naming it did): a clear ImportError naming both."""
-    from wgse_mmseg import _openmmlab
+    from wgse_mmseg import openmmlab_stack
     versions = {'mmsegmentation': '1.2.2', 'mmengine': '0.10.7',
                 'onedl-mmsegmentation': '1.4.2', 'onedl-mmcv': '2.3.6'}
 
     def version(name):
         if name not in versions:
-            raise _openmmlab.metadata.PackageNotFoundError(name)
+            raise openmmlab_stack.metadata.PackageNotFoundError(name)
         return versions[name]
 
-    monkeypatch.setattr(_openmmlab.metadata, 'version', version)
-    _openmmlab.installed_stacks.cache_clear()
+    monkeypatch.setattr(openmmlab_stack.metadata, 'version', version)
+    openmmlab_stack.installed_stacks.cache_clear()
     try:
         with pytest.raises(ImportError, match='both OpenMMLab stacks') as err:
-            _openmmlab.require_openmmlab('wgse_mmseg.models')
+            openmmlab_stack.require_openmmlab('wgse_mmseg.models')
         assert 'onedl-mmsegmentation 1.4.2' in str(err.value)
         assert 'openmmlab: mmengine 0.10.7, mmsegmentation 1.2.2' in str(
             err.value)
     finally:
-        _openmmlab.installed_stacks.cache_clear()
+        openmmlab_stack.installed_stacks.cache_clear()

@@ -2,6 +2,6 @@
 (:mod:`.inferencer`), checkpoint loading, ONNX export and its runtime.
 Import the module you need. The benchmarks and experiment grids are the
 measurement wing, ``wgse_bench``, which this package never imports."""
-from .._openmmlab import require_openmmlab
+from ..openmmlab_stack import require_openmmlab
 
 require_openmmlab('wgse_mmseg.apis')  # each module checks MMSeg itself

@@ -14,7 +14,7 @@ else (batching, ``return_datasamples``, ``out_dir``, ``show``) MMSeg's::
 
 ``mmseg.apis.inference_model(model, 'clip.dat')`` works as it is.
 """
-from .._openmmlab import check_mmseg_layer
+from ..openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.apis.inferencer')  # before MMSeg is imported
 

@@ -21,7 +21,7 @@ batch norm. The input checks of the preprocessor and the enhancers (0 and
 1 only, finite values) are data-dependent control flow and stay outside
 the graph: :class:`~.onnx_segmentor.OnnxSpikeSegmentor` makes them.
 """
-from .._openmmlab import check_mmseg_layer
+from ..openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.apis.onnx_export')  # before MMSeg is imported
 

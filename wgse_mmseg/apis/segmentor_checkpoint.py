@@ -6,7 +6,7 @@ only a logged warning. :func:`load_segmentor` refuses such a file instead,
 and reads it weights-only (nothing in it is executed). ``tools/demo.py`` and
 the ONNX export (:mod:`.onnx_export`) load their models through it.
 """
-from .._openmmlab import check_mmseg_layer
+from ..openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.apis.segmentor_checkpoint')  # before MMSeg
 # is imported

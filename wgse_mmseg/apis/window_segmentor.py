@@ -14,7 +14,7 @@ window on its own::
     segment = PipelineSegmentor(model, pipeline, 'clip.dat')
     labels = segment(spikes)                   # (B, T, H, W) -> (B, H, W)
 """
-from .._openmmlab import check_mmseg_layer
+from ..openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.apis.window_segmentor')  # before MMSeg
 

@@ -8,7 +8,7 @@ What makes the data (the Cityscapes converter, the synthetic street scenes,
 REDS-style views) is :mod:`wgse_mmseg.data_generation`, which needs no
 OpenMMLab.
 """
-from .._openmmlab import check_mmseg_layer
+from ..openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.datasets')
 

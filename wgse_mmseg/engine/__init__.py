@@ -2,7 +2,7 @@
 (:mod:`.runner`), the visualisation hook that draws spike clips
 (:mod:`.visualization_hook`) and the model wrapper for distributed runs on
 CPUs (:mod:`.model_wrappers`)."""
-from .._openmmlab import check_mmseg_layer
+from ..openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.engine')
 

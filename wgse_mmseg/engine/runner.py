@@ -27,7 +27,7 @@ from mmengine.model import BaseTTAModel
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
-from .._openmmlab import prepare_mmseg_layer
+from ..openmmlab_stack import prepare_mmseg_layer
 from ..fileio.atomic import atomic_path, temporaries_of
 from ..fileio.input_guard import OutputFolderError
 from ..fileio.locks import own_folder

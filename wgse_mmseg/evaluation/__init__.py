@@ -1,5 +1,5 @@
 """Metrics beyond MMSeg's: reconstruction quality (PSNR, SSIM, 2-D entropy)."""
-from .._openmmlab import check_mmseg_layer
+from ..openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.evaluation')
 

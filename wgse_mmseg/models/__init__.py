@@ -2,7 +2,7 @@
 enhancer in every segmentor, the registered enhancers (:mod:`.enhancers`),
 the legacy segmentor name (:mod:`.segmentors`) and image reconstruction
 (:mod:`.reconstruction`)."""
-from .._openmmlab import check_mmseg_layer
+from ..openmmlab_stack import check_mmseg_layer
 
 check_mmseg_layer('wgse_mmseg.models')
 

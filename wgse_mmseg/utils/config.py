@@ -17,7 +17,7 @@ import os.path as osp
 import re
 from typing import TYPE_CHECKING, Any, Dict, List, Optional, Union
 
-from .._openmmlab import prepare_mmseg_layer
+from ..openmmlab_stack import prepare_mmseg_layer
 from ..core.arguments import Choice, Integer, Path
 from ..errors import excerpt
 from ..limits import MAX_WORKERS
@@ -49,7 +49,7 @@ def load_config(path: Union[str, 'Config'],
     ``Config.merge_from_dict`` (so ``val_dataloader.dataset.data_root=A``
     beside ``data_root=B`` keeps ``A``); then the fields are checked against
     the settings once more (see :mod:`wgse_mmseg.utils.spike_settings`).
-    Sets the MMSeg layer up first (:func:`~wgse_mmseg._openmmlab.
+    Sets the MMSeg layer up first (:func:`~wgse_mmseg.openmmlab_stack.
     prepare_mmseg_layer`), which the configs' ``mmseg::`` bases need on the
     onedl stack.
     """

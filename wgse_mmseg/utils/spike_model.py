@@ -57,7 +57,7 @@ def spike_config(config: Union[str, Any], enhancer: Optional[dict] = None,
     """
     from mmengine.config import Config
 
-    from .._openmmlab import prepare_mmseg_layer
+    from ..openmmlab_stack import prepare_mmseg_layer
     from ..compat.config_scopes import package_configs
     from .config import load_config
     prepare_mmseg_layer('spike_config')

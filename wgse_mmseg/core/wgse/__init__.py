@@ -9,7 +9,7 @@
   float64 before its first use in a process;
 * the kernels behind it: :mod:`.torch_band_networks` (torch operations),
   :mod:`.compiled_band_networks` (the C extension ``_band_networks.c``),
-  :mod:`.triton_band_networks` (CUDA; kernels in ``_triton_band_kernels``).
+  :mod:`.triton_band_networks` (CUDA; kernels in :mod:`.triton_band_kernels`).
 """
 from .band_network_backends import BACKENDS, CHOICES, BandNetworkBackend
 from .wgse import WGSE, BandNetwork

@@ -9,7 +9,7 @@ tile's activations while it streams the gradient, so nothing of size
 ``pixels x H`` is ever kept: the only memory beyond the input, output and
 their gradients is the forward's mask of where the output is positive (a
 byte a coefficient) and one row of parameter-gradient sums per program.
-Kernels: :mod:`._triton_band_kernels`.
+Kernels: :mod:`.triton_band_kernels`.
 
 Precision of the tensor-core products (:func:`dot_precision`): under
 autocast their operands are rounded to its dtype (fp16 or bf16); otherwise
@@ -44,7 +44,7 @@ from torch import Tensor
 try:
     import triton
 
-    from . import _triton_band_kernels as kernels
+    from . import triton_band_kernels as kernels
     _IMPORT_ERROR = None
 except ImportError as error:  # triton is not installed (CPU-only torch)
     triton = kernels = None
