@@ -1,5 +1,5 @@
 """Models and metadata read from files, checked against the interface they
-must have before use (issue 32, item 2): ONNX files given to
+must have before use: ONNX files given to
 ``OnnxSpikeSegmentor``, checkpoint metadata, JSON from files.
 
 The ONNX models here are built by hand (a few operators), each declaring

@@ -1,4 +1,4 @@
-"""Every image kind keeps its meaning (issue 32, item 3): bool, 8-bit,
+"""Every image kind keeps its meaning: bool, 8-bit,
 16-bit and float images, as arrays given to the quality measures and as
 files read by the image readers, are scored/read on one scale or refused;
 and each measure keeps its stated memory bound.

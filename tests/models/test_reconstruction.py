@@ -824,9 +824,9 @@ def test_shipped_weights_beat_tfp_on_the_reds_sample(shared_dir):
 
 
 def test_shipped_weights_reach_33_db_on_the_held_out_reds_stream(shared_dir):
-    """Issue 26's bar, on the whole frame of the stream the shipped
-    weights never saw (they trained on reds_train's, a part of another
-    clip): 33.39 dB, SSIM 0.952 when shipped."""
+    """The shipped weights' bar (docs/reconstruction.md), on the whole
+    frame of the stream they never saw (they trained on reds_train's, a
+    part of another clip)."""
     root = osp.join(shared_dir, 'data', 'reds_sample')
     gt = cv2.imread(osp.join(root, 'gt', REDS_NAME + '.png'), 0) / 255.0
     window = load_spikes(osp.join(root, 'spike', REDS_NAME + '.dat'), 250,

@@ -1,4 +1,4 @@
-"""Cross-field checks at the start of training (issue 32, item 5): a crop
+"""Cross-field checks at the start of training: a crop
 below the smallest input the built model takes, or a batch its batch norms
 cannot train on, refused before any data is read, naming the smallest
 value that works."""
