@@ -30,6 +30,7 @@ the OpenMMLab stack it says what to install.
 """
 import importlib
 
+from .errors import WgseError
 from .version import __version__
 
 #: the packages that register with MMSeg
@@ -81,5 +82,5 @@ def __getattr__(name):
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
-__all__ = ['__version__', 'load_config', 'register_all_modules',
+__all__ = ['__version__', 'WgseError', 'load_config', 'register_all_modules',
            'spike_config']

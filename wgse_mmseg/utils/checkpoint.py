@@ -11,11 +11,12 @@ import torch
 
 from ..core.limits import cut, excerpt
 from ..core.output_folder import note_input
+from ..errors import WgseError
 
 __all__ = []
 
 
-class CheckpointError(ValueError):
+class CheckpointError(WgseError, ValueError):
     """A file that cannot be read as a checkpoint; names the file."""
 
 

@@ -40,6 +40,7 @@ from torch import nn
 from torch._subclasses import fake_tensor
 
 from ..core.limits import MAX_IMAGE_SIDE, cut
+from ..errors import WgseError
 
 __all__ = ['ModelFitError']
 
@@ -55,7 +56,7 @@ _NO_SHAPE_ONLY_FORM = tuple(getattr(fake_tensor, name) for name in (
 _REFUSALS = (RuntimeError, ValueError, AssertionError, IndexError)
 
 
-class ModelFitError(ValueError):
+class ModelFitError(WgseError, ValueError):
     """Settings that are each valid but do not fit the model or each
     other; names the setting and the smallest value that works."""
 

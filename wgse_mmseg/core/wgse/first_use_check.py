@@ -57,6 +57,7 @@ import torch
 from torch import Tensor, nn
 
 from ..limits import cut
+from ...errors import WgseError
 
 __all__ = ['FirstUseCheckFailed']
 
@@ -66,7 +67,7 @@ REPORT_TO = ("the project's bug tracker with this line and the docs/gpu.md "
              'machine')
 
 
-class FirstUseCheckFailed(RuntimeError):
+class FirstUseCheckFailed(WgseError, RuntimeError):
     """A backend named explicitly failed its first-use check."""
 
 
