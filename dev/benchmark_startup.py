@@ -22,7 +22,7 @@ import sys
 import time
 from typing import Dict, List, Sequence
 
-from wgse_mmseg.core.arguments import Integer, Path
+from wgse_mmseg.command_line import Integer, Path
 from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 

@@ -42,7 +42,7 @@ import zipfile
 
 import numpy as np
 
-from wgse_mmseg.core.arguments import Path
+from wgse_mmseg.command_line import Path
 from wgse_mmseg.core.io import write_bytes
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 

@@ -45,7 +45,7 @@ TARGETS = {
 def build_parser() -> argparse.ArgumentParser:
     # imported here, after main() has chosen Triton's interpreter for
     # --smoke (the package's kernels import triton where they are loaded)
-    from wgse_mmseg.core.arguments import Path
+    from wgse_mmseg.command_line import Path
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--smoke', action='store_true',
                         help='the same code on the CPU at tiny shapes, '

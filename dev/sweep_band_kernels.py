@@ -34,8 +34,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 from wgse_bench.markdown import markdown_table
 from wgse_bench.timing import time_calls
 from wgse_bench.wgse_choices import HIDDEN_CHANNELS, PRECISIONS
-from wgse_mmseg.core.arguments import (Choice, Integer, Path, Text,
-                                       excerpt)
+from wgse_mmseg.command_line import (Choice, Integer, Path, Text,
+                                     excerpt)
 from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 

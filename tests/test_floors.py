@@ -16,7 +16,7 @@ ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 
 #: the library's packages (and top-level modules) from the ground floor up
 FLOORS = (
-    ('version', 'errors', 'core'),
+    ('version', 'errors', 'argument_checks', 'command_line', 'core'),
     ('data_generation',),
     ('compat',),
     ('_openmmlab',),

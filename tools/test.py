@@ -13,7 +13,7 @@ import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.arguments import Number, Path
+from wgse_mmseg.command_line import Number, Path
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)

@@ -12,7 +12,7 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 
 import wgse_mmseg.core.io as spike_io
-from wgse_mmseg.core.arguments import ArgumentError
+from wgse_mmseg.argument_checks import ArgumentError
 from wgse_mmseg.core.io import (SpikeFileError, load_spikes, save_spikes,
                                 spike_shape)
 

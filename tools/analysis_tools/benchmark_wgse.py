@@ -32,7 +32,7 @@ import argparse
 import sys
 
 from wgse_bench.wgse_choices import DEFAULT_SHAPES, IMPLEMENTATIONS, SHAPE
-from wgse_mmseg.core.arguments import Choice, Integer, Path
+from wgse_mmseg.command_line import Choice, Integer, Path
 from wgse_mmseg.core.limits import MAX_REPEAT
 from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
 

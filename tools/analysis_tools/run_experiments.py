@@ -37,7 +37,7 @@ import shlex
 import sys
 import time
 
-from wgse_mmseg.core.arguments import EPOCHS, ITERATIONS, SEED, Path, Text
+from wgse_mmseg.command_line import EPOCHS, ITERATIONS, SEED, Path, Text
 from wgse_mmseg.core.output_folder import (OutputFolderError,
                                            check_tool_outputs, keeps_inputs,
                                            own_folder)

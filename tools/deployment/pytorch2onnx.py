@@ -29,7 +29,7 @@ import sys
 from wgse_mmseg.apis.onnx_settings import (LOGITS_TOLERANCE,
                                            MIN_ARGMAX_AGREEMENT, OPSET, OPSETS,
                                            SHAPE_ENTRY)
-from wgse_mmseg.core.arguments import SEED, Path
+from wgse_mmseg.command_line import SEED, Path
 from wgse_mmseg.core.output_folder import (add_wait_option, check_output_kind,
                                            check_tool_outputs, keeps_inputs,
                                            own_folder)

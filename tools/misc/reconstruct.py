@@ -52,12 +52,12 @@ import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, Choice,
-                                       Integer, Path, SequenceOf, Text,
-                                       add_frame_size_options,
-                                       check_frame_size)
+from wgse_mmseg.command_line import (EXPOSURE, LAYOUT, LAYOUT_HELP, NUM_STEPS,
+                                     Choice, Integer, Path, SequenceOf, Text,
+                                     add_frame_size_options,
+                                     check_frame_size)
 from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
-from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
+from wgse_mmseg.core.exposure import apply_exposure
 from wgse_mmseg.core.output_folder import (check_tool_outputs, keeps_inputs,
                                            own_folder)
 from wgse_mmseg.core.recording_walk import add_walk_options

@@ -14,7 +14,6 @@ from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
 from mmengine.config import Config
 
 import wgse_mmseg
-from wgse_mmseg.core.arguments import EPOCHS, ITERATIONS, declare
 from wgse_mmseg.core.limits import excerpt
 from wgse_mmseg.utils.config import parse_option_value
 
@@ -139,7 +138,6 @@ def enhancer_options(enhancer: Optional[dict]) -> Dict[str, Any]:
     return options
 
 
-@declare(epochs=EPOCHS.or_none(), max_iters=ITERATIONS.or_none())
 def schedule_options(epochs: Optional[int],
                      max_iters: Optional[int]) -> Tuple[Dict[str, Any], str]:
     """``--cfg-options`` for the schedule and the final checkpoint's name.
@@ -150,7 +148,7 @@ def schedule_options(epochs: Optional[int],
     (a tenth of the iterations), so an interrupted run resumes; validation
     during training is off (the run is tested afterwards).
     """
-    length = check_schedule(epochs, max_iters)
+    length = check_schedule('schedule_options', epochs, max_iters)
     warmup = max(1, length // 10)
     options = {
         'val_cfg': None, 'val_dataloader': None, 'val_evaluator': None,

@@ -34,8 +34,9 @@ import torch
 from mmengine.model import revert_sync_batchnorm
 from torch import nn
 
-from ..core.arguments import NUM_STEPS, SIDE, declare
+from ..argument_checks import check_integer
 from ..core.io import atomic_path
+from ..core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from ..core.wgse import WGSE
 from ..utils.cross_checks import check_input_fits
 from .onnx_segmentor import INPUT, OUTPUT, OnnxSpikeSegmentor, \
@@ -86,7 +87,6 @@ def random_spikes(shape: Sequence[int], seed: int) -> torch.Tensor:
             SPIKE_PROBABILITY).float()
 
 
-@declare(num_steps=NUM_STEPS, height=SIDE, width=SIDE, opset=OPSETS)
 def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
                 height: int, width: int, opset: int = OPSET,
                 dataset_meta: Optional[dict] = None,
@@ -112,6 +112,11 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
             (TFI's data-dependent scans), metadata that is not classes and
             a palette, or a file its own checks refuse; nothing is left.
     """
+    check_integer('export_onnx', 'num_steps', num_steps, 1, MAX_NUM_STEPS)
+    check_integer('export_onnx', 'height', height, 1, MAX_IMAGE_SIDE)
+    check_integer('export_onnx', 'width', width, 1, MAX_IMAGE_SIDE)
+    check_integer('export_onnx', 'opset', opset, OPSETS.minimum,
+                  OPSETS.maximum)
     if dataset_meta is not None:
         dataset_meta = check_dataset_meta(f'{path} (dataset_meta)',
                                           dataset_meta)

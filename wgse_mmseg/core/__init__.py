@@ -6,8 +6,8 @@ where mmengine, mmseg and mmcv are not installed (a GPU machine without
 OpenMMLab, a notebook), and importing it changes nothing outside it.
 
 * :mod:`.constants`: the readout rate and the REDS intensity scale;
-  :mod:`.arguments`: the declared argument checks of the public entry
-  points; :mod:`.limits`: the stated size limits they apply;
+  :mod:`.limits`: the stated size limits the argument checks
+  (:mod:`wgse_mmseg.argument_checks`) and the readers apply;
 * :mod:`.io`: spike files (``.dat``, ``.spk``, ``.npy``, ``.npz``) and
   atomic writes;
 * :mod:`.wavelets`: the DWT as matrices, equal to PyWavelets';
@@ -28,8 +28,8 @@ registers these with MMSeg's registries.
 
 Importing it imports none of these: each name below, and each submodule,
 is imported where it is first used, so that a command line's argument
-parser (:mod:`.arguments`, :mod:`.limits`, :mod:`.output_folder`) loads
-without torch, OpenCV or Triton.
+parser (:mod:`wgse_mmseg.command_line`, :mod:`.limits`,
+:mod:`.output_folder`) loads without torch, OpenCV or Triton.
 """
 import importlib
 

@@ -18,7 +18,7 @@ import re
 from typing import TYPE_CHECKING, Any, Dict, List, Optional, Union
 
 from .._openmmlab import prepare_mmseg_layer
-from ..core.arguments import Choice, Integer, Path
+from ..command_line import Choice, Integer, Path
 from ..core.limits import MAX_WORKERS, excerpt
 from ..core.output_folder import note_input
 from .spike_settings import (SPIKE_SETTINGS, SpikeSettingsError,

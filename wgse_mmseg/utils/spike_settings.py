@@ -42,14 +42,15 @@ import inspect
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
-from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf,
-                              Path)
+from ..command_line import (FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf,
+                            Path)
 from ..core.limits import excerpt
+from ..errors import WgseError
 
 __all__ = []
 
 
-class SpikeSettingsError(ValueError):
+class SpikeSettingsError(WgseError, ValueError):
     """A spike setting is not valid, or its fields cannot be made to agree
     with it."""
 
