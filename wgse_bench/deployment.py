@@ -29,8 +29,10 @@ from mmseg.structures import SegDataSample
 from wgse_mmseg.apis.onnx_export import (SpikeSegmentorGraph, export_onnx,
                                          random_spikes)
 from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
-from wgse_mmseg.argument_checks import check_integer
-from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
+from wgse_mmseg.argument_checks import (ArgumentError, check_integer,
+                                        check_path, check_text, is_integer)
+from wgse_mmseg.core.limits import (MAX_BATCH_SIZE, MAX_IMAGE_SIDE,
+                                    MAX_NUM_STEPS, MAX_WORKERS)
 from wgse_mmseg.utils.config import load_config
 
 from .machine import machine_record
@@ -77,9 +79,17 @@ def measure_deployment(name: str, config: str,
         :func:`~.timing.time_calls`'s, checked before anything is built.
     """
     entry = 'measure_deployment'
+    check_text(entry, 'name', name)
+    if not (isinstance(shape, (list, tuple)) and len(shape) == 3 and
+            is_integer(shape[0], 1, MAX_NUM_STEPS) and
+            all(is_integer(side, 1, MAX_IMAGE_SIDE) for side in shape[1:])):
+        raise ArgumentError(entry, 'shape', f'(T, H, W), T an integer in '
+                            f'[1, {MAX_NUM_STEPS}] and H, W in '
+                            f'[1, {MAX_IMAGE_SIDE}]', shape)
     check_integer(entry, 'batch_size', batch_size, 1, MAX_BATCH_SIZE)
     check_integer(entry, 'threads', threads, 1, MAX_WORKERS, optional=True)
     check_repeats(entry, repeat, warmup)
+    check_path(entry, 'config', config, exists='file')
     previous = torch.get_num_threads()
     if threads is not None:
         torch.set_num_threads(threads)

@@ -8,12 +8,14 @@ train and test tools (:func:`enhancer_options`, :func:`schedule_options`,
 :func:`as_cli`).
 """
 import fnmatch
+import os
 import os.path as osp
 from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 from mmengine.config import Config
 
 import wgse_mmseg
+from wgse_mmseg.argument_checks import ArgumentError, check_path
 from wgse_mmseg.core.limits import excerpt
 from wgse_mmseg.utils.config import parse_option_value
 
@@ -71,6 +73,9 @@ def load_grid(path: str) -> Tuple[Config, List[Entry]]:
     type=...), cfg_options=dict(...))``: a variant that also changes the
     training recipe.
     """
+    check_path('load_grid', 'path', path, exists='file')
+    if not os.fspath(path).endswith('.py'):
+        raise ArgumentError('load_grid', 'path', 'a grid file (.py)', path)
     grid = Config.fromfile(path)
     for key in ('models', 'enhancers', 'cfg_options', 'epochs', 'seeds',
                 'latency'):

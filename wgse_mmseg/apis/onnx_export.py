@@ -26,6 +26,7 @@ from .._openmmlab import check_mmseg_layer
 check_mmseg_layer('wgse_mmseg.apis.onnx_export')  # before MMSeg is imported
 
 import json
+import os
 import warnings
 from typing import Any, Callable, Dict, Optional, Sequence
 
@@ -34,7 +35,7 @@ import torch
 from mmengine.model import revert_sync_batchnorm
 from torch import nn
 
-from ..argument_checks import check_integer
+from ..argument_checks import ArgumentError, check_integer, check_path
 from ..core.io import atomic_path
 from ..core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from ..core.wgse import WGSE
@@ -117,6 +118,13 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
     check_integer('export_onnx', 'width', width, 1, MAX_IMAGE_SIDE)
     check_integer('export_onnx', 'opset', opset, OPSETS.minimum,
                   OPSETS.maximum)
+    check_path('export_onnx', 'path', path)
+    if os.path.isdir(path):
+        raise ArgumentError('export_onnx', 'path', 'the path of the file to '
+                            'write, not a folder', path)
+    if not isinstance(graph, SpikeSegmentorGraph):
+        raise ArgumentError('export_onnx', 'graph', 'a SpikeSegmentorGraph '
+                            '(a built segmentor as one module)', graph)
     if dataset_meta is not None:
         dataset_meta = check_dataset_meta(f'{path} (dataset_meta)',
                                           dataset_meta)

@@ -61,7 +61,7 @@ class ModelFitError(WgseError, ValueError):
     other; names the setting and the smallest value that works."""
 
 
-class _WrongWidth(Exception):
+class _WrongWidth(WgseError, ValueError):
     """A layer given another number of channels than it takes."""
 
     def __init__(self, name: str, layer: nn.Module, given: int):

@@ -6,6 +6,7 @@ import torch
 
 from ...argument_checks import (FLOAT32_RANGE, check_choice, check_integer,
                                 check_number)
+from ..checks import check_device
 from ..constants import READOUT_HZ
 from ..limits import MAX_NUM_STEPS, check_allocation
 from ..seeding import check_seed
@@ -85,6 +86,7 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
     check_number(entry, 'readout_hz', readout_hz, 0, strict_minimum=True,
                  float32=True)
     check_choice(entry, 'backend', backend, CHOICES)
+    device = check_device(entry, 'device', device)
     threshold, gain, readout_hz = (float(threshold), float(gain),
                                    float(readout_hz))
     low, high = FLOAT32_RANGE
@@ -95,7 +97,6 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
             f'for gain={gain!r} and threshold={threshold!r}; it must be 0 or '
             f'of magnitude in [{low:.4g}, {high:.4g}] (a normal float32)')
     parsed = parse_effects(effects)
-    device = torch.device(device)
     intensity = frames_to_intensity(frames, torch.float32, device)
     count, height, width = intensity.shape
     check_allocation(int(num_steps) * height * width,
