@@ -51,7 +51,8 @@ PACKAGE_DIRS = tuple(osp.dirname(package.__file__).replace('\\', '/') + '/'
 #: public entry points the test does not call, and why
 NOT_CALLED = {
     'register_all_modules': 'takes no arguments',
-    'load_config': 'reads an MMSeg config (tests/utils/test_config_options.py)',
+    'load_config': 'reads an MMSeg config '
+                   '(tests/utils/test_config_options.py)',
     'spike_config': 'combines MMSeg configs (tests/utils/test_spike_model.py)',
     'SpikeRunner': "mmengine's Runner; its arguments are mmengine's",
     'CPUDistributedDataParallel': "torch's DistributedDataParallel on CPU, "

@@ -33,6 +33,9 @@ FLOAT32_RANGE = (2.0 ** -126, (2 - 2.0 ** -23) * 2.0 ** 127)
 #: ``(T, H, W)``) or ``'HWT'`` (frames last, ``(H, W, T)``, as some
 #: simulators and viewers store them); see :mod:`wgse_mmseg.core.io`
 LAYOUTS = ('THW', 'HWT')
+#: the exposures of an image from spikes besides a gain: ``'auto'`` and
+#: ``'none'`` (see :func:`wgse_mmseg.core.exposure.apply_exposure`)
+EXPOSURE_CHOICES = ('auto', 'none')
 
 
 class ArgumentError(WgseError, ValueError):

@@ -11,10 +11,10 @@ import argparse
 import copy
 from typing import Any, Optional, Sequence
 
-from .argument_checks import (LAYOUTS, ArgumentError, integer_expected,
-                              is_choice, is_integer, is_number, is_path,
-                              number_expected, path_expected)
-from .core.exposure import EXPOSURE_CHOICES
+from .argument_checks import (EXPOSURE_CHOICES, LAYOUTS, ArgumentError,
+                              integer_expected, is_choice, is_integer,
+                              is_number, is_path, number_expected,
+                              path_expected)
 from .core.limits import (MAX_CLASSES, MAX_EPOCHS, MAX_IMAGE_SIDE, MAX_ITERS,
                           MAX_NUM_STEPS, MAX_REPEAT, MAX_SEED)
 from .errors import excerpt

@@ -17,13 +17,10 @@ from typing import NamedTuple, Tuple, Union
 
 import numpy as np
 
-from ..argument_checks import (ArgumentError, check_number, is_choice,
-                               is_number)
+from ..argument_checks import (EXPOSURE_CHOICES, ArgumentError,
+                               check_number, is_choice, is_number)
 
 __all__ = ['apply_exposure']
-
-#: the non-numeric values of an ``exposure`` argument
-EXPOSURE_CHOICES = ('auto', 'none')
 
 #: ``'auto'`` brightens an image only when its bright end is below this
 #: fraction of white, i.e. when it would need a gain above 4. Calibrated
