@@ -23,8 +23,9 @@ import time
 from typing import Dict, List, Sequence
 
 from wgse_mmseg.command_line import Integer, Path
-from wgse_mmseg.core.limits import MAX_REPEAT
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+from wgse_mmseg.limits import MAX_REPEAT
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 #: the modules a tool's --help must not need: each takes from a tenth of a
@@ -113,7 +114,7 @@ def main(argv=None) -> int:
     check_tool_outputs(args, 'out')
     from wgse_bench.machine import machine_record
     from wgse_bench.markdown import markdown_table
-    from wgse_mmseg.core.io import atomic_output
+    from wgse_mmseg.fileio.atomic import atomic_output
     before = os.getloadavg()[0]
     rows = measure(args.repeat)
     machine = machine_record('cpu')

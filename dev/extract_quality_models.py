@@ -2,9 +2,9 @@
 
     python dev/extract_quality_models.py [--out DIR]
 
-The no-reference measures (:mod:`wgse_mmseg.core.quality`) need published
-model data, which the package ships in ``wgse_mmseg/core/quality/data`` so
-that nothing is downloaded at run time. This script makes those files from
+The no-reference measures (:mod:`wgse_mmseg.evaluation.quality`) need published
+model data, which the package ships in ``wgse_mmseg/evaluation/quality/data``
+so that nothing is downloaded at run time. This script makes those files from
 pinned registry packages (it needs the registry; CI does not run it):
 
 * ``niqe_pristine_model.npz``: ``basicsr/metrics/niqe_pris_params.npz`` of
@@ -43,8 +43,9 @@ import zipfile
 import numpy as np
 
 from wgse_mmseg.command_line import Path
-from wgse_mmseg.core.io import write_bytes
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+from wgse_mmseg.fileio.atomic import write_bytes
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 
 DEFAULT_OUT = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),
                        'wgse_mmseg', 'core', 'quality', 'data')
@@ -69,7 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
         description='Make the NIQE/BRISQUE model files from pinned packages')
     parser.add_argument('--out', type=Path(), default=DEFAULT_OUT,
                         help='output folder (default: the package\'s '
-                        'wgse_mmseg/core/quality/data)')
+                        'wgse_mmseg/evaluation/quality/data)')
     return parser
 
 

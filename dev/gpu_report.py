@@ -22,8 +22,9 @@ import os
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.output_folder import (check_tool_outputs, keeps_inputs,
-                                           own_folder)
+from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.fileio.locks import own_folder
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 #: docs/gpu.md's targets on one H100 or H200 (issue 43): figure

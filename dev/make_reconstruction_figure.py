@@ -23,8 +23,9 @@ from wgse_mmseg.command_line import (LAYOUT, LAYOUT_HELP, Choice, Integer,
                                      add_frame_size_options,
                                      check_frame_size)
 from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
-from wgse_mmseg.core.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+from wgse_mmseg.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
+from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
 
 # OpenCV, torch and the MMSeg layer are imported where they are used, after
 # the arguments are read: --help and argument errors come at once.
@@ -98,9 +99,9 @@ def main(argv=None):
 
     import wgse_mmseg
     wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
-    from wgse_mmseg.core.io import (SpikeFileError, centered_window,
-                                    load_spikes, spike_shape, to_uint8,
-                                    write_png)
+    from wgse_mmseg.core.spike_formats import SpikeFileError, centered_window
+    from wgse_mmseg.fileio.images import to_uint8, write_png
+    from wgse_mmseg.fileio.spike_files import load_spikes, spike_shape
     from wgse_mmseg.models.reconstruction import (load_reconstructor,
                                                   reconstruction_method)
     try:

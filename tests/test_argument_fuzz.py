@@ -161,7 +161,7 @@ FIXTURE_FILES = {}
 @pytest.fixture(scope='module', autouse=True)
 def _files(tmp_path_factory, wrong_file_kinds):
     import cv2
-    from wgse_mmseg.core.io import save_spikes
+    from wgse_mmseg.fileio.spike_files import save_spikes
     root = tmp_path_factory.mktemp('fuzz')
     (root / 'images').mkdir()
     cv2.imwrite(str(root / 'images' / 'a.png'),
@@ -242,6 +242,7 @@ def _required(entry):
         'measure_deployment': dict(name='x', config=files['missing'],
                                    cfg_options=None, shape=(2, 4, 4)),
         'load_grid': dict(path=files['missing']),
+        'read_scene_file': dict(path=files['missing']),
         'export_weights': dict(checkpoint=DEFAULT_WEIGHTS,
                                out=str(files['root'] / 'weights.pth')),
     }.get(entry, {})

@@ -13,7 +13,7 @@ import wgse_mmseg
 from mmseg.registry import DATASETS, MODELS, TRANSFORMS
 from mmseg.structures import SegDataSample
 from wgse_mmseg.core import TFI, TFP, WGSE, simulate_spikes
-from wgse_mmseg.core.io import SpikeFileError
+from wgse_mmseg.core.spike_formats import SpikeFileError
 
 wgse_mmseg.register_all_modules()
 
@@ -291,7 +291,7 @@ def test_a_refused_checkpoint_never_advises_turning_safety_off(tmp_path):
 @pytest.mark.parametrize('code, strerror', [
     (28, 'No space left on device'), (30, 'Read-only file system')])
 def test_a_write_that_fails_names_its_file(tmp_path, code, strerror):
-    from wgse_mmseg.core.io import atomic_output
+    from wgse_mmseg.fileio.atomic import atomic_output
     target = tmp_path / 'out.bin'
     with pytest.raises(OSError) as info:
         with atomic_output(str(target)) as f:

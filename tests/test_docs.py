@@ -114,13 +114,15 @@ def test_pages_show_only_api_names(built):
 def test_the_check_finds_an_internal_name():
     """What the page check reads: code text, dotted names of the package
     but not paths; a constant of a documented module is not API."""
-    page = ('<p><code class="docutils literal"><span>wgse_mmseg.core.io.'
-            'SPIKE_FORMATS</span></code> and <code>wgse_mmseg/core/io.py'
-            '</code>, <code>wgse_mmseg.core.io.load_spikes()</code></p>')
+    page = ('<p><code class="docutils literal"><span>wgse_mmseg.fileio.'
+            'spike_files.SPIKE_FORMATS</span></code> and <code>wgse_mmseg/'
+            'fileio/spike_files.py</code>, <code>wgse_mmseg.fileio.'
+            'spike_files.load_spikes()</code></p>')
     names = shown_names(page)
-    assert names == {'wgse_mmseg.core.io.SPIKE_FORMATS',
-                     'wgse_mmseg.core.io.load_spikes'}
-    api = {'wgse_mmseg.core.io.load_spikes', 'wgse_mmseg.core.WGSE'}
-    assert not_api(names, api) == ['wgse_mmseg.core.io.SPIKE_FORMATS']
+    assert names == {'wgse_mmseg.fileio.spike_files.SPIKE_FORMATS',
+                     'wgse_mmseg.fileio.spike_files.load_spikes'}
+    api = {'wgse_mmseg.fileio.spike_files.load_spikes', 'wgse_mmseg.core.WGSE'}
+    assert not_api(names, api) == [
+        'wgse_mmseg.fileio.spike_files.SPIKE_FORMATS']
     assert not_api({'wgse_mmseg.core', 'wgse_mmseg.core.WGSE.backend'},
                    api) == []

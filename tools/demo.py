@@ -7,10 +7,10 @@ or walk a recording into a video of overlays.
         [--backend pytorch|onnxruntime]
         [--stride N [--batch-size 8] [--fps 10] [--save-frames]]
 
-``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat`` needs
-``--height``/``--width`` or a side file; an ``.npy``/``.npz`` without its
-layout, ``--layout``). The config's test pipeline takes the window of
-``num_steps`` frames centred on the middle frame, as in testing
+``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.fileio.spike_files` reads
+(``.dat`` needs ``--height``/``--width`` or a side file; an ``.npy``/``.npz``
+without its layout, ``--layout``). The config's test pipeline takes the window
+of ``num_steps`` frames centred on the middle frame, as in testing
 (``--cfg-options num_steps=T`` sets the model's ``T``).
 
 The prediction, in the dataset's palette, is blended (``--opacity``) over
@@ -18,7 +18,7 @@ the window's spike rate and written as a PNG to ``--out-file`` (default
 ``<stem>_seg.png`` here); the path is printed.
 
 ``--stride N`` walks the recording instead
-(:mod:`wgse_mmseg.core.recording_walk`): the window of ``num_steps``
+(:mod:`wgse_mmseg.apis.recording_walk`): the window of ``num_steps``
 readouts centred on every ``N``-th readout is segmented as the one-window
 demo segments it, and its overlay becomes a frame of the video
 ``--out-file`` (``.mp4`` or ``.gif``; default ``<stem>_seg.mp4``), with
@@ -39,8 +39,9 @@ import sys
 from wgse_mmseg.command_line import (EXPOSURE, LAYOUT, PROBABILITY, Choice,
                                      Path, Text, add_frame_size_options,
                                      check_frame_size)
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
-from wgse_mmseg.core.recording_walk import add_walk_options
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.apis.recording_walk import add_walk_options
 from wgse_mmseg.utils.config import add_config_options
 
 # The model's modules (torch, OpenCV, OpenMMLab) are imported where they are
@@ -143,7 +144,7 @@ def clip_image(spikes, exposure):
     (an array) of the whole clip (spike rate / 0.6) with ``exposure``
     applied, and what it did (``core.exposure.Exposed``)."""
     from wgse_mmseg.core.exposure import apply_exposure
-    from wgse_mmseg.core.io import to_uint8
+    from wgse_mmseg.fileio.images import to_uint8
     from wgse_mmseg.core.reconstruction_baselines import tfp
     exposed = apply_exposure(tfp(spikes.cpu().numpy()), exposure)
     return to_uint8(exposed.image), exposed
@@ -193,14 +194,14 @@ def onnx_segmentor(path: str, device: str):
 def walk(args, cfg) -> None:
     """``--stride``: segment a window every ``args.stride`` readouts into
     the video ``args.out_file``
-    (:func:`~wgse_mmseg.core.recording_walk.walk_recording`)."""
+    (:func:`~wgse_mmseg.apis.recording_walk.walk_recording`)."""
     import torch
 
     from wgse_mmseg.apis.window_segmentor import (PipelineSegmentor,
                                                   pipeline_loader)
-    from wgse_mmseg.core.io import spike_shape
-    from wgse_mmseg.core.recording_walk import (plan_recording_walk,
-                                                walk_outputs, walk_recording)
+    from wgse_mmseg.fileio.spike_files import spike_shape
+    from wgse_mmseg.apis.recording_walk import walk_recording
+    from wgse_mmseg.apis.walk_plan import plan_recording_walk, walk_outputs
     walk_outputs(args.out_file, args.save_frames, [args.spikes])  # first
     pipeline = build_pipeline(cfg, args.height, args.width, args.layout)
     length = pipeline_loader(pipeline).num_steps
@@ -254,7 +255,7 @@ def main(argv=None):
     import torch
     from mmengine.registry import init_default_scope
 
-    from wgse_mmseg.core.io import write_png
+    from wgse_mmseg.fileio.images import write_png
     from wgse_mmseg.utils.config import load_config
     from wgse_mmseg.utils.cross_checks import check_input_fits
     if args.device is None:

@@ -14,7 +14,8 @@ import os.path as osp
 import sys
 
 from wgse_mmseg.command_line import Number, Path
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
 
@@ -72,7 +73,7 @@ def main():
     args = build_parser().parse_args()
     check_tool_outputs(args, 'out', 'show_dir')
     # torch and OpenMMLab once the arguments are read (--help answers at once)
-    from wgse_mmseg.core.io import SpikeFileError
+    from wgse_mmseg.core.spike_formats import SpikeFileError
     from wgse_mmseg.utils.checkpoint import read_checkpoint
     try:
         cfg = config_from_args(args)

@@ -12,7 +12,8 @@ import os.path as osp
 import sys
 
 from wgse_mmseg.command_line import Path
-from wgse_mmseg.core.output_folder import OutputFolderError, add_wait_option
+from wgse_mmseg.fileio.input_guard import OutputFolderError
+from wgse_mmseg.fileio.locks import add_wait_option
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
 
@@ -42,7 +43,7 @@ def _amp_device_missing() -> bool:
 def main():
     args = build_parser().parse_args()
     # torch and OpenMMLab once the arguments are read (--help answers at once)
-    from wgse_mmseg.core.io import SpikeFileError
+    from wgse_mmseg.core.spike_formats import SpikeFileError
     from wgse_mmseg.utils.checkpoint import CheckpointError
     from wgse_mmseg.utils.cross_checks import ModelFitError
     if args.amp and _amp_device_missing():

@@ -31,8 +31,8 @@ from wgse_mmseg.apis.onnx_export import (SpikeSegmentorGraph, export_onnx,
 from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
 from wgse_mmseg.argument_checks import (ArgumentError, check_integer,
                                         check_path, check_text, is_integer)
-from wgse_mmseg.core.limits import (MAX_BATCH_SIZE, MAX_IMAGE_SIDE,
-                                    MAX_NUM_STEPS, MAX_WORKERS)
+from wgse_mmseg.limits import (MAX_BATCH_SIZE, MAX_IMAGE_SIDE, MAX_NUM_STEPS,
+                               MAX_WORKERS)
 from wgse_mmseg.utils.config import load_config
 
 from .machine import machine_record

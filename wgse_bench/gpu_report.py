@@ -57,7 +57,7 @@ from typing import (Any, Callable, Dict, Iterator, List, NamedTuple,
 
 import torch
 
-from wgse_mmseg.core.io import atomic_output
+from wgse_mmseg.fileio.atomic import atomic_output
 from wgse_mmseg.core.wavelets import band_lengths
 from wgse_mmseg.core.wgse import (WGSE, band_network_backends, first_use_check,
                                   triton_band_networks)

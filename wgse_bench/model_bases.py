@@ -210,7 +210,7 @@ def main(argv: Optional[List[str]] = None) -> None:
     text = format_rows(rows, machine_record(), args.num_steps, args.side)
     print(text)
     if args.out:
-        from wgse_mmseg.core.io import atomic_output
+        from wgse_mmseg.fileio.atomic import atomic_output
         with atomic_output(args.out) as out:
             out.write(text.encode())
 

@@ -29,9 +29,9 @@ reconstructs the window centred on each ``--frames`` frame (default: the
 middle one) and the image, as ``tools/misc/reconstruct.py`` writes it (its
 ``--exposure``, by default ``auto``: a dark recording's image brightened so
 that its 99.5th percentile is white, each method's own gain), is scored by
-the no-reference measures (:mod:`wgse_mmseg.core.quality`: NIQE and BRISQUE,
-lower is better; 2-D entropy, higher means more detail); prints a Markdown
-table of the means over the frames, naming the machine.
+the no-reference measures (:mod:`wgse_mmseg.evaluation.quality`: NIQE and
+BRISQUE, lower is better; 2-D entropy, higher means more detail); prints a
+Markdown table of the means over the frames, naming the machine.
 """
 import argparse
 import os.path as osp
@@ -52,13 +52,14 @@ from wgse_mmseg.argument_checks import (ArgumentError, check_integer,
                                         is_choice, is_integer)
 from wgse_mmseg.command_line import (EXPOSURE, LAYOUT, LAYOUT_HELP, NUM_STEPS,
                                      Choice, Integer, Path, SequenceOf, Text,
-                                     add_frame_size_options,
-                                     check_frame_size)
+                                     add_frame_size_options, check_frame_size)
 from wgse_mmseg.core.exposure import apply_exposure
-from wgse_mmseg.core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
-from wgse_mmseg.core.io import (SpikeFileError, centered_window, load_spikes,
-                                spike_shape, to_uint8)
-from wgse_mmseg.core.quality import NO_REFERENCE_METRICS, no_reference_scores
+from wgse_mmseg.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from wgse_mmseg.core.spike_formats import SpikeFileError, centered_window
+from wgse_mmseg.fileio.spike_files import load_spikes, spike_shape
+from wgse_mmseg.fileio.images import to_uint8
+from wgse_mmseg.evaluation.quality import (NO_REFERENCE_METRICS,
+                                           no_reference_scores)
 from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
                                       PackReconstructionInputs,
                                       REDSSpikeDataset)
@@ -255,7 +256,7 @@ def score_recording(path: str, methods: Sequence[str] = METHODS,
     method's output at ``exposure`` (``'auto'``, ``'none'`` or a gain;
     ``gain`` is the mean gain applied), in 8 bits. ``tfp``/``tfi`` use
     ``num_steps``-frame windows, ``wgse`` its model's. ``layout``: as
-    :func:`~wgse_mmseg.core.io.load_spikes` takes it.
+    :func:`~wgse_mmseg.fileio.spike_files.load_spikes` takes it.
     """
     entry = 'score_recording'
     check_path(entry, 'path', path)

@@ -16,7 +16,8 @@ import cv2
 import numpy as np
 
 from wgse_mmseg.core.constants import REDS_THRESHOLD
-from wgse_mmseg.core.io import SPIKE_EXTENSIONS, load_spikes, save_spikes
+from wgse_mmseg.fileio.spike_files import (SPIKE_EXTENSIONS, load_spikes,
+                                           save_spikes)
 from wgse_mmseg.core.simulation import fixed_point, simulate_spikes
 
 from .machine import machine_record

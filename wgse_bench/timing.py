@@ -6,7 +6,7 @@ from typing import (TYPE_CHECKING, Any, Callable, Dict, List, NamedTuple,
                     Sequence, Union)
 
 from wgse_mmseg.argument_checks import check_integer
-from wgse_mmseg.core.limits import MAX_REPEAT
+from wgse_mmseg.limits import MAX_REPEAT
 
 if TYPE_CHECKING:  # torch where a call is timed (a tool's --help needs none)
     import torch

@@ -46,7 +46,7 @@ import tempfile
 from typing import Dict, List, NamedTuple, Optional, Sequence
 
 from wgse_mmseg.command_line import Choice, Integer, Path
-from wgse_mmseg.core.limits import MAX_WORKERS
+from wgse_mmseg.limits import MAX_WORKERS
 
 __all__ = []
 

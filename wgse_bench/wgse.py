@@ -21,7 +21,7 @@ from typing import Dict, List, Optional
 
 import torch
 
-from wgse_mmseg.core.io import atomic_output
+from wgse_mmseg.fileio.atomic import atomic_output
 from wgse_mmseg.core.wgse import WGSE, band_network_backends
 
 from .machine import machine_record

@@ -4,7 +4,7 @@
 torch, so that their command lines answer ``--help`` and argument errors at
 once (tests/bench/test_wgse_choices.py holds them equal to the kernels')."""
 from wgse_mmseg.command_line import NUM_STEPS, SIDE, Integer, SequenceOf
-from wgse_mmseg.core.limits import MAX_BATCH_SIZE
+from wgse_mmseg.limits import MAX_BATCH_SIZE
 
 __all__ = []
 

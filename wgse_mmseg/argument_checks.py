@@ -18,7 +18,7 @@ import os
 from numbers import Integral, Real
 from typing import Any, Optional, Sequence, Tuple
 
-from .core.limits import MAX_IMAGE_SIDE, MAX_PARAMETERS
+from .limits import MAX_IMAGE_SIDE, MAX_PARAMETERS
 from .errors import WgseError, excerpt
 
 __all__ = ['ArgumentError']
@@ -31,7 +31,7 @@ FLOAT32_RANGE = (2.0 ** -126, (2 - 2.0 ** -23) * 2.0 ** 127)
 
 #: the axis orders of a 3-D spike array on disk: ``'THW'`` (frames first,
 #: ``(T, H, W)``) or ``'HWT'`` (frames last, ``(H, W, T)``, as some
-#: simulators and viewers store them); see :mod:`wgse_mmseg.core.io`
+#: simulators and viewers store them); see :mod:`wgse_mmseg.fileio.spike_files`
 LAYOUTS = ('THW', 'HWT')
 #: the exposures of an image from spikes besides a gain: ``'auto'`` and
 #: ``'none'`` (see :func:`wgse_mmseg.core.exposure.apply_exposure`)
@@ -244,7 +244,7 @@ def check_layout(entry: str, layout: Any) -> Optional[str]:
 
 def check_parameter_count(entry: str, count: int, fields: str) -> None:
     """Refuse a learned module of more than
-    :data:`~wgse_mmseg.core.limits.MAX_PARAMETERS` parameters before
+    :data:`~wgse_mmseg.limits.MAX_PARAMETERS` parameters before
     building it; ``fields`` names the arguments that set the count."""
     if count > MAX_PARAMETERS:
         raise ArgumentError(

@@ -15,8 +15,8 @@ from .argument_checks import (EXPOSURE_CHOICES, LAYOUTS, ArgumentError,
                               integer_expected, is_choice, is_integer,
                               is_number, is_path, number_expected,
                               path_expected)
-from .core.limits import (MAX_CLASSES, MAX_EPOCHS, MAX_IMAGE_SIDE, MAX_ITERS,
-                          MAX_NUM_STEPS, MAX_REPEAT, MAX_SEED)
+from .limits import (MAX_CLASSES, MAX_EPOCHS, MAX_IMAGE_SIDE, MAX_ITERS,
+                     MAX_NUM_STEPS, MAX_REPEAT, MAX_SEED)
 from .errors import excerpt
 
 __all__ = []
@@ -316,8 +316,9 @@ LAYOUT_HELP = ('THW or HWT: how a .npy/.npz that does not record its layout '
 
 def add_frame_size_options(parser: argparse.ArgumentParser) -> None:
     """A tool's ``--height`` and ``--width``: the frame size of a ``.dat``
-    recording (which records none; :mod:`wgse_mmseg.core.io`). They go
-    together: :func:`check_frame_size` refuses one without the other."""
+    recording (which records none; :mod:`wgse_mmseg.fileio.spike_files`).
+    They go together: :func:`check_frame_size` refuses one without the
+    other."""
     parser.add_argument('--height', type=SIDE,
                         help='frame height of a .dat recording (with --width)')
     parser.add_argument('--width', type=SIDE,

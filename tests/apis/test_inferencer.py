@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from wgse_mmseg.apis.inferencer import SpikeSegInferencer
-from wgse_mmseg.core.io import save_spikes
+from wgse_mmseg.fileio.spike_files import save_spikes
 from wgse_mmseg.engine import spike_clip_image
 from wgse_mmseg.utils.config import load_config
 

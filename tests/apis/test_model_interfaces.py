@@ -16,8 +16,9 @@ from onnx import TensorProto, helper
 
 from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
 from wgse_mmseg.apis.segmentor_checkpoint import load_segmentor
-from wgse_mmseg.core.limits import (MAX_JSON_DEPTH, json_depth,
-                                    load_json_file, parse_json)
+from wgse_mmseg.fileio.bounded_reads import (json_depth, load_json_file,
+                                             parse_json)
+from wgse_mmseg.limits import MAX_JSON_DEPTH
 from wgse_mmseg.utils.checkpoint import CheckpointError, check_dataset_meta
 
 T, H, W = 3, 4, 5
@@ -258,7 +259,7 @@ def test_the_onnx_walk_checks_the_model_against_config_and_recording(
     """Before a walk: the file's T against the config's window, its H, W
     against the recording's frames; more classes than the default palette
     has colours, where the file records none."""
-    from wgse_mmseg.core.io import save_spikes
+    from wgse_mmseg.fileio.spike_files import save_spikes
     model = _model(tmp_path / 'm.onnx') if num_steps != 21 else _model(
         tmp_path / 'm.onnx', in_shape=('n', 21, H, W),
         out_shape=('n', 21, H, W),

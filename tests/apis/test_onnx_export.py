@@ -36,7 +36,7 @@ from wgse_mmseg.apis.onnx_export import (  # noqa: E402
     LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, SpikeSegmentorGraph,
     compare_with_onnx, export_onnx, random_spikes)
 from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor  # noqa: E402
-from wgse_mmseg.core.io import save_spikes  # noqa: E402
+from wgse_mmseg.fileio.spike_files import save_spikes  # noqa: E402
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 TOOL = osp.join(ROOT, 'tools', 'deployment', 'pytorch2onnx.py')

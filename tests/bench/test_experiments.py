@@ -563,7 +563,7 @@ def test_a_run_another_process_runs_is_not_run_twice(tmp_path, capsys,
                                                      monkeypatch):
     """Two grid commands at once: a run whose folder another process owns
     is reported failed, naming it, and not trained a second time."""
-    from wgse_mmseg.core.output_folder import own_folder
+    from wgse_mmseg.fileio.locks import own_folder
     (tmp_path / 'data' / 'spike' / 'train').mkdir(parents=True)
     grid, entries = runner.load_grid(GRID_CPU)
     settings = ExperimentSettings(GRID_CPU, str(tmp_path / 'data'),
@@ -596,8 +596,8 @@ def test_only_the_runs_own_checkpoints_are_removed(tmp_path):
     """A run's folder after training: the checkpoints its training wrote
     (in the manifest) go, with ``last_checkpoint`` naming one; a ``.pth``
     the user put there stays."""
-    from wgse_mmseg.core.io import write_bytes
-    from wgse_mmseg.core.output_folder import own_folder
+    from wgse_mmseg.fileio.atomic import write_bytes
+    from wgse_mmseg.fileio.locks import own_folder
     from wgse_bench.experiments.runner import _remove_checkpoints
     run_dir = tmp_path / 'seed_0'
     with own_folder(str(run_dir)):

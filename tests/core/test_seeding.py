@@ -11,7 +11,7 @@ import torch
 from hypothesis import given, settings, strategies as st
 
 from wgse_mmseg.argument_checks import ArgumentError
-from wgse_mmseg.core.limits import MAX_SEED
+from wgse_mmseg.limits import MAX_SEED
 from wgse_mmseg.core.seeding import (_string_key_word, check_seed,
                                      derive_generator, derive_seed,
                                      draw_seed)

@@ -13,19 +13,19 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from wgse_mmseg.core.constants import READOUT_HZ
-from wgse_mmseg.core.limits import check_allocation
-from wgse_mmseg.core.simulation import (EFFECTS, frames_to_intensity,
-                                        initial_charge, parse_effects,
-                                        simulate_spikes)
+from wgse_mmseg.core.simulation import (EFFECTS, fixed_point,
+                                        frames_to_intensity, initial_charge,
+                                        parse_effects, simulate_spikes)
 from wgse_mmseg.core.simulation.camera_motion import (CameraMotion,
                                                       trajectory_source_maps)
 from wgse_mmseg.core.simulation.effect import SensorEffect, SimulationContext
-from wgse_mmseg.core.simulation import fixed_point
 from wgse_mmseg.core.simulation.fixed_point import ONE, Integrator, quantise
 from wgse_mmseg.core.simulation.interpolation import FlowLight
 from wgse_mmseg.core.simulation.light import LinearLight
 from wgse_mmseg.core.simulation.sensor import SensorMaps
 from wgse_mmseg.core.simulation.warp import affine_grid
+from wgse_mmseg.fileio.scene_files import read_scene_file
+from wgse_mmseg.limits import check_allocation
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
@@ -613,12 +613,12 @@ def test_scene_files(tmp_path):
     as_yaml.write_text('shot_noise: {electrons: 1000}\njitter:\n')
     direct, meta = simulate_spikes(_image(), 30, effects=scene, seed=2)
     for path in (as_json, str(as_yaml)):
-        from_file, file_meta = simulate_spikes(_image(), 30, effects=path,
-                                               seed=2)
+        from_file, file_meta = simulate_spikes(
+            _image(), 30, effects=read_scene_file(path), seed=2)
         assert np.array_equal(from_file, direct) and file_meta == meta
     empty = tmp_path / 'empty.yml'
     empty.write_text('')
-    assert simulate_spikes(_image(), 5, effects=empty)[1]['effects'] == {}
+    assert read_scene_file(empty) == {}
 
 
 @pytest.mark.parametrize('text, suffix, message', [
@@ -631,7 +631,7 @@ def test_bad_scene_files_name_the_file(tmp_path, text, suffix, message):
     path = tmp_path / ('scene' + suffix)
     path.write_text(text)
     with pytest.raises(ValueError, match=message) as info:
-        simulate_spikes(_image(), 5, effects=path)
+        simulate_spikes(_image(), 5, effects=read_scene_file(path))
     assert str(path) in str(info.value)
 
 
@@ -657,7 +657,7 @@ def test_yaml_aliases_are_refused_within_bounds(tmp_path):
     tracemalloc.start()
     began = time.perf_counter()
     with pytest.raises(ValueError, match='alias') as info:
-        simulate_spikes(_image(), 5, effects=path)
+        simulate_spikes(_image(), 5, effects=read_scene_file(path))
     seconds = time.perf_counter() - began
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
@@ -665,8 +665,7 @@ def test_yaml_aliases_are_refused_within_bounds(tmp_path):
     assert str(path) in str(info.value) and len(str(info.value)) < 1000
     # a single anchor without an alias is plain YAML
     path.write_text('shot_noise: &noise {electrons: 1000}\n')
-    assert simulate_spikes(_image(), 5, effects=path)[1] == simulate_spikes(
-        _image(), 5, effects={'shot_noise': {'electrons': 1000}})[1]
+    assert read_scene_file(path) == {'shot_noise': {'electrons': 1000}}
 
 
 @pytest.mark.parametrize('text, suffix', [
@@ -681,16 +680,16 @@ def test_scene_errors_quote_bounded_excerpts(tmp_path, text, suffix):
     path = tmp_path / ('scene' + suffix)
     path.write_text(text)
     with pytest.raises(ValueError) as info:
-        simulate_spikes(_image(), 5, effects=path)
+        simulate_spikes(_image(), 5, effects=read_scene_file(path))
     assert str(path) in str(info.value) and len(str(info.value)) < 1000
 
 
 def test_scene_files_over_the_limit_are_refused_unread(tmp_path):
-    from wgse_mmseg.core.limits import TEXT_FILE_LIMIT_BYTES
+    from wgse_mmseg.limits import TEXT_FILE_LIMIT_BYTES
     path = tmp_path / 'big.yaml'
     path.write_text('# ' + 'x' * TEXT_FILE_LIMIT_BYTES + '\nshot_noise: {}\n')
     with pytest.raises(ValueError, match='larger than'):
-        simulate_spikes(_image(), 5, effects=path)
+        simulate_spikes(_image(), 5, effects=read_scene_file(path))
 
 
 # ------------------------------------------------------------------- errors

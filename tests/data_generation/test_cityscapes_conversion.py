@@ -17,8 +17,9 @@ from wgse_mmseg.data_generation.cityscapes_conversion import (
     CITYSCAPES_LABELS, LABEL_ID_TO_TRAIN_ID, ConversionSettings,
     convert_cityscapes, find_samples, labelids_to_trainids, load_scene,
     resize_nearest, sample_effects)
-from wgse_mmseg.core.io import load_spikes
-from wgse_mmseg.core.output_folder import MANIFEST_NAME, own_folder
+from wgse_mmseg.fileio.spike_files import load_spikes
+from wgse_mmseg.fileio.locks import own_folder
+from wgse_mmseg.fileio.output_folder import MANIFEST_NAME
 from wgse_mmseg.core.seeding import derive_seed
 from wgse_mmseg.data_generation.shards import WHOLE, Shard
 from wgse_mmseg.core import simulation  # the converter calls it there
@@ -624,7 +625,8 @@ def test_a_shard_has_one_writer_and_no_link_is_followed(tmp_path, cityscapes,
     replaced with the sample, its target untouched; the Cityscapes input
     and the dataset's listing take each image once whatever links lead to
     it, and a folder linking to itself does not stop the listing."""
-    from wgse_mmseg.core.output_folder import OutputFolderError, own_folder
+    from wgse_mmseg.fileio.input_guard import OutputFolderError
+    from wgse_mmseg.fileio.locks import own_folder
     root, _ = cityscapes
     out = str(tmp_path / 'out')
     with own_folder(out, 'shard-1-of-2'):

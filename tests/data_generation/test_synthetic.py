@@ -4,8 +4,8 @@ import os
 import numpy as np
 import pytest
 
-from wgse_mmseg.core.io import load_spikes, spike_shape
-from wgse_mmseg.core.output_folder import MANIFEST_NAME
+from wgse_mmseg.fileio.spike_files import load_spikes, spike_shape
+from wgse_mmseg.fileio.output_folder import MANIFEST_NAME
 from wgse_mmseg.data_generation.synthetic import (make_synthetic_dataset,
                                                   render_street_scene)
 from wgse_mmseg.data_generation.views import render_trajectory
@@ -44,7 +44,8 @@ def test_the_dataset_folder_is_owned(tmp_path):
     folder inside is refused naming it, a second writer is refused naming
     the first, and no lock file is left."""
     import pytest
-    from wgse_mmseg.core.output_folder import OutputFolderError, own_folder
+    from wgse_mmseg.fileio.input_guard import OutputFolderError
+    from wgse_mmseg.fileio.locks import own_folder
     out = tmp_path / 'synth'
     args = dict(num_train=1, num_val=1, height=16, width=32, num_steps=9,
                 progress=False)

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from wgse_mmseg.core.output_folder import MANIFEST_NAME
+from wgse_mmseg.fileio.output_folder import MANIFEST_NAME
 from wgse_mmseg.data_generation import training_images
 from wgse_mmseg.data_generation.training_images import (
     SCIKIT_IMAGE_PHOTOGRAPHS, export_training_images)
@@ -99,7 +99,7 @@ def test_a_damaged_or_linked_image_is_written_again(tmp_path):
     """A re-run keeps an image only when it holds its pixels: a truncated
     PNG, another image's PNG and a link (its target untouched) are
     written again; a linked source folder is refused naming it."""
-    from wgse_mmseg.core.output_folder import OutputFolderError
+    from wgse_mmseg.fileio.input_guard import OutputFolderError
     out = tmp_path / 'images'
     first = export_training_images(str(out), ('matplotlib',))['matplotlib']
     expected = {p: open(p, 'rb').read() for p in first}

@@ -12,7 +12,8 @@ import pytest
 import torch
 
 import wgse_mmseg
-from wgse_mmseg.core.output_folder import OutputFolderError, own_folder
+from wgse_mmseg.fileio.input_guard import OutputFolderError
+from wgse_mmseg.fileio.locks import own_folder
 from wgse_mmseg.utils.checkpoint import CheckpointError
 from wgse_mmseg.utils.config import build_runner, load_config
 

@@ -9,7 +9,8 @@ from mmengine.registry import RUNNERS
 
 import wgse_mmseg
 from wgse_mmseg.core.exposure import apply_exposure
-from wgse_mmseg.core.io import load_spikes, to_uint8
+from wgse_mmseg.fileio.images import to_uint8
+from wgse_mmseg.fileio.spike_files import load_spikes
 from wgse_mmseg.core.reconstruction_baselines import tfp
 from wgse_mmseg.utils.config import load_config
 

@@ -205,7 +205,7 @@ def test_paramwise_cfg_gives_the_enhancer_its_own_learning_rate():
 def test_inference_model_takes_a_spike_file(tmp_path):
     from mmseg.apis import inference_model, init_model
 
-    from wgse_mmseg.core.io import save_spikes
+    from wgse_mmseg.fileio.spike_files import save_spikes
     cfg = load_config(config_path(SEGFORMER_WGSE),
                       dict(num_steps=9))
     path = str(tmp_path / 'clip.npy')

@@ -26,8 +26,8 @@ from wgse_mmseg.evaluation import (ReconstructionMetric, entropy_2d,
 from wgse_bench.reconstruction import (benchmark, format_table,
                                        main, multiply_adds,
                                        score_recording)
-from wgse_mmseg.core.quality import no_reference_scores
-from wgse_mmseg.core.io import load_spikes, save_spikes
+from wgse_mmseg.evaluation.quality import no_reference_scores
+from wgse_mmseg.fileio.spike_files import load_spikes, save_spikes
 from wgse_mmseg.models.reconstruction import (CLASSICAL_METHODS,
                                               DEFAULT_WEIGHTS,
                                               METHODS, reconstruction_method,

@@ -27,9 +27,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from wgse_mmseg.command_line import (LAYOUT, Argument, Choice, Integer,
-                                     Number, OneOf, Path, SequenceOf, Text)
-from wgse_mmseg.core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
+from wgse_mmseg.command_line import (LAYOUT, Argument, Choice, Integer, Number,
+                                     OneOf, Path, SequenceOf, Text)
+from wgse_mmseg.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
 from wgse_mmseg.data_generation.shards import Shard, ShardArgument
 from wgse_mmseg.utils.config import SPIKE_SETTING_KINDS, ConfigOptions
 

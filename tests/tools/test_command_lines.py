@@ -11,7 +11,7 @@ from contextlib import redirect_stderr, redirect_stdout
 import numpy as np
 import pytest
 
-from wgse_mmseg.core.io import save_spikes
+from wgse_mmseg.fileio.spike_files import save_spikes
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'configs', 'segformer_b0_wgse.py')

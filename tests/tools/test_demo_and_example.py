@@ -19,7 +19,7 @@ from mmseg.registry import MODELS
 from mmseg.structures import SegDataSample
 from wgse_mmseg.utils.config import load_config
 from wgse_mmseg.datasets import SpikeCityscapesDataset
-from wgse_mmseg.core.io import load_spikes, save_spikes
+from wgse_mmseg.fileio.spike_files import load_spikes, save_spikes
 
 wgse_mmseg.register_all_modules()  # before mmseg builds anything
 

@@ -12,7 +12,7 @@ import torch
 import wgse_mmseg
 from mmengine.registry import init_default_scope
 from mmseg.registry import MODELS
-from wgse_mmseg.core.output_folder import own_folder
+from wgse_mmseg.fileio.locks import own_folder
 from wgse_mmseg.utils.config import load_config
 
 wgse_mmseg.register_all_modules()  # before mmseg builds anything

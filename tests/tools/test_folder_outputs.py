@@ -7,7 +7,7 @@ import os.path as osp
 import numpy as np
 import pytest
 
-from wgse_mmseg.core.io import save_spikes
+from wgse_mmseg.fileio.spike_files import save_spikes
 
 
 def _recording(path):

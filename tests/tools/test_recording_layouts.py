@@ -13,7 +13,8 @@ import pytest
 import wgse_mmseg
 from mmengine.registry import init_default_scope
 from mmseg.registry import TRANSFORMS
-from wgse_mmseg.core.io import SpikeFileError, to_uint8
+from wgse_mmseg.core.spike_formats import SpikeFileError
+from wgse_mmseg.fileio.images import to_uint8
 from wgse_mmseg.core.reconstruction_baselines import tfp
 from wgse_mmseg.utils.config import load_config
 

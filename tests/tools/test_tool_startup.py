@@ -36,4 +36,4 @@ def test_importing_the_package_imports_nothing_heavy(startup):
     # nor the command-line kinds the tools' parsers are built from
     assert startup.heavy_imports(
         ['-c', 'import wgse_mmseg.command_line, '
-         'wgse_mmseg.core.recording_walk, wgse_mmseg.utils.config']) == []
+         'wgse_mmseg.apis.recording_walk, wgse_mmseg.utils.config']) == []

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 import wgse_mmseg
-from wgse_mmseg.core.io import save_spikes
+from wgse_mmseg.fileio.spike_files import save_spikes
 
 wgse_mmseg.register_all_modules()
 from wgse_mmseg.models.reconstruction import load_reconstructor  # noqa: E402

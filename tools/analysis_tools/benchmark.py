@@ -16,10 +16,10 @@ import argparse
 import json
 import sys
 
-from wgse_mmseg.command_line import (REPEAT, SIDE, WARMUP, Integer, Path,
-                                     Text)
-from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+from wgse_mmseg.command_line import REPEAT, SIDE, WARMUP, Integer, Path, Text
+from wgse_mmseg.limits import MAX_BATCH_SIZE, MAX_WORKERS
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.utils.config import add_config_options
 
 
@@ -57,7 +57,7 @@ def main():
     from wgse_bench.machine import run_isolated
     from wgse_bench.segmentation import (benchmark_config,
                                          format_results)
-    from wgse_mmseg.core.io import atomic_output
+    from wgse_mmseg.fileio.atomic import atomic_output
     results, failures = [], []
     for config in args.configs:
         print(f'benchmarking {config} ...', flush=True)

@@ -21,8 +21,9 @@ import sys
 
 from wgse_mmseg.apis.onnx_settings import SHAPE_ENTRY
 from wgse_mmseg.command_line import REPEAT, WARMUP, Integer, Path, Text
-from wgse_mmseg.core.limits import MAX_BATCH_SIZE, MAX_WORKERS
-from wgse_mmseg.core.output_folder import check_tool_outputs, keeps_inputs
+from wgse_mmseg.limits import MAX_BATCH_SIZE, MAX_WORKERS
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -64,7 +65,7 @@ def main(argv=None) -> int:
     from wgse_bench.deployment import (format_deployment,
                                        measure_deployment)
     from wgse_bench.machine import run_isolated
-    from wgse_mmseg.core.io import atomic_output
+    from wgse_mmseg.fileio.atomic import atomic_output
     grid, entries = load_grid(args.grid)
     results, failures = [], []
     for entry in select(entries, args.only):

@@ -12,8 +12,9 @@ Prints two tables:
    kernel is built, the base model also runs on the torch path (as without
    it, and as on a GPU); both must give the same spikes.
 2. Time to load one ``--load-shape`` sample (default 129x512x1024) from
-   each format with :func:`wgse_mmseg.core.io.load_spikes` (files just written,
-   so from the page cache: decoding, not the disk), against simulating it.
+   each format with :func:`wgse_mmseg.fileio.spike_files.load_spikes` (files
+   just written, so from the page cache: decoding, not the disk), against
+   simulating it.
 
 Each time is the median of ``--repeat`` runs after one warm-up run. The
 default size runs in about a minute on two cores; the full-size run is::
@@ -26,9 +27,8 @@ count, so the ratio compares algorithms, not core counts).
 """
 import argparse
 
-from wgse_mmseg.command_line import (NUM_STEPS, SIDE, Integer, SequenceOf,
-                                     Text)
-from wgse_mmseg.core.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
+from wgse_mmseg.command_line import NUM_STEPS, SIDE, Integer, SequenceOf, Text
+from wgse_mmseg.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
 
 
 def build_parser() -> argparse.ArgumentParser:

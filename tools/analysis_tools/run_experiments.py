@@ -19,7 +19,7 @@ when ``WORK_DIR/<entry>/seed_<seed>/result.json`` exists (written
 atomically): re-running the command skips finished runs and resumes an
 interrupted one from its last checkpoint. A run another process is running
 (two grid commands at once) is not run twice: it is reported failed, naming
-that process (:func:`~wgse_mmseg.core.output_folder.own_folder` of its
+that process (:func:`~wgse_mmseg.fileio.locks.own_folder` of its
 folder). At the end, every finished run of
 the selected entries and seeds is aggregated into ``results.csv``,
 ``results.md``, ``accuracy_vs_time.png`` and ``loss_curves.png`` in
@@ -38,9 +38,9 @@ import sys
 import time
 
 from wgse_mmseg.command_line import EPOCHS, ITERATIONS, SEED, Path, Text
-from wgse_mmseg.core.output_folder import (OutputFolderError,
-                                           check_tool_outputs, keeps_inputs,
-                                           own_folder)
+from wgse_mmseg.fileio.input_guard import OutputFolderError, keeps_inputs
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.locks import own_folder
 from wgse_mmseg.utils.config import add_config_options
 
 

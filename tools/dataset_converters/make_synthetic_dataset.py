@@ -13,9 +13,10 @@ import sys
 
 from wgse_mmseg.command_line import (NUM_STEPS, SEED, SIDE, Integer, Number,
                                      Path)
-from wgse_mmseg.core.limits import MAX_SAMPLES
-from wgse_mmseg.core.output_folder import (add_wait_option, check_tool_outputs,
-                                           keeps_inputs)
+from wgse_mmseg.limits import MAX_SAMPLES
+from wgse_mmseg.fileio.locks import add_wait_option
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
 
 

@@ -13,7 +13,7 @@ and must fit the config exactly (``--cfg-options num_steps=T`` for another
 The file (default ``<config name>.onnx``) is written whole or not at all,
 by one export at a time (a second export to the same file stops naming
 the first, or waits with ``--wait``:
-:func:`~wgse_mmseg.core.output_folder.own_folder`), and verified before it
+:func:`~wgse_mmseg.fileio.locks.own_folder`), and verified before it
 is published: its interface is checked, and, unless ``--no-verify``, ONNX
 Runtime (CPU) runs it on two random Bernoulli streams beside the torch
 model; the largest logit difference and the share of pixels with the same
@@ -30,9 +30,9 @@ from wgse_mmseg.apis.onnx_settings import (LOGITS_TOLERANCE,
                                            MIN_ARGMAX_AGREEMENT, OPSET, OPSETS,
                                            SHAPE_ENTRY)
 from wgse_mmseg.command_line import SEED, Path
-from wgse_mmseg.core.output_folder import (add_wait_option, check_output_kind,
-                                           check_tool_outputs, keeps_inputs,
-                                           own_folder)
+from wgse_mmseg.fileio.locks import add_wait_option, own_folder
+from wgse_mmseg.fileio.input_guard import check_output_kind, keeps_inputs
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
 from wgse_mmseg.utils.config import add_config_options
 
 #: streams of the check against the torch model

@@ -8,15 +8,15 @@ walk a recording into a video.
     python tools/misc/reconstruct.py SPIKE_FILE --out VIDEO.mp4|.gif
         --stride N [--batch-size 8] [--fps 10] [--save-frames] [...]
 
-``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.core.io` reads (``.dat``,
-``.spk``, ``.npy``, ``.npz``; a ``.dat`` needs ``--height``/``--width`` or a
-``<file>.json`` side file). For each requested centre frame (default: the
-middle frame) the window of ``--num-steps`` frames centred on it goes through
-the method, and ``DIR/<stem>_<frame>.png`` (8-bit grey, upright) is written;
-each path is printed with the exposure gain applied, the image's
-no-reference scores (NIQE and BRISQUE, lower is better; 2-D entropy in
-bits; ``n/a`` where the image is too small or flat for one:
-:mod:`wgse_mmseg.core.quality`) and why that gain. ``--exposure auto``
+``SPIKE_FILE`` is any stream :mod:`wgse_mmseg.fileio.spike_files` reads
+(``.dat``, ``.spk``, ``.npy``, ``.npz``; a ``.dat`` needs
+``--height``/``--width`` or a ``<file>.json`` side file). For each requested
+centre frame (default: the middle frame) the window of ``--num-steps`` frames
+centred on it goes through the method, and ``DIR/<stem>_<frame>.png`` (8-bit
+grey, upright) is written; each path is printed with the exposure gain applied,
+the image's no-reference scores (NIQE and BRISQUE, lower is better; 2-D entropy
+in bits; ``n/a`` where the image is too small or flat for one:
+:mod:`wgse_mmseg.evaluation.quality`) and why that gain. ``--exposure auto``
 (default) leaves an image of normal brightness as the method made it (a
 calibrated stream is never made worse) and brightens only a clearly
 under-exposed one, whose 99.5th percentile is below a quarter of white, so
@@ -26,7 +26,7 @@ method's intensities; a number is a fixed gain.
 
 An ``.npy``/``.npz`` that does not record its layout needs ``--layout THW``
 (stored ``(T, H, W)``) or ``HWT`` (stored ``(H, W, T)``); it is never guessed
-(:mod:`wgse_mmseg.core.io`).
+(:mod:`wgse_mmseg.fileio.spike_files`).
 
 ``--method wgse`` (default) runs the trained model of ``--checkpoint``: an
 mmengine checkpoint of a ``configs/reconstruction`` config or a file of
@@ -34,7 +34,7 @@ mmengine checkpoint of a ``configs/reconstruction`` config or a file of
 ``wgse_mmseg/weights``. The model's window length is its own ``num_steps``.
 ``tfp``/``tfi`` are the classical baselines on the REDS intensity scale.
 
-``--stride N`` walks the recording (:mod:`wgse_mmseg.core.recording_walk`):
+``--stride N`` walks the recording (:mod:`wgse_mmseg.apis.recording_walk`):
 the window centred on every ``N``-th readout (``0, N, 2N, ...``; those whose
 window does not fit at the ends are skipped and said so) is reconstructed,
 ``--batch-size`` windows a model call, exposed as above (each window on its
@@ -58,9 +58,10 @@ from wgse_mmseg.command_line import (EXPOSURE, LAYOUT, LAYOUT_HELP, NUM_STEPS,
                                      check_frame_size)
 from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
 from wgse_mmseg.core.exposure import apply_exposure
-from wgse_mmseg.core.output_folder import (check_tool_outputs, keeps_inputs,
-                                           own_folder)
-from wgse_mmseg.core.recording_walk import add_walk_options
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.fileio.locks import own_folder
+from wgse_mmseg.apis.recording_walk import add_walk_options
 
 # torch, OpenCV and the MMSeg layer are imported where they are used, after
 # the arguments are read: --help and argument errors come at once.
@@ -120,11 +121,12 @@ def parse_args(argv=None):
 def walk(args) -> None:
     """``--stride``: reconstruct a window every ``args.stride`` readouts into
     the video ``args.out``
-    (:func:`~wgse_mmseg.core.recording_walk.walk_recording`)."""
+    (:func:`~wgse_mmseg.apis.recording_walk.walk_recording`)."""
     import torch
 
-    from wgse_mmseg.core.io import to_uint8
-    from wgse_mmseg.core.recording_walk import walk_outputs, walk_recording
+    from wgse_mmseg.fileio.images import to_uint8
+    from wgse_mmseg.apis.recording_walk import walk_recording
+    from wgse_mmseg.apis.walk_plan import walk_outputs
     from wgse_mmseg.models.reconstruction import (load_reconstructor,
                                                   reconstruction_method)
     walk_outputs(args.out, args.save_frames, [args.spikes])  # before loading
@@ -156,10 +158,10 @@ def main(argv=None):
     args = parse_args(argv)
     import wgse_mmseg
     wgse_mmseg.register_all_modules()  # the MMSeg layer, before its import
-    from wgse_mmseg.core.io import (SpikeFileError, centered_window,
-                                    load_spikes, spike_shape, to_uint8,
-                                    write_png)
-    from wgse_mmseg.core.quality import no_reference_scores
+    from wgse_mmseg.core.spike_formats import SpikeFileError, centered_window
+    from wgse_mmseg.fileio.images import to_uint8, write_png
+    from wgse_mmseg.fileio.spike_files import load_spikes, spike_shape
+    from wgse_mmseg.evaluation.quality import no_reference_scores
     from wgse_mmseg.models.reconstruction import (load_reconstructor,
                                                   reconstruction_method)
     if args.stride is not None:

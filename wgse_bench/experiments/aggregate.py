@@ -8,7 +8,8 @@ import os.path as osp
 import statistics
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-from wgse_mmseg.core.limits import LOG_FILE_LIMIT_BYTES, load_json_file
+from wgse_mmseg.fileio.bounded_reads import load_json_file
+from wgse_mmseg.limits import LOG_FILE_LIMIT_BYTES
 
 from .grid import Entry, describe
 from .runner import METRICS, RESULT, read_benchmark, run_directory

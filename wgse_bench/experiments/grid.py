@@ -16,7 +16,7 @@ from mmengine.config import Config
 
 import wgse_mmseg
 from wgse_mmseg.argument_checks import ArgumentError, check_path
-from wgse_mmseg.core.limits import excerpt
+from wgse_mmseg.errors import excerpt
 from wgse_mmseg.utils.config import parse_option_value
 
 from .settings import check_schedule

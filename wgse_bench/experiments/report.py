@@ -12,8 +12,8 @@ from typing import Any, Dict, List
 
 from mmengine.config import Config
 
-from wgse_mmseg.core.io import atomic_output
-from wgse_mmseg.core.limits import load_json_file
+from wgse_mmseg.fileio.atomic import atomic_output
+from wgse_mmseg.fileio.bounded_reads import load_json_file
 
 from ..markdown import markdown_table
 from .aggregate import aggregate

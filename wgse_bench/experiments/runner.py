@@ -21,10 +21,10 @@ from typing import Any, Dict, List, NamedTuple, Optional
 
 from mmengine.config import Config
 
-from wgse_mmseg.core.io import atomic_output
-from wgse_mmseg.core.limits import (LOG_FILE_LIMIT_BYTES, load_json_file,
-                                    parse_json)
-from wgse_mmseg.core.output_folder import OwnedFolder, discard, open_append
+from wgse_mmseg.fileio.atomic import atomic_output
+from wgse_mmseg.fileio.bounded_reads import load_json_file, parse_json
+from wgse_mmseg.limits import LOG_FILE_LIMIT_BYTES
+from wgse_mmseg.fileio.output_folder import OwnedFolder, discard, open_append
 
 from ..machine import run_isolated
 from ..segmentation import benchmark_config, validation_cost

@@ -12,7 +12,7 @@ from typing import Optional, Tuple
 
 from wgse_mmseg.argument_checks import (ArgumentError, check_flag,
                                         check_integer, check_path, is_integer)
-from wgse_mmseg.core.limits import MAX_EPOCHS, MAX_ITERS, MAX_SEED
+from wgse_mmseg.limits import MAX_EPOCHS, MAX_ITERS, MAX_SEED
 
 
 def check_schedule(entry: str, epochs: Optional[int],

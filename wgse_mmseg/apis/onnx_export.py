@@ -36,12 +36,12 @@ from mmengine.model import revert_sync_batchnorm
 from torch import nn
 
 from ..argument_checks import ArgumentError, check_integer, check_path
-from ..core.io import atomic_path
-from ..core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from ..core.wgse import WGSE
+from ..fileio.atomic import atomic_path
 from ..utils.cross_checks import check_input_fits
-from .onnx_segmentor import INPUT, OUTPUT, OnnxSpikeSegmentor, \
-    check_dataset_meta
+from .onnx_segmentor import (INPUT, OUTPUT, OnnxSpikeSegmentor,
+                             check_dataset_meta)
 from .onnx_settings import (LOGITS_TOLERANCE, MIN_ARGMAX_AGREEMENT, OPSET,
                             OPSETS)
 

@@ -19,8 +19,8 @@ from typing import NamedTuple, Optional, Tuple
 import numpy as np
 import torch
 
-from ..core.limits import check_utf8_path, parse_json
-from ..core.output_folder import note_input
+from ..fileio.bounded_reads import check_utf8_path, parse_json
+from ..fileio.input_guard import note_input
 from ..utils.checkpoint import check_dataset_meta
 
 __all__ = ['OnnxSpikeSegmentor']

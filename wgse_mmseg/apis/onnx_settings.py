@@ -3,7 +3,7 @@ offers, the input sizes a command line accepts and the agreement with the
 torch model it requires. Kept apart from the export, which needs torch,
 ONNX and MMSeg, so that the tools' command lines read them at once."""
 from ..command_line import Integer
-from ..core.limits import MAX_NUM_STEPS
+from ..limits import MAX_NUM_STEPS
 
 __all__ = []
 
@@ -20,6 +20,6 @@ MIN_ARGMAX_AGREEMENT = 0.999
 OPSETS = Integer(18, 23)
 OPSET = 18
 #: each of ``T``, ``H`` and ``W`` of an export, on a command line (a side
-#: above :data:`~wgse_mmseg.core.limits.MAX_NUM_STEPS` would not fit a
+#: above :data:`~wgse_mmseg.limits.MAX_NUM_STEPS` would not fit a
 #: runtime's memory anyway)
 SHAPE_ENTRY = Integer(1, MAX_NUM_STEPS)

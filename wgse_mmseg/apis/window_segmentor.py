@@ -1,6 +1,6 @@
 """A segmentor and its config's test pipeline as a *window model*.
 
-A walk over a recording (:mod:`wgse_mmseg.core.recording_walk`) reads the
+A walk over a recording (:mod:`wgse_mmseg.apis.recording_walk`) reads the
 windows of a batch itself and hands them to a callable ``(B, T, H, W)``
 spikes -> results. :class:`PipelineSegmentor` is that callable for a
 segmentor in PyTorch: each window goes through exactly what the config's

@@ -37,8 +37,7 @@ import importlib
 _NAMES = {
     'READOUT_HZ': 'constants', 'REDS_THRESHOLD': 'constants',
     'REDS_WHITE_RATE': 'constants', 'apply_exposure': 'exposure',
-    'exposure_gain': 'exposure', 'SpikeFileError': 'io',
-    'load_spikes': 'io', 'save_spikes': 'io', 'spike_shape': 'io',
+    'exposure_gain': 'exposure', 'SpikeFileError': 'spike_formats',
     'TFI': 'representations', 'TFP': 'representations',
     'SpatialMeanFilter': 'representations',
     'TemporalMeanFilter': 'representations',
@@ -47,7 +46,7 @@ _NAMES = {
 }
 
 __all__ = [
-    'SpikeFileError', 'load_spikes', 'save_spikes', 'spike_shape', 'TFI',
+    'SpikeFileError', 'TFI',
     'TFP', 'SpatialMeanFilter', 'TemporalMeanFilter', 'simulate_spikes',
     'wavedec', 'waverec', 'WGSE', 'apply_exposure'
 ]

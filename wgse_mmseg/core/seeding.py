@@ -31,7 +31,7 @@ from typing import Any, List, Optional, Union
 import numpy as np
 
 from ..argument_checks import check_integer
-from .limits import MAX_SEED
+from ..limits import MAX_SEED
 
 __all__ = []
 

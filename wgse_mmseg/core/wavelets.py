@@ -29,7 +29,7 @@ import torch
 
 from ..argument_checks import (ArgumentError, check_choice, check_integer,
                                is_integer)
-from .limits import check_allocation
+from ..limits import check_allocation
 
 __all__ = ['wavedec', 'waverec']
 

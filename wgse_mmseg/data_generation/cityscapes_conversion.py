@@ -37,13 +37,13 @@ samples whose marker matches); a run removes the marker before it writes a
 sample's files and writes it last, each file atomically, so a run killed at
 any point leaves that sample without a marker, and the next run (with any
 settings) redoes it. Temporary files are named after their target
-(:func:`~wgse_mmseg.core.io.atomic_output`), and a run removes only those of
-its own samples. Each sample's seed is derived from the base seed and its
-name (:func:`~wgse_mmseg.core.seeding.derive_seed`), so reruns give
+(:func:`~wgse_mmseg.fileio.atomic.atomic_output`), and a run removes only
+those of its own samples. Each sample's seed is derived from the base seed and
+its name (:func:`~wgse_mmseg.core.seeding.derive_seed`), so reruns give
 identical files.
 
 One writer per shard. A conversion owns ``out_dir``
-(:func:`~wgse_mmseg.core.output_folder.own_folder`, job ``shard-K-of-N``):
+(:func:`~wgse_mmseg.fileio.locks.own_folder`, job ``shard-K-of-N``):
 a second process converting the same shard into it is refused at once,
 naming the first, or waits (``wait``, ``--wait``); a link inside
 ``out_dir`` is never written through (a linked folder is refused, a link
@@ -71,14 +71,17 @@ from tqdm import tqdm
 
 from ..argument_checks import (ArgumentError, check_flag, check_integer,
                                check_number, check_path, is_choice)
-from ..core.folder_walk import files_under
+from ..fileio.folder_walk import files_under
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
-from ..core.images import read_image
-from ..core.io import save_spikes, temporaries_of, write_png
-from ..core.limits import (MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES,
-                           MAX_WORKERS, excerpt, parse_json)
-from ..core.markers import invalidate, is_complete, write_marker
-from ..core.output_folder import OwnedFolder, own_folder
+from ..fileio.images import read_image, write_png
+from ..fileio.spike_files import save_spikes
+from ..fileio.atomic import temporaries_of
+from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES, MAX_WORKERS
+from ..errors import excerpt
+from ..fileio.bounded_reads import parse_json
+from ..fileio.markers import invalidate, is_complete, write_marker
+from ..fileio.output_folder import OwnedFolder
+from ..fileio.locks import own_folder
 from ..core.seeding import check_seed, derive_seed
 from .shards import SHARD, WHOLE, Shard
 
@@ -413,11 +416,11 @@ def convert_sample(sample: CityscapesSample, root: str, out_dir: str,
     Everything is computed before anything is written; then the marker is
     removed, the label and the spikes are written, and the marker (recipe,
     size and SHA-256 of the bytes written to both files, the simulator's
-    metadata) last, each file atomically (:mod:`wgse_mmseg.core.markers`).
+    metadata) last, each file atomically (:mod:`wgse_mmseg.fileio.markers`).
     Returns ``'skipped'`` when the sample is already done, else its model,
     ``'sequence'`` or ``'static'``. A link at a sample's file is replaced, a
     linked folder refused
-    (:class:`~wgse_mmseg.core.output_folder.OwnedFolder`).
+    (:class:`~wgse_mmseg.fileio.output_folder.OwnedFolder`).
     """
     from ..core.simulation import simulate_spikes  # torch, where it runs
     owned = OwnedFolder(out_dir)
@@ -538,7 +541,8 @@ def load_scene(value: Optional[str]) -> Dict[str, Optional[dict]]:
     effect's defaults; empty for ``value=None``), each effect checked by the
     simulator's parser so that a typo fails before any conversion.
     """
-    from ..core.simulation import parse_effects, read_scene_file
+    from ..core.simulation import parse_effects
+    from ..fileio.scene_files import read_scene_file
     if value is None:
         return {}
     if osp.isfile(value):

@@ -9,7 +9,7 @@ shard of the same job, make exactly what one process makes alone.
 from typing import List, NamedTuple, Sequence, TypeVar
 
 from ..command_line import Argument
-from ..core.limits import MAX_SAMPLES
+from ..limits import MAX_SAMPLES
 
 __all__ = []
 
@@ -32,7 +32,7 @@ class Shard(NamedTuple):
 
 class ShardArgument(Argument):
     """A :class:`Shard` (or pair) ``(K, N)`` of ints with
-    ``1 <= K <= N <=`` :data:`~wgse_mmseg.core.limits.MAX_SAMPLES`; on a
+    ``1 <= K <= N <=`` :data:`~wgse_mmseg.limits.MAX_SAMPLES`; on a
     command line, the word ``K/N``."""
 
     def accepts(self, value):

@@ -18,12 +18,13 @@ from tqdm import tqdm
 
 from ..argument_checks import (check_flag, check_integer, check_number,
                                check_path)
-from ..core.limits import (MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES,
-                           check_allocation)
+from ..limits import (MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES,
+                      check_allocation)
 from ..core.constants import REDS_THRESHOLD
-from ..core.io import save_spikes, write_png
-from ..core.markers import invalidate, is_complete, write_marker
-from ..core.output_folder import own_folder
+from ..fileio.spike_files import save_spikes
+from ..fileio.images import write_png
+from ..fileio.markers import invalidate, is_complete, write_marker
+from ..fileio.locks import own_folder
 from ..core.seeding import check_seed, derive_generator, derive_seed
 
 __all__ = ['make_synthetic_dataset']

@@ -16,7 +16,7 @@ A source that is not installed is skipped and reported. Files are written
 complete or not at all, and a re-run keeps each PNG that already holds its
 image (a damaged one, or a link at its path, is written again), so an
 interrupted run resumes. A run owns ``out_dir``
-(:func:`~wgse_mmseg.core.output_folder.own_folder`): a second run into it
+(:func:`~wgse_mmseg.fileio.locks.own_folder`): a second run into it
 is refused naming the first, or waits with ``--wait``::
 
     python -m wgse_mmseg.data_generation.training_images \\
@@ -37,11 +37,10 @@ from tqdm import tqdm
 from ..argument_checks import (ArgumentError, check_flag, check_integer,
                                check_path, is_choice)
 from ..command_line import Choice, Integer, Path, SequenceOf
-from ..core.folder_walk import files_under
-from ..core.images import read_image
-from ..core.io import write_png
-from ..core.output_folder import (OutputFolderError, add_wait_option,
-                                  own_folder)
+from ..fileio.folder_walk import files_under
+from ..fileio.images import read_image, write_png
+from ..fileio.input_guard import OutputFolderError
+from ..fileio.locks import add_wait_option, own_folder
 
 __all__ = ['export_training_images']
 

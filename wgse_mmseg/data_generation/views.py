@@ -12,9 +12,10 @@ import cv2
 import numpy as np
 import torch
 
-from ..core.folder_walk import files_under
-from ..core.images import fit_within, read_grey_image
-from ..core.limits import check_allocation
+from ..fileio.folder_walk import files_under
+from ..core.image_values import fit_within
+from ..fileio.images import read_grey_image
+from ..limits import check_allocation
 from ..core.simulation import trajectory_source_maps
 
 __all__ = []
@@ -28,7 +29,7 @@ def load_images(image_dir: str, max_side: int) -> Tuple[List[str],
                                                         List[np.ndarray]]:
     """Every image under ``image_dir`` (recursively, sorted by path; each
     file once, however many links lead to it, and a tree with links to
-    itself walked to its end: :func:`~wgse_mmseg.core.folder_walk.
+    itself walked to its end: :func:`~wgse_mmseg.fileio.folder_walk.
     files_under`), as ``(H, W)`` float32 grey in [0, 1], downscaled to at
     most ``max_side`` pixels per side; returns the paths and the images."""
     paths = files_under(image_dir, IMAGE_EXTENSIONS)

@@ -30,11 +30,11 @@ from mmengine.dataset import BaseDataset
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
-from ..argument_checks import (ArgumentError, check_frame_size,
-                               check_integer, check_layout, check_number,
-                               check_path, check_text, is_number)
-from ..core.folder_walk import files_under
-from ..core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
+from ..argument_checks import (ArgumentError, check_frame_size, check_integer,
+                               check_layout, check_number, check_path,
+                               check_text, is_number)
+from ..fileio.folder_walk import files_under
+from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
 from ..core.seeding import check_seed, derive_generator, derive_seed
 from ..core.constants import REDS_WHITE_RATE
 from ..core.simulation import simulate_spikes

@@ -9,8 +9,8 @@ from mmseg.datasets import CityscapesDataset
 from mmseg.registry import DATASETS
 
 from ..argument_checks import check_choice, check_text
-from ..core.folder_walk import files_under
-from ..core.markers import sample_problem
+from ..fileio.folder_walk import files_under
+from ..fileio.markers import sample_problem
 
 __all__ = ['SpikeCityscapesDataset']
 
@@ -107,7 +107,7 @@ class SpikeCityscapesDataset(CityscapesDataset):
 
     def _listing(self) -> List[dict]:
         """MMSeg's data list; from a folder (no ``ann_file``), its spike
-        files found by :func:`~wgse_mmseg.core.folder_walk.files_under`
+        files found by :func:`~wgse_mmseg.fileio.folder_walk.files_under`
         (each once, a tree with links to itself walked to its end; MMSeg's
         own listing follows such links forever)."""
         if self.ann_file and not osp.isdir(self.ann_file):

@@ -28,9 +28,10 @@ from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from .._openmmlab import prepare_mmseg_layer
-from ..core.io import atomic_path, temporaries_of
-from ..core.output_folder import (OutputFolderError, discard, own_folder,
-                                  unshare)
+from ..fileio.atomic import atomic_path, temporaries_of
+from ..fileio.input_guard import OutputFolderError
+from ..fileio.locks import own_folder
+from ..fileio.output_folder import discard, unshare
 from ..utils.checkpoint import CheckpointError, load_error
 from ..models.data_preprocessor import (SpikeModelMismatchError,
                                         unfit_weights)
@@ -129,12 +130,12 @@ class SpikeRunner(Runner):
         the built model (:func:`~wgse_mmseg.utils.cross_checks.
         check_training_fits`: the crop, the batch), before any data is
         read, and with the work dir owned for the whole run
-        (:func:`~wgse_mmseg.core.output_folder.own_folder`, job
+        (:func:`~wgse_mmseg.fileio.locks.own_folder`, job
         ``'train'``: its lock file is ``.lock-train``, so a grid runner
         that owns the folder for its own state can train in it): a second
         training into the same work dir, which would
         interleave its checkpoints and ``last_checkpoint`` with this one's,
-        is refused with an :class:`~wgse_mmseg.core.output_folder.
+        is refused with an :class:`~wgse_mmseg.fileio.output_folder.
         OutputFolderError` naming this process before it writes its config
         or a checkpoint there (only its log, in its own timestamped folder,
         as every run's), or with ``wait_for_work_dir=True`` in the config
@@ -228,7 +229,7 @@ class SpikeRunner(Runner):
     def save_checkpoint(self, out_dir: str, filename: str, *args, **kwargs):
         """mmengine's, but on a local ``out_dir`` written under a temporary
         name and renamed over ``filename`` once whole
-        (:func:`~wgse_mmseg.core.io.atomic_path`): a job killed while it
+        (:func:`~wgse_mmseg.fileio.atomic.atomic_path`): a job killed while it
         saves leaves the previous checkpoints and ``last_checkpoint`` (which
         mmengine's checkpoint hook updates after this returns) as they were,
         so ``--resume`` continues from the last complete checkpoint, and the
@@ -237,7 +238,7 @@ class SpikeRunner(Runner):
         ``OSError`` naming ``filename``'s path. Only the main process
         saves, as in mmengine. ``last_checkpoint``, which mmengine writes
         in place, is never written through a link or into a file with
-        other names (:func:`~wgse_mmseg.core.output_folder.unshare`)."""
+        other names (:func:`~wgse_mmseg.fileio.output_folder.unshare`)."""
         if not osp.isdir(out_dir):  # a remote backend: as mmengine does it
             return super().save_checkpoint(out_dir, filename, *args,
                                            **kwargs)

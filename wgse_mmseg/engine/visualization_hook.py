@@ -13,8 +13,8 @@ from mmseg.registry import HOOKS
 from mmseg.structures import SegDataSample
 from ..argument_checks import check_integer, check_layout
 from ..core.exposure import apply_exposure
-from ..core.io import to_uint8
-from ..core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from ..fileio.images import to_uint8
+from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from ..core.reconstruction_baselines import tfp
 from ..datasets.transforms import LoadSpikeFromFile
 

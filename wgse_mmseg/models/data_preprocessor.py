@@ -7,7 +7,7 @@ from mmseg.models.data_preprocessor import SegDataPreProcessor
 from mmseg.registry import MODELS
 from ..argument_checks import (ArgumentError, check_choice,
                                check_frame_size, check_integer)
-from ..core.limits import MAX_CLASSES, MAX_IMAGE_SIDE
+from ..limits import MAX_CLASSES, MAX_IMAGE_SIDE
 from ..errors import WgseError
 
 __all__ = ['SpikeSegDataPreProcessor', 'SpikeModelMismatchError']

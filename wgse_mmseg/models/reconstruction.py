@@ -26,7 +26,7 @@ from mmseg.registry import MODELS
 from ..argument_checks import (ArgumentError, check_integer,
                                check_parameter_count, check_path)
 from ..core.checks import check_device, check_finite
-from ..core.io import atomic_output
+from ..fileio.atomic import atomic_output
 from ..core import reconstruction_baselines
 from ..core.constants import RECONSTRUCTION_METHODS
 from ..utils.checkpoint import CheckpointError, read_checkpoint

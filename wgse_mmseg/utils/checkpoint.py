@@ -9,9 +9,8 @@ from typing import Dict
 import numpy as np
 import torch
 
-from ..core.limits import cut, excerpt
-from ..core.output_folder import note_input
-from ..errors import WgseError
+from ..errors import WgseError, cut, excerpt
+from ..fileio.input_guard import note_input
 
 __all__ = []
 

@@ -19,8 +19,9 @@ from typing import TYPE_CHECKING, Any, Dict, List, Optional, Union
 
 from .._openmmlab import prepare_mmseg_layer
 from ..command_line import Choice, Integer, Path
-from ..core.limits import MAX_WORKERS, excerpt
-from ..core.output_folder import note_input
+from ..limits import MAX_WORKERS
+from ..errors import excerpt
+from ..fileio.input_guard import note_input
 from .spike_settings import (SPIKE_SETTINGS, SpikeSettingsError,
                              apply_spike_settings, check_setting)
 

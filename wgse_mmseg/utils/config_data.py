@@ -16,7 +16,7 @@ Python by design in MMSeg (``Config.fromfile``), and is executed.
 import ast
 from typing import Any, Dict
 
-from ..core.limits import MAX_JSON_DEPTH, TEXT_FILE_LIMIT_BYTES
+from ..limits import MAX_JSON_DEPTH, TEXT_FILE_LIMIT_BYTES
 from ..errors import WgseError
 
 __all__ = []
@@ -46,7 +46,7 @@ def _value(node: ast.AST, source: str, depth: int = 0) -> Any:
         raise ConfigDataError(
             f'{source}: line {getattr(node, "lineno", "?")}: values nested '
             f'deeper than {MAX_JSON_DEPTH} levels are not read '
-            f'(wgse_mmseg.core.limits.MAX_JSON_DEPTH)')
+            f'(wgse_mmseg.limits.MAX_JSON_DEPTH)')
     depth += 1
     if isinstance(node, ast.Constant):
         return node.value

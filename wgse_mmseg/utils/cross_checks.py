@@ -39,8 +39,8 @@ import torch
 from torch import nn
 from torch._subclasses import fake_tensor
 
-from ..core.limits import MAX_IMAGE_SIDE, cut
-from ..errors import WgseError
+from ..limits import MAX_IMAGE_SIDE
+from ..errors import WgseError, cut
 
 __all__ = ['ModelFitError']
 
@@ -239,7 +239,7 @@ def smallest_input_side(runs: Callable[[int], bool],
     """The smallest side ``s`` for which ``runs(s)``, searched up from
     ``start`` (doubling, then halving the gap), on the premise that a model
     that takes an input takes every larger one; ``None`` if none up to
-    :data:`~wgse_mmseg.core.limits.MAX_IMAGE_SIDE` does. The checks call it
+    :data:`~wgse_mmseg.limits.MAX_IMAGE_SIDE` does. The checks call it
     with forwards of shapes only, which allocate nothing at any side."""
     low, high = 0, max(1, start)  # runs(low) is False (or low is 0)
     while not runs(high):

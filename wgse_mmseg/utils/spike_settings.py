@@ -42,10 +42,8 @@ import inspect
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
-from ..command_line import (FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf,
-                            Path)
-from ..core.limits import excerpt
-from ..errors import WgseError
+from ..command_line import FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf, Path
+from ..errors import WgseError, excerpt
 
 __all__ = []
 

@@ -9,7 +9,8 @@ from mmcv.transforms import Compose
 from mmseg.registry import TRANSFORMS
 from wgse_mmseg.datasets import (LoadSpikeFromFile, SpikeRandomCrop,
                                  SpikeRandomFlip)
-from wgse_mmseg.core.io import SpikeFileError, load_spikes, save_spikes
+from wgse_mmseg.core.spike_formats import SpikeFileError
+from wgse_mmseg.fileio.spike_files import load_spikes, save_spikes
 
 T = 129
 

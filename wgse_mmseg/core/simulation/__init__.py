@@ -29,7 +29,7 @@ from .camera_motion import trajectory_source_maps
 from .effect import EFFECTS, register_effect
 from .fixed_point import initial_charge
 from .intensity import frames_to_intensity
-from .scene import parse_effects, read_scene_file
+from .scene import parse_effects
 from .simulator import simulate_spikes
 
 __all__ = ['simulate_spikes']

@@ -29,7 +29,7 @@ import torch
 
 from ... import argument_checks
 from ...argument_checks import ArgumentError, is_number
-from ..limits import excerpt
+from ...errors import excerpt
 from ..seeding import derive_seed
 
 __all__ = []

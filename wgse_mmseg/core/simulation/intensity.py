@@ -2,7 +2,7 @@
 import numpy as np
 import torch
 
-from ..images import check_unit_range, full_scale
+from ..image_values import check_unit_range, full_scale
 
 __all__ = []
 
@@ -15,7 +15,7 @@ def frames_to_intensity(frames, dtype: torch.dtype = torch.float64,
     """``(N, H, W)`` or ``(N, H, W, 3)`` frames to ``(N, H, W)`` intensity.
 
     Args:
-        frames: any image kind :mod:`wgse_mmseg.core.images` accepts
+        frames: any image kind :mod:`wgse_mmseg.core.image_values` accepts
             (``bool``, ``uint8``, ``uint16``, float in [0, 1]); colour
             frames are RGB and become luma (BT.601 weights). A NumPy array,
             a CPU tensor or anything ``np.asarray`` takes.

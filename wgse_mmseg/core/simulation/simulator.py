@@ -8,7 +8,7 @@ from ...argument_checks import (FLOAT32_RANGE, check_choice, check_integer,
                                 check_number)
 from ..checks import check_device
 from ..constants import READOUT_HZ
-from ..limits import MAX_NUM_STEPS, check_allocation
+from ...limits import MAX_NUM_STEPS, check_allocation
 from ..seeding import check_seed
 from .effect import SimulationContext
 from .fixed_point import CHOICES, MAX_BLOCK_STEPS, Integrator, quantise

@@ -56,8 +56,7 @@ from typing import Dict, List, NamedTuple, Optional, Sequence
 import torch
 from torch import Tensor, nn
 
-from ..limits import cut
-from ...errors import WgseError
+from ...errors import WgseError, cut
 
 __all__ = ['FirstUseCheckFailed']
 

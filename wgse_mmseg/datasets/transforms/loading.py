@@ -13,8 +13,9 @@ from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
 from ...argument_checks import check_integer, check_layout
-from ...core.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
-from ...core.io import centered_window, load_spikes, spike_shape
+from ...limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from ...core.spike_formats import centered_window
+from ...fileio.spike_files import load_spikes, spike_shape
 
 __all__ = ['LoadSpikeFromFile']
 
@@ -24,7 +25,7 @@ class LoadSpikeFromFile(BaseTransform):
     """Load a spike stream from ``results['img_path']``.
 
     Reads ``.dat``, ``.spk``, ``.npy`` and ``.npz`` files (see
-    :mod:`wgse_mmseg.core.io`).
+    :mod:`wgse_mmseg.fileio.spike_files`).
 
     Args:
         num_steps: frames to load. ``None`` loads the whole stream. A longer
@@ -41,8 +42,8 @@ class LoadSpikeFromFile(BaseTransform):
             stored, ``'THW'`` ``(T, H, W)`` or ``'HWT'`` ``(H, W, T)``;
             ``None`` (default) takes the layout each file records, and a
             file that records none is an error naming it
-            (:func:`~wgse_mmseg.core.io.load_spikes`). A config sets it
-            for a dataset of such files, e.g.
+            (:func:`~wgse_mmseg.fileio.spike_files.load_spikes`). A config
+            sets it for a dataset of such files, e.g.
             ``dict(type='LoadSpikeFromFile', num_steps=41, layout='THW')``.
 
     Added keys: ``img`` ``(H, W, T)`` uint8, ``img_shape``, ``ori_shape``,
@@ -87,7 +88,7 @@ class LoadSpikeFromFile(BaseTransform):
         """``results`` with the keys :meth:`transform` adds, from a window
         ``(T, H, W)`` of 0/1 already read (a walk over a recording reads
         the windows of a batch at once,
-        :mod:`wgse_mmseg.core.recording_walk`)."""
+        :mod:`wgse_mmseg.apis.recording_walk`)."""
         results['img'] = np.ascontiguousarray(spikes.transpose(1, 2, 0))
         results['img_shape'] = spikes.shape[1:]
         results['ori_shape'] = spikes.shape[1:]

@@ -21,10 +21,11 @@ from mmcv.transforms import BaseTransform
 from mmseg.registry import TRANSFORMS
 from ...argument_checks import check_choice, check_integer, check_number
 from ...core.checks import check_device
-from ...core.images import read_image
-from ...core.limits import MAX_NUM_STEPS
+from ...fileio.images import read_image
+from ...limits import MAX_NUM_STEPS
 from ...core.seeding import check_seed, derive_seed, draw_seed
-from ...core.simulation import parse_effects, read_scene_file, simulate_spikes
+from ...core.simulation import parse_effects, simulate_spikes
+from ...fileio.scene_files import read_scene_file
 
 __all__ = ['SimulateSpikes']
 

@@ -2,8 +2,9 @@
 
 Full-reference (against ground truth): :func:`psnr` and :func:`ssim`, on
 images in [0, 1] (data range 1). No-reference (real recordings without ground
-truth): :func:`entropy_2d`, re-exported from :mod:`wgse_mmseg.core.quality`,
-the one home of the no-reference measures (with NIQE and BRISQUE).
+truth): :func:`entropy_2d`, re-exported from
+:mod:`wgse_mmseg.evaluation.quality`, the one home of the no-reference measures
+(with NIQE and BRISQUE).
 
 Every function takes ``(H, W)`` arrays: float in [0, 1], or ``uint8`` (read
 as ``value / 255``).
@@ -12,8 +13,8 @@ import cv2
 import numpy as np
 
 from ...argument_checks import check_integer, check_number
-from ...core.limits import MAX_IMAGE_SIDE
-from ...core.quality import as_unit_grey, entropy_2d
+from ...limits import MAX_IMAGE_SIDE
+from ..quality import as_unit_grey, entropy_2d
 
 __all__ = ['psnr', 'ssim', 'entropy_2d']
 

@@ -10,7 +10,7 @@ protocol:
    and SHA-256 of each file it covers match the files on disk;
 2. otherwise :func:`invalidate` (remove the marker), write the files (each
    atomically, with a writer that returns the size and SHA-256 of the bytes
-   it wrote, :class:`~wgse_mmseg.core.io.WrittenFile`), then
+   it wrote, :class:`~wgse_mmseg.fileio.atomic.WrittenFile`), then
    :func:`write_marker` last, atomically, with those records. A marker
    therefore describes the bytes its own run wrote: if another run replaced
    a file meanwhile, the marker does not match it.
@@ -27,8 +27,8 @@ import json
 import os
 from typing import Any, Dict, Mapping, Optional
 
-from .io import WrittenFile, write_bytes
-from .limits import load_json_file
+from .atomic import WrittenFile, write_bytes
+from .bounded_reads import load_json_file
 
 __all__ = []
 
@@ -45,7 +45,7 @@ def file_digest(path: str) -> str:
 def read_marker(marker: str) -> Optional[dict]:
     """The marker's content when it exists and is well formed (a recipe,
     and ``files`` mapping names to ``{"size", "sha256"}``), else ``None``.
-    A marker over :data:`~wgse_mmseg.core.limits.TEXT_FILE_LIMIT_BYTES`
+    A marker over :data:`~wgse_mmseg.limits.TEXT_FILE_LIMIT_BYTES`
     is not well formed."""
     try:
         content = load_json_file(marker, 'marker')
@@ -116,7 +116,8 @@ def write_marker(marker: str, recipe: Any,
                  extra: Optional[Dict[str, Any]] = None,
                  default=None) -> None:
     """Write ``marker`` atomically: ``recipe``, the records of the files
-    this run ``written`` (name -> :class:`~wgse_mmseg.core.io.WrittenFile`,
+    this run ``written`` (name ->
+    :class:`~wgse_mmseg.fileio.atomic.WrittenFile`,
     as the writers returned them) and ``extra`` fields (``default``
     serialises what JSON cannot)."""
     content = dict(recipe=recipe, files={

@@ -17,7 +17,7 @@ from typing import List
 import cv2
 import numpy as np
 
-from ..images import as_grey_levels
+from ...core.image_values import as_grey_levels
 from .model_data import brisque_model
 from .natural_scene import fit_aggd_root, mscn
 
@@ -63,7 +63,7 @@ def _scale_features(levels: np.ndarray) -> List[float]:
 
 def brisque(image) -> float:
     """BRISQUE score of an ``(H, W)`` grey image (any kind
-    :mod:`wgse_mmseg.core.images` accepts; scored as 8 bits). Lower is
+    :mod:`wgse_mmseg.core.image_values` accepts; scored as 8 bits). Lower is
     better. Memory: at most :data:`BYTES_PER_PIXEL` bytes per pixel (the
     float64 coefficients of the whole image and their four neighbour
     products).

@@ -6,10 +6,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wgse_mmseg.core.io import write_bytes
-from wgse_mmseg.core.markers import (file_digest, invalidate, is_complete,
-                                     read_marker, sample_problem,
-                                     write_marker)
+from wgse_mmseg.fileio.atomic import write_bytes
+from wgse_mmseg.fileio.markers import (file_digest, invalidate, is_complete,
+                                       read_marker, sample_problem,
+                                       write_marker)
 
 
 def test_a_marker_covers_the_recipe_and_every_file(tmp_path):
@@ -121,7 +121,7 @@ def test_any_marker_content_is_read_or_refused(tmp_path_factory, content):
 
 @pytest.mark.parametrize('full', [False, True])
 def test_a_marker_over_the_limit_is_malformed(tmp_path, full):
-    from wgse_mmseg.core.limits import TEXT_FILE_LIMIT_BYTES
+    from wgse_mmseg.limits import TEXT_FILE_LIMIT_BYTES
     marker = tmp_path / 'm.json'
     marker.write_bytes(b' ' * (TEXT_FILE_LIMIT_BYTES + 1))
     assert sample_problem(str(marker), dict(a=str(marker)), full) == \

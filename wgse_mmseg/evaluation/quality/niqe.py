@@ -14,7 +14,7 @@ import math
 import cv2
 import numpy as np
 
-from ..images import as_grey_levels
+from ...core.image_values import as_grey_levels
 from .model_data import niqe_model
 from .natural_scene import fit_aggd_grid, mscn
 
@@ -68,7 +68,7 @@ def _block_features(block: np.ndarray):
 
 def niqe(image) -> float:
     """NIQE score of an ``(H, W)`` grey image (any kind
-    :mod:`wgse_mmseg.core.images` accepts; scored as 8 bits). Lower is
+    :mod:`wgse_mmseg.core.image_values` accepts; scored as 8 bits). Lower is
     better; photographs score about 3-6. Memory: at most
     :data:`BYTES_PER_PIXEL` bytes per pixel (the float64 local moments of
     the whole image).

@@ -1,4 +1,4 @@
-"""Atomic writes (wgse_mmseg.core.io.atomic_path and its writers): an
+"""Atomic writes (wgse_mmseg.fileio.atomic.atomic_path and its writers): an
 output that is a FIFO or a character device written through and never
 replaced, a socket, block device or folder refused naming it; a failed
 write (a full disk, a file-size limit) leaves no temporary and names the
@@ -16,11 +16,10 @@ import time
 
 import pytest
 
-from wgse_mmseg.core import io as spike_io
-from wgse_mmseg.core.io import atomic_output, atomic_path, write_bytes
-from wgse_mmseg.core.output_folder import (OutputFolderError,
-                                           check_output_kind,
-                                           check_tool_outputs)
+from wgse_mmseg.fileio import atomic
+from wgse_mmseg.fileio.atomic import atomic_output, atomic_path, write_bytes
+from wgse_mmseg.fileio.input_guard import OutputFolderError, check_output_kind
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
 
 DATA = bytes(range(256)) * 1000  # more than a pipe's buffer
 
@@ -142,7 +141,7 @@ def test_a_failed_write_leaves_no_temporary_and_names_the_file(
     target.write_bytes(b'earlier')
 
     def failing(path, data):
-        with spike_io.atomic_output(path) as f:
+        with atomic.atomic_output(path) as f:
             f.write(data[:10])
             f.flush()
             raise OSError(error, os.strerror(error))

@@ -4,7 +4,7 @@ from typing import Dict, Optional
 
 from .brisque import brisque
 from .entropy import entropy_2d
-from ..images import as_grey_levels
+from ...core.image_values import as_grey_levels
 from .niqe import niqe
 
 __all__ = []
@@ -18,7 +18,7 @@ def no_reference_scores(image) -> Dict[str, Optional[float]]:
     """``{'NIQE', 'BRISQUE', 'Entropy2D'}`` of an ``(H, W)`` grey image;
     ``None`` for a measure the image is too small or too flat for (the
     measure's ``ValueError`` says which). A malformed image (not ``(H, W)``,
-    not an accepted kind: :mod:`wgse_mmseg.core.images`) raises
+    not an accepted kind: :mod:`wgse_mmseg.core.image_values`) raises
     ``ValueError``."""
     levels = as_grey_levels(image)  # a malformed image is an error, not
     scores = {}  # a None; each measure scores these 8 bits

@@ -1,4 +1,4 @@
-"""Owning an output folder (wgse_mmseg.core.output_folder) with real
+"""Owning an output folder (wgse_mmseg.fileio.output_folder) with real
 processes: a second writer refused naming the first, or waiting for it; a
 killed writer's lock freed by the kernel; links at the lock, at files and
 on the way never followed; state files never appended to through a link."""
@@ -13,23 +13,23 @@ import threading
 
 import pytest
 
-from wgse_mmseg.core import output_folder
-from wgse_mmseg.core.io import write_bytes
-from wgse_mmseg.core.output_folder import (MANIFEST_NAME, OutputFolderError,
-                                           discard,
-                                           open_append, own_folder)
+from wgse_mmseg.fileio import input_guard, locks, output_folder
+from wgse_mmseg.fileio.atomic import write_bytes
+from wgse_mmseg.fileio.input_guard import OutputFolderError
+from wgse_mmseg.fileio.locks import own_folder
+from wgse_mmseg.fileio.output_folder import MANIFEST_NAME, discard, open_append
 
 #: a process that owns FOLDER (job JOB, or None), says 'held', and keeps it
 #: until its stdin closes; with WAIT, says 'trying' first and waits
 HOLDER = textwrap.dedent('''
     import os.path as osp, sys, types
-    core = osp.dirname(sys.argv[6])
-    # the package's folders without their __init__: no torch to import
-    for name, path in (('wgse_mmseg', osp.dirname(core)),
-                       ('wgse_mmseg.core', core)):
+    fileio = osp.dirname(sys.argv[6])
+    # the package's folders without their __init__: nothing else to import
+    for name, path in (('wgse_mmseg', osp.dirname(fileio)),
+                       ('wgse_mmseg.fileio', fileio)):
         sys.modules[name] = types.ModuleType(name)
         sys.modules[name].__path__ = [path]
-    from wgse_mmseg.core.output_folder import own_folder
+    from wgse_mmseg.fileio.locks import own_folder
     folder, job, wait, log = sys.argv[1:5]
     print('trying', flush=True)
     with own_folder(folder, None if job == '-' else job, wait == 'wait'):
@@ -258,20 +258,20 @@ def test_a_damaged_writer_record_still_refuses_clearly(tmp_path, record):
 
 @pytest.fixture
 def guarded():
-    """A tool's run (:func:`output_folder.keeps_inputs`) for the test."""
-    output_folder._GUARDS[0] += 1
+    """A tool's run (:func:`input_guard.keeps_inputs`) for the test."""
+    input_guard._GUARDS[0] += 1
     yield
-    output_folder._GUARDS[0] -= 1
-    output_folder._INPUTS.clear()
+    input_guard._GUARDS[0] -= 1
+    input_guard.NOTED_INPUTS.clear()
 
 
 @pytest.mark.parametrize('name', ['same', 'hard link', 'symbolic link'])
 def test_an_output_that_is_an_input_is_refused_naming_both(tmp_path, name,
                                                            guarded):
-    from wgse_mmseg.core.io import write_bytes
+    from wgse_mmseg.fileio.atomic import write_bytes
     source = tmp_path / 'input.bin'
     source.write_bytes(b'user data')
-    output_folder.note_input(str(source))
+    input_guard.note_input(str(source))
     out = tmp_path / 'out.bin'
     if name == 'same':
         out = source
@@ -296,14 +296,14 @@ def test_outputs_are_checked_against_the_given_inputs_and_nothing_else(
     source.write_bytes(b'a')
     other.write_bytes(b'b')
     os.link(source, tmp_path / 'a2')
-    output_folder.check_output(str(other), [str(source)])
-    output_folder.check_output(str(tmp_path / 'missing'), [str(source)])
+    input_guard.check_output(str(other), [str(source)])
+    input_guard.check_output(str(tmp_path / 'missing'), [str(source)])
     with pytest.raises(OutputFolderError, match='a2.*the input .*/a '):
-        output_folder.check_output(str(tmp_path / 'a2'), [str(source)])
+        input_guard.check_output(str(tmp_path / 'a2'), [str(source)])
     # outside a tool's run nothing read is remembered: a library caller
     # may read a file and save it back
-    output_folder.note_input(str(source))
-    output_folder.check_output(str(source))
+    input_guard.note_input(str(source))
+    input_guard.check_output(str(source))
 
 
 def test_a_tools_output_arguments_against_its_other_arguments(tmp_path):
@@ -328,13 +328,13 @@ def test_a_tools_output_arguments_against_its_other_arguments(tmp_path):
 
 def test_keeps_inputs_scopes_the_notes_and_ends_a_refusal_in_one_line(
         tmp_path):
-    from wgse_mmseg.core.io import write_bytes
+    from wgse_mmseg.fileio.atomic import write_bytes
     source = tmp_path / 'in'
     source.write_bytes(b'keep')
 
-    @output_folder.keeps_inputs
+    @input_guard.keeps_inputs
     def main():
-        output_folder.note_input(str(source))
+        input_guard.note_input(str(source))
         write_bytes(str(source), b'lost')
 
     with pytest.raises(SystemExit) as info:
@@ -342,7 +342,7 @@ def test_keeps_inputs_scopes_the_notes_and_ends_a_refusal_in_one_line(
     assert 'error:' in str(info.value.code) and str(source) in str(
         info.value.code)
     assert source.read_bytes() == b'keep'
-    assert not output_folder._INPUTS and not output_folder._GUARDS[0]
+    assert not input_guard.NOTED_INPUTS and not input_guard._GUARDS[0]
     write_bytes(str(source), b'mine')  # outside a run: the caller's choice
     assert source.read_bytes() == b'mine'
 
@@ -374,7 +374,7 @@ def test_a_user_file_where_the_lock_belongs_is_not_overwritten(tmp_path,
 def test_a_lock_left_by_a_killed_writer_is_taken(tmp_path):
     folder = tmp_path / 'out'
     folder.mkdir()
-    (folder / '.lock').write_bytes(output_folder._writer_record())
+    (folder / '.lock').write_bytes(locks._writer_record())
     with own_folder(str(folder)):
         pass
     assert not (folder / '.lock').exists()
@@ -385,7 +385,7 @@ def test_a_waiting_writer_says_whom_it_waits_for_and_again_later(
     folder, log = tmp_path / 'out', tmp_path / 'log'
     first = _holder(folder, log, 'first')
     _wait_for(first, 'held')
-    monkeypatch.setattr(output_folder, 'WAIT_REPORT_S', 0.3)
+    monkeypatch.setattr(locks, 'WAIT_REPORT_S', 0.3)
     timer = threading.Timer(1.0, first.stdin.close)
     timer.start()
     try:
@@ -458,7 +458,7 @@ def test_removal_takes_only_what_the_manifest_lists(tmp_path, guarded,
     stay, and the folder stays with them, named on stderr."""
     source = tmp_path / 'recording.npy'
     source.write_bytes(b'user data')
-    output_folder.note_input(str(source))
+    input_guard.note_input(str(source))
     out = tmp_path / 'out'
     with own_folder(str(out)) as owned:
         for name in ('a.bin', 'deep/er/b.bin', 'mixed/c.bin', 'linked.bin'):
@@ -526,7 +526,7 @@ def test_an_input_inside_an_output_folder_is_refused(tmp_path, guarded,
     elif where == 'through a linked parent':
         (tmp_path / 'via').symlink_to(out)
         given = tmp_path / 'via' / 'rec.npy'
-    output_folder.note_input(str(given))
+    input_guard.note_input(str(given))
     with pytest.raises(OutputFolderError,
                        match=f'{folder}: this output folder holds the input '
                        f'{given}'):
@@ -545,7 +545,7 @@ def test_a_hard_link_of_an_input_is_never_replaced_or_removed(tmp_path,
     folder's clearing leaves it."""
     source = tmp_path / 'rec.npy'
     source.write_bytes(b'user data')
-    output_folder.note_input(str(source))
+    input_guard.note_input(str(source))
     out = tmp_path / 'out'
     with own_folder(str(out)) as owned:
         write_bytes(str(out / 'frame.png'), b'package')

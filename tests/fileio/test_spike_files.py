@@ -1,4 +1,5 @@
-"""Spike file reading and writing (``wgse_mmseg.core.io``)."""
+"""Spike file reading and writing (``wgse_mmseg.fileio.spike_files``)."""
+import hashlib
 import json
 import os
 import os.path as osp
@@ -11,10 +12,11 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-import wgse_mmseg.core.io as spike_io
 from wgse_mmseg.argument_checks import ArgumentError
-from wgse_mmseg.core.io import (SpikeFileError, load_spikes, save_spikes,
-                                spike_shape)
+from wgse_mmseg.core import spike_formats
+from wgse_mmseg.fileio import atomic, images, spike_arrays, spike_files
+from wgse_mmseg.core.spike_formats import SpikeFileError
+from wgse_mmseg.fileio.spike_files import load_spikes, save_spikes, spike_shape
 
 
 def _random_spikes(shape, seed=0, p=0.3):
@@ -404,7 +406,7 @@ def test_failure_mid_write_keeps_old_file_and_no_temp(tmp_path, monkeypatch,
     def broken_pack(spikes):
         raise RuntimeError('disk full (simulated)')
 
-    monkeypatch.setattr(spike_io, '_pack', broken_pack)
+    monkeypatch.setattr(spike_formats, 'pack_frames', broken_pack)
     with pytest.raises(RuntimeError, match='simulated'):
         save_spikes(path, _random_spikes((2, 4, 6), seed=13))
     assert _listing(tmp_path) == [osp.basename(path)]
@@ -438,7 +440,7 @@ def test_atomic_writes_leave_the_process_umask_alone(tmp_path, monkeypatch,
         thread = threading.Thread(target=other_thread)
         thread.start()
         for index in range(50):
-            spike_io.write_bytes(str(tmp_path / f'written{index}.bin'), b'x')
+            atomic.write_bytes(str(tmp_path / f'written{index}.bin'), b'x')
         save_spikes(str(tmp_path / 'spikes.npy'),
                     _random_spikes((2, 3, 3), seed=15))
         thread.join()
@@ -546,12 +548,12 @@ def test_write_png_round_trip_and_nothing_on_failure(tmp_path):
                                             dtype=np.uint8)
     for name, image in (('label.png', label), ('colour.png', bgr)):
         path = str(tmp_path / 'out' / name)
-        spike_io.write_png(path, image)
+        images.write_png(path, image)
         np.testing.assert_array_equal(
             cv2.imread(path, cv2.IMREAD_UNCHANGED), image)
     with pytest.raises((OSError, cv2.error)):  # nothing to encode
-        spike_io.write_png(str(tmp_path / 'empty.png'),
-                           np.zeros((0, 3), np.uint8))
+        images.write_png(str(tmp_path / 'empty.png'),
+                         np.zeros((0, 3), np.uint8))
     assert sorted(os.listdir(tmp_path)) == ['out']  # no file, no temp file
 
 
@@ -714,7 +716,8 @@ def test_npz_member_over_the_limit_is_refused_before_inflating(
         tmp_path, inflated, monkeypatch):
     path = str(tmp_path / 'bomb.npz')
     _write_npz_bomb(path, (64, 256, 256))
-    monkeypatch.setattr(spike_io, 'READ_LIMIT_BYTES', 1 << 20)
+    for module in (spike_arrays, spike_formats):
+        monkeypatch.setattr(module, 'READ_LIMIT_BYTES', 1 << 20)
     for read in (spike_shape, load_spikes):
         with pytest.raises(SpikeFileError,
                            match=_path_in_message(path) + '.*declares '
@@ -771,7 +774,8 @@ def test_windows_over_the_read_limit_are_refused(tmp_path, ext, monkeypatch):
     spikes = _random_spikes((10, 4, 6), seed=3)
     save_spikes(path, spikes)
     kwargs = dict(height=4, width=6) if ext == '.dat' else {}
-    monkeypatch.setattr(spike_io, 'READ_LIMIT_BYTES', 4 * 24)
+    for module in (spike_arrays, spike_formats):
+        monkeypatch.setattr(module, 'READ_LIMIT_BYTES', 4 * 24)
     np.testing.assert_array_equal(
         load_spikes(path, start=6, length=4, **kwargs), spikes[6:])
     with pytest.raises(SpikeFileError, match='read limit'):
@@ -878,14 +882,15 @@ def test_any_window_arguments_read_or_name_the_problem(ext, start, length):
 # ------------------------------------------------------ the format registry
 def test_the_registry_is_the_one_list_of_formats():
     from wgse_bench import simulator
-    assert spike_io.SPIKE_EXTENSIONS == tuple(spike_io.SPIKE_FORMATS) == (
+    formats = spike_files.SPIKE_FORMATS
+    assert spike_files.SPIKE_EXTENSIONS == tuple(formats) == (
         '.dat', '.spk', '.npy', '.npz')
-    for ext, fmt in spike_io.SPIKE_FORMATS.items():
+    for ext, fmt in spike_files.SPIKE_FORMATS.items():
         assert fmt.extension == ext == ext.lower()
-    assert simulator.SPIKE_EXTENSIONS is spike_io.SPIKE_EXTENSIONS
+    assert simulator.SPIKE_EXTENSIONS is spike_files.SPIKE_EXTENSIONS
 
 
-@pytest.mark.parametrize('ext', sorted(spike_io.SPIKE_FORMATS))
+@pytest.mark.parametrize('ext', sorted(spike_files.SPIKE_FORMATS))
 def test_every_registered_format_round_trips_a_window(tmp_path, ext):
     """What a new entry must do, on the shape .dat needs (8 | H*W)."""
     spikes = _random_spikes((7, 4, 6), seed=11)
@@ -893,7 +898,7 @@ def test_every_registered_format_round_trips_a_window(tmp_path, ext):
     written = save_spikes(path, spikes)
     assert written.size == osp.getsize(path)
     with open(path, 'rb') as f:
-        assert spike_io.hashlib.sha256(f.read()).hexdigest() == \
+        assert hashlib.sha256(f.read()).hexdigest() == \
             written.sha256
     size = dict(height=4, width=6)
     assert spike_shape(path, **size) == (7, 4, 6)
@@ -916,16 +921,16 @@ def test_one_entry_adds_a_format(tmp_path, monkeypatch):
             return header.unpack(f.read(header.size))
 
     def read(path, shape, start, length, layout):
-        start, length = spike_io._window(path, shape[0], start, length,
-                                         shape[1] * shape[2])
+        start, length = spike_formats.check_window(
+            path, shape[0], start, length, shape[1] * shape[2])
         data = np.fromfile(path, np.uint8, offset=header.size)
         return data.reshape(shape)[start:start + length]
 
     def encode(path, spikes):
         return header.pack(*spikes.shape) + spikes.tobytes()
 
-    fmt = spike_io.SpikeFormat('.raw', layout, shape, read, encode)
-    monkeypatch.setitem(spike_io.SPIKE_FORMATS, '.raw', fmt)
+    fmt = spike_files.SpikeFormat('.raw', layout, shape, read, encode)
+    monkeypatch.setitem(spike_files.SPIKE_FORMATS, '.raw', fmt)
     spikes = _random_spikes((5, 3, 2), seed=12)
     path = str(tmp_path / 'clip.raw')
     save_spikes(path, spikes)
@@ -941,17 +946,17 @@ def test_a_temporary_is_named_after_its_target(tmp_path):
     """A killed writer's temporary file is found for its target only, so a
     run removes its own and leaves another process's beside it."""
     target = tmp_path / 'a_spike.spk'
-    with spike_io.atomic_output(str(target)) as f:
+    with atomic.atomic_output(str(target)) as f:
         f.write(b'x')
         (left, ) = [p for p in os.listdir(tmp_path) if p.startswith('.tmp-')]
         assert left.startswith('.tmp-a_spike.spk.') and left.endswith('.spk')
-        assert spike_io.temporaries_of([str(target)]) == [
+        assert atomic.temporaries_of([str(target)]) == [
             str(tmp_path / left)]
-        assert spike_io.temporaries_of([str(tmp_path / 'a_spike')]) == []
-        assert spike_io.temporaries_of([str(tmp_path / 'spike.spk')]) == []
-        assert spike_io.temporaries_of([str(tmp_path / 'no' / 'x')]) == []
+        assert atomic.temporaries_of([str(tmp_path / 'a_spike')]) == []
+        assert atomic.temporaries_of([str(tmp_path / 'spike.spk')]) == []
+        assert atomic.temporaries_of([str(tmp_path / 'no' / 'x')]) == []
     assert os.listdir(tmp_path) == ['a_spike.spk']
-    assert spike_io.temporaries_of([str(target)]) == []
+    assert atomic.temporaries_of([str(target)]) == []
 
 
 # ------------------------------------------------------------ layouts

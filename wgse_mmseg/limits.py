@@ -1,10 +1,9 @@
 """The stated limits on the work an argument, a config, a checkpoint or a
-file can make the package do, in one place, and the bounded readers of text
-files that use them.
+file can make the package do, in one place (standard library only).
 
 Sizes (``MAX_*``): every size a caller, a config or a checkpoint can ask for
 is checked against one of these before anything is allocated
-(:mod:`.arguments`), so that a number typed or crafted into a file cannot ask
+, so that a number typed or crafted into a file cannot ask
 for terabytes or a loop that never ends. They are generous for real use: the
 largest configs of this repository use ``T = 129``, 512 channels and 3
 blocks; a spike camera frame is 250 x 400 (Spike-Cityscapes 1024 x 2048).
@@ -30,172 +29,115 @@ quotes at most :data:`EXCERPT_CHARS` characters of an offending value:
     ``WGSE_MMSEG_ALLOCATION_LIMIT`` (bytes).
 ``MAX_JSON_DEPTH``
     the deepest nesting of arrays and objects any JSON the package reads
-    may have (:func:`parse_json`; the package writes at most 4 levels), so
-    that no crafted file or metadata can exhaust the parser's recursion.
+    may have (:func:`wgse_mmseg.fileio.bounded_reads.parse_json`; the
+    package writes at most 4 levels), so that no crafted file or metadata can
+    exhaust the parser's recursion.
 """
-import json
 import os
-import re
-import stat
-from typing import Any
 
-from ..errors import EXCERPT_CHARS, cut, excerpt  # noqa: F401
+from .errors import EXCERPT_CHARS, cut, excerpt  # noqa: F401
 
 #: ``T``: spike frames per window (``num_steps``) a model, transform,
 #: converter or the simulator works on (0.2 s of a 20 kHz camera)
 MAX_NUM_STEPS = 4096
+
+
 #: height, width, crop and padded size of a frame, in pixels
 MAX_IMAGE_SIDE = 16384
+
+
 #: width of a learned network (``hidden_channels``, ``channels``,
 #: ``mid_channels``)
 MAX_CHANNELS = 1024
+
+
 #: residual blocks of a learned network (``num_blocks``)
 MAX_NUM_BLOCKS = 16
+
+
 #: DWT levels of WGSE (``level``): 5 in the paper; past ``log2(T)`` levels
 #: the bands of a ``T <= MAX_NUM_STEPS`` stream stop shrinking
 MAX_LEVEL = 16
+
+
 #: side of a learned convolution kernel (``kernel_size``)
 MAX_KERNEL_SIZE = 31
+
+
 #: window of a parameter-free filter (TFP ``window``, mean filters'
 #: ``kernel_size``)
 MAX_WINDOW = 2 * MAX_NUM_STEPS - 1
+
+
 #: parameters of one learned module built from arguments, a config or a
 #: checkpoint (200 MB of float32; WGSE has about 0.1 million, the
 #: reconstruction head at its paper width about 3.5 million)
 MAX_PARAMETERS = 50_000_000
+
+
 #: samples or scenes one dataset or converter run may declare
 MAX_SAMPLES = 1_000_000
+
+
 #: classes of a segmentation label map (uint8 labels, 255 is ignored)
 MAX_CLASSES = 255
+
+
 #: seeds are 63-bit non-negative integers (NumPy and torch accept them)
 MAX_SEED = 2**63 - 1
+
+
 #: repetitions of a benchmark measurement
 MAX_REPEAT = 100_000
+
+
 #: worker processes or threads of a tool
 MAX_WORKERS = 1024
+
+
 #: samples in one batch a tool builds (a benchmark's ``--batch-size``)
 MAX_BATCH_SIZE = 4096
+
+
 #: training length a tool asks for: epochs, or iterations
 MAX_EPOCHS = 100_000
+
+
 MAX_ITERS = 100_000_000
+
+
 #: tiles along one side of a figure (its columns of frames)
 MAX_FIGURE_TILES = 1024
+
+
 #: the factor a figure's tiles are resized by
 MAX_TILE_SCALE = 64
 
+
 #: bytes one spike read may allocate (a window, an ``.npz`` member)
 READ_LIMIT_BYTES = 2**31
+
+
 #: bytes one allocation decided by a product of the user's numbers may
 #: take, unless ``WGSE_MMSEG_ALLOCATION_LIMIT`` says otherwise
 ALLOCATION_LIMIT_BYTES = 2**33
+
+
 #: the environment variable that raises (or lowers) it, in bytes
 ALLOCATION_LIMIT_ENV = 'WGSE_MMSEG_ALLOCATION_LIMIT'
+
+
 #: bytes of a side file, marker or scene file
 TEXT_FILE_LIMIT_BYTES = 2**20
+
+
 #: bytes of a log or result file of a training run the package reads back
 #: (mmengine's logs, an experiment's results)
 LOG_FILE_LIMIT_BYTES = 2**28
+
+
 #: nesting of arrays and objects in JSON read from a file or a model
 MAX_JSON_DEPTH = 32
-
-#: a JSON string literal (escapes included), whose brackets do not nest
-_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
-_JSON_BRACKET = re.compile(r'[\[\]{}]')
-
-
-def check_utf8_path(path, library: str) -> None:
-    """Refuse ``path`` where it holds bytes that are not UTF-8 (a name in
-    another system's encoding, which Python carries as surrogates):
-    ``library`` (OpenCV, ONNX Runtime) takes paths as UTF-8 and cannot
-    open it (OpenCV's reader crashes the process on it).
-
-    Raises:
-        ValueError: naming the path (escaped) as not UTF-8.
-    """
-    try:
-        os.fspath(path).encode('utf-8')
-    except UnicodeEncodeError:
-        raise ValueError(
-            f'{ascii(os.fspath(path))}: the path holds bytes that are not '
-            f'UTF-8, which {library} cannot open; rename the file or the '
-            f'folder on its way') from None
-
-
-def read_text_file(path: str, what: str,
-                   limit: int = TEXT_FILE_LIMIT_BYTES) -> str:
-    """The UTF-8 text of ``path``, refused when longer than ``limit``
-    bytes (read at most ``limit + 1`` bytes, so a growing or special file
-    cannot make it read more).
-
-    Raises:
-        ValueError: naming ``path`` and ``what`` it should be, for a file
-            over the limit, not UTF-8, or no regular file (a FIFO would
-            block the read). ``OSError`` passes through.
-    """
-    # O_NONBLOCK: opening a FIFO without a writer would wait for one
-    fd = os.open(path, os.O_RDONLY | getattr(os, 'O_NONBLOCK', 0))
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        raise ValueError(f'{path}: a {what} is read from a regular file, '
-                         f'not a FIFO, device or folder')
-    with open(fd, 'rb') as f:
-        data = f.read(limit + 1)
-    if len(data) > limit:
-        raise ValueError(
-            f'{path}: a {what} larger than {limit} bytes is refused '
-            f'(wgse_mmseg.core.limits.TEXT_FILE_LIMIT_BYTES)')
-    try:
-        return data.decode('utf-8')
-    except UnicodeDecodeError as err:
-        raise ValueError(f'{path}: a {what} must be UTF-8 text ({err})') \
-            from err
-
-
-def json_depth(text: str) -> int:
-    """The deepest nesting of arrays and objects in JSON ``text``, counted
-    without parsing it (brackets inside strings do not count)."""
-    depth = deepest = 0
-    for bracket in _JSON_BRACKET.findall(_JSON_STRING.sub('""', text)):
-        depth += 1 if bracket in '[{' else -1
-        deepest = max(deepest, depth)
-    return deepest
-
-
-def parse_json(text: str, source: str, what: str,
-               limit: int = TEXT_FILE_LIMIT_BYTES) -> Any:
-    """The JSON value of ``text`` read from ``source`` (a file, or a model's
-    metadata entry), the one bounded JSON parser of the package: at most
-    ``limit`` characters and :data:`MAX_JSON_DEPTH` levels of nesting.
-
-    Raises:
-        ValueError: naming ``source`` and ``what`` it should be, for text
-            over a limit or invalid JSON.
-    """
-    if len(text) > limit:
-        raise ValueError(
-            f'{source}: a {what} longer than {limit} characters is refused')
-    depth = json_depth(text)
-    if depth > MAX_JSON_DEPTH:
-        raise ValueError(
-            f'{source}: a {what} nested too deeply ({depth} levels; at most '
-            f'{MAX_JSON_DEPTH} are read, wgse_mmseg.core.limits.'
-            f'MAX_JSON_DEPTH)')
-    try:
-        return json.loads(text)
-    except ValueError as err:
-        raise ValueError(f'{source}: a {what} must be JSON ({err})') from err
-
-
-def load_json_file(path: str, what: str,
-                   limit: int = TEXT_FILE_LIMIT_BYTES) -> Any:
-    """The JSON value in ``path``: :func:`read_text_file` then
-    :func:`parse_json`, both with ``limit`` bytes.
-
-    Raises:
-        ValueError: naming ``path``, for a file over the limits, not UTF-8,
-            or invalid JSON. ``OSError`` passes through.
-    """
-    return parse_json(read_text_file(path, what, limit), path, what, limit)
 
 
 __all__ = []

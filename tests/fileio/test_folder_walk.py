@@ -1,4 +1,4 @@
-"""Walking a folder tree (wgse_mmseg.core.folder_walk.files_under): random
+"""Walking a folder tree (wgse_mmseg.fileio.folder_walk.files_under): random
 trees of folders, files and links (to folders, ancestors, the folder
 itself, files, nothing) against an independent reference built from
 ``os.path.realpath``; the loader of training images on a folder linking to
@@ -11,7 +11,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wgse_mmseg.core.folder_walk import files_under
+from wgse_mmseg.fileio.folder_walk import files_under
 from wgse_mmseg.data_generation.views import load_images
 
 

@@ -1,7 +1,7 @@
 """Two-dimensional image entropy, a no-reference measure of detail."""
 import numpy as np
 
-from ..images import as_grey_levels, row_blocks
+from ...core.image_values import as_grey_levels, row_blocks
 
 __all__ = ['entropy_2d']
 

@@ -1,4 +1,4 @@
-"""Walking a recording (wgse_mmseg.core.recording_walk): the plan against an
+"""Walking a recording (wgse_mmseg.apis.recording_walk): the plan against an
 enumeration of the grid, the windows against load_spikes, a generated .dat
 recording many batches long walked into MP4 and GIF, resuming after an
 interruption, refusing mixed settings, and memory bounded by the batch."""
@@ -18,11 +18,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from wgse_mmseg.core.io import load_spikes, save_spikes, to_uint8
-from wgse_mmseg.core.output_folder import OutputFolderError
-from wgse_mmseg.core.recording_walk import (CSV_COLUMNS, WalkError,
-                                            plan_walk, read_windows,
-                                            walk_outputs, walk_recording)
+from wgse_mmseg.fileio.images import to_uint8
+from wgse_mmseg.fileio.spike_files import load_spikes, save_spikes
+from wgse_mmseg.fileio.input_guard import OutputFolderError
+from wgse_mmseg.apis.recording_walk import walk_recording
+from wgse_mmseg.apis.walk_plan import (WalkError, plan_walk, read_windows,
+                                       walk_outputs)
+from wgse_mmseg.apis.walk_state import CSV_COLUMNS
 
 HEIGHT, WIDTH = 32, 48
 LENGTH, HALF = 41, 20
@@ -349,8 +351,8 @@ def test_bad_walks_are_named_errors(tmp_path):
 WALKER = '''
 import os, sys, time
 import numpy as np
-from wgse_mmseg.core.io import to_uint8
-from wgse_mmseg.core.recording_walk import walk_recording
+from wgse_mmseg.fileio.images import to_uint8
+from wgse_mmseg.apis.recording_walk import walk_recording
 recording, video, go = sys.argv[1:4]
 print('ready', flush=True)
 while not os.path.exists(go):
@@ -546,7 +548,7 @@ def test_links_at_the_state_folder_and_outputs_are_not_followed(tmp_path):
 
 def test_a_video_path_that_is_not_utf8_is_refused_before_the_walk():
     import os
-    from wgse_mmseg.core.recording_walk import walk_outputs
+    from wgse_mmseg.apis.walk_plan import walk_outputs
     with pytest.raises(ValueError, match='not UTF-8, which OpenCV cannot'):
         walk_outputs(os.fsdecode(b'/tmp/walk\xff.mp4'))
 

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..limits import load_json_file
+from ...fileio.bounded_reads import load_json_file
 
 __all__ = []
 
