@@ -1,5 +1,7 @@
-"""The checking decorator that :mod:`.io` and :mod:`.recording_walk` still
-apply to their entry points, with the kinds they name.
+"""The checking decorator that :mod:`wgse_mmseg.fileio.spike_files`,
+:mod:`wgse_mmseg.apis.walk_plan` and :mod:`wgse_mmseg.apis.recording_walk`
+still apply to their entry points, with the kinds they (and
+:mod:`wgse_mmseg.fileio.spike_arrays`) name.
 
 ``@declare(path=Path(), height=SIDE)`` checks the bound arguments of every
 call before the body runs and raises
