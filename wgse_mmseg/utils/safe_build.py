@@ -29,7 +29,7 @@ file and the key path (``ckpt.pth: meta['model'].data_preprocessor.type:
 :func:`build_from_file_config` then builds it with every ``type`` replaced
 by the allowed class itself, so no registry looks up a name that came from
 a file; a value a built class refuses (its declared arguments and stated
-limits, :mod:`wgse_mmseg.argument_checks`: ``channels=200000``) is reported
+limits, :mod:`wgse_mmseg.argument_checks`: ``channels=0``) is reported
 as a :class:`ConfigDataError` naming the file and the argument's key path
 (``ckpt.pth: meta['model'].channels: SpikeReconstructor: channels must be
 ...``), before anything is allocated. Every build from file data in the package
