@@ -182,7 +182,7 @@ class ConversionSettings:
         check_integer(entry, 'width', self.width, 1, MAX_IMAGE_SIDE)
         check_integer(entry, 'num_steps', self.num_steps, 1, MAX_NUM_STEPS)
         check_number(entry, 'threshold', self.threshold, 0,
-                     strict_minimum=True)
+                     strict_minimum=True, float32=True)
         check_integer(entry, 'frames_around', self.frames_around, 0,
                       SNIPPET_LENGTH - 1 - ANNOTATED_INDEX)
         if not isinstance(self.scene, dict):

@@ -165,7 +165,9 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
     check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE)
     check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
     check_integer(entry, 'num_frames', num_frames, 1, MAX_FRAMES)
-    check_number(entry, 'threshold', threshold, 0, strict_minimum=True)
+    # the simulator's rule, before any file is written
+    check_number(entry, 'threshold', threshold, 0, strict_minimum=True,
+                 float32=True)
     check_seed(seed, entry=entry)
     check_flag(entry, 'progress', progress)
     check_flag(entry, 'wait', wait)

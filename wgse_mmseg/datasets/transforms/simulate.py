@@ -90,8 +90,10 @@ class SimulateSpikes(BaseTransform):
         super().__init__()
         entry = 'SimulateSpikes'
         check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
-        check_number(entry, 'threshold', threshold, 0, strict_minimum=True)
-        check_number(entry, 'gain', gain, 0)
+        # the simulator's rules, when the transform is built
+        check_number(entry, 'threshold', threshold, 0, strict_minimum=True,
+                     float32=True)
+        check_number(entry, 'gain', gain, 0, float32=True)
         check_seed(seed, entry=entry, allow_none=True)
         check_choice(entry, 'channel_order', channel_order, ('bgr', 'rgb'))
         check_device(entry, 'device', device)
