@@ -22,10 +22,10 @@ import sys
 import time
 from typing import Dict, List, Sequence
 
-from wgse_mmseg.core.arguments import Integer, Path
+from wgse_mmseg.command_line import Integer, Path
 from wgse_mmseg.limits import MAX_REPEAT
-from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 #: the modules a tool's --help must not need: each takes from a tenth of a

@@ -25,7 +25,7 @@ ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 
 #: the library's packages (and top-level modules) from the ground floor up
 FLOORS = (
-    ('version', 'errors', 'limits'),
+    ('version', 'errors', 'limits', 'argument_checks', 'command_line'),
     ('core',),
     ('fileio',),
     ('data_generation',),

@@ -42,10 +42,10 @@ import zipfile
 
 import numpy as np
 
-from wgse_mmseg.core.arguments import Path
+from wgse_mmseg.command_line import Path
 from wgse_mmseg.fileio.atomic import write_bytes
-from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 
 DEFAULT_OUT = osp.join(osp.dirname(osp.dirname(osp.abspath(__file__))),
                        'wgse_mmseg', 'core', 'quality', 'data')

@@ -56,7 +56,7 @@ GPU_BUDGET_S = 420
 def build_parser() -> argparse.ArgumentParser:
     # imported here, after main() has chosen Triton's interpreter for
     # --dry-run (the package's kernels import triton where they are loaded)
-    from wgse_mmseg.core.arguments import Number, Path
+    from wgse_mmseg.command_line import Number, Path
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--dry-run', action='store_true',
                         help="every section's code on the CPU at tiny "

@@ -18,10 +18,10 @@ import sys
 
 import numpy as np
 
-from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, Choice, Integer,
-                                       Number, Path, SequenceOf, Text,
-                                       add_frame_size_options,
-                                       check_frame_size)
+from wgse_mmseg.command_line import (LAYOUT, LAYOUT_HELP, Choice, Integer,
+                                     Number, Path, SequenceOf, Text,
+                                     add_frame_size_options,
+                                     check_frame_size)
 from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
 from wgse_mmseg.limits import MAX_FIGURE_TILES, MAX_TILE_SCALE
 from wgse_mmseg.fileio.input_guard import keeps_inputs

@@ -34,11 +34,10 @@ from typing import Dict, List, Optional, Sequence, Tuple
 from wgse_bench.markdown import markdown_table
 from wgse_bench.timing import time_calls
 from wgse_bench.wgse_choices import HIDDEN_CHANNELS, PRECISIONS
-from wgse_mmseg.core.arguments import (Choice, Integer, Path, Text,
-                                       excerpt)
+from wgse_mmseg.command_line import Choice, Integer, Path, Text, excerpt
 from wgse_mmseg.limits import MAX_REPEAT
-from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 
 #: the longest band of WGSE's default (db8, 5 levels) at T = 129
 BAND_LENGTH = 72

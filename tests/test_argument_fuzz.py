@@ -1,19 +1,31 @@
-"""Every declared argument of every public entry point, fuzzed.
+"""Every argument of every public entry point, fuzzed.
 
-For each argument that an entry point declares
-(:mod:`wgse_mmseg.core.arguments`), hypothesis draws wrong types, NaN, Inf,
-negative, zero, huge and fractional numbers, strings with quotes and
-backslashes and, for paths, a directory, an empty file, a text file and a
-missing file. The call must either give a project error (raised in this
-package) that names the entry point and the argument, or a file error naming
-the file, or succeed, within time and memory bounds.
+The entry points are found from the public API, not from the code that
+checks them: every function and class in the ``__all__`` of a public module
+of the library and of the measurement wing, and every class the package
+registers in an MMSeg or mmengine registry, each with the parameters of
+``inspect.signature``. For each parameter that takes a plain value (by its
+default or the valid value given here: a number, a string, a flag, a path,
+``None`` or a sequence of those; not a config, a tensor or a callable),
+hypothesis draws wrong types, NaN, Inf, negative, zero, huge and fractional
+numbers, strings with quotes and backslashes, and a directory, an empty
+file, a text file and a missing file. The call either succeeds, within time
+and memory bounds, or raises the package's clear error: an
+:class:`~wgse_mmseg.argument_checks.ArgumentError` naming the entry point
+and the parameter, or a ``ValueError``/``TypeError``/``OSError`` raised in
+the package (never deep in torch, NumPy or the standard library) naming the
+parameter or the file. A value no plain parameter takes (NaN, Inf, an
+``object()``, a complex number, bytes) is never accepted.
 """
+import collections
 import importlib
 import inspect
 import math
 import os
 import os.path as osp
+import pathlib
 import pkgutil
+import re
 import shutil
 
 import numpy as np
@@ -24,44 +36,117 @@ from hypothesis import strategies as st
 
 import wgse_bench
 import wgse_mmseg
-from wgse_mmseg.core.arguments import LAYOUT, ArgumentError, Choice, Path
+from wgse_mmseg.argument_checks import ArgumentError
 from wgse_mmseg.data_generation.cityscapes_conversion import ConversionSettings
+from wgse_mmseg.errors import WgseError
 
 wgse_mmseg.register_all_modules()
 
 #: the packages whose entry points are fuzzed
 PACKAGES = (wgse_mmseg, wgse_bench)
 PACKAGE_NAMES = tuple(package.__name__ for package in PACKAGES)
+PACKAGE_DIRS = tuple(osp.dirname(package.__file__).replace('\\', '/') + '/'
+                     for package in PACKAGES)
+
+#: public entry points the test does not call, and why
+NOT_CALLED = {
+    'register_all_modules': 'takes no arguments',
+    'load_config': 'reads an MMSeg config '
+                   '(tests/utils/test_config_options.py)',
+    'spike_config': 'combines MMSeg configs (tests/utils/test_spike_model.py)',
+    'SpikeRunner': "mmengine's Runner; its arguments are mmengine's",
+    'CPUDistributedDataParallel': "torch's DistributedDataParallel on CPU, "
+                                  'built by the runner',
+    'SpikeSegInferencer': "MMSeg's inferencer over a built model "
+                          '(tests/apis/test_inference.py)',
+    'OnnxSpikeSegmentor': 'needs an exported model '
+                          '(tests/apis/test_onnx_export.py)',
+    'load_segmentor': 'a config and a checkpoint of a trained segmentor '
+                      '(tests/apis/test_segmentor_checkpoint.py)',
+    'WalkReport': 'the record walk_recording returns',
+    'aggregate': 'reads the runs of an experiment grid (tests/bench)',
+    'loss_change': 'reads a training curve (tests/bench)',
+    'select': 'filters the entries of a grid file (tests/bench)',
+    'report': 'renders the runs of an experiment grid (tests/bench)',
+    'benchmark_entry': 'times a trained run of a grid (tests/bench)',
+    'finished': 'reads a run of a grid (tests/bench)',
+    'plan': 'plans the runs of a grid (tests/bench)',
+    'run_one': 'trains a run of a grid (tests/bench)',
+    'run_report': 'measures the GPU report on a GPU (dev/gpu_report.py)',
+    'benchmark': 'scores a REDS folder with a trained model (tests/bench)',
+    'benchmark_config': 'builds and times a whole segmentor (tests/bench)',
+    'count_flops': 'counts a built segmentor (tests/bench)',
+    'measure_enhancer_step': 'times a built segmentor (tests/bench)',
+    'measure_latency': 'times a built segmentor (tests/bench)',
+    'measure_throughput': 'times a built segmentor (tests/bench)',
+    'measure_train_step': 'times a built segmentor (tests/bench)',
+    'model_bases': 'tries every model base of MMSeg (tests/bench)',
+    'try_model_base': 'builds an MMSeg model base (tests/bench)',
+}
+#: parameters handed to OpenMMLab as they are, which it checks
+PASSED_THROUGH = {
+    'ReconstructionMetric': {'collect_device', 'prefix', 'collect_dir'},
+}
+#: annotations of parameters that take no plain value
+NOT_PLAIN = re.compile(r'Callable|Dict|dict|Module|Mapping|Config|Tensor|'
+                       r'ndarray|Graph|device')
 
 
-def _declared_entry_points():
-    """``(callable, declaration)`` of every entry point that :func:`declare`
-    checks, found in every module of the library and of the measurement
-    wing: a function, or a class whose ``__init__`` is declared, defined in
-    the module that holds it (a module whose optional dependency is absent
-    is skipped)."""
-    found = []
-    infos = [info for package in PACKAGES for info in pkgutil.walk_packages(
-        package.__path__, package.__name__ + '.')]
-    for info in infos:
+def _public_modules(package):
+    """``package`` and every module of it whose dotted name has no part
+    starting with ``_`` (a module whose optional dependency is absent is
+    left out)."""
+    yield package
+    for info in pkgutil.walk_packages(package.__path__,
+                                      package.__name__ + '.'):
+        if any(part.startswith('_') for part in info.name.split('.')):
+            continue
         try:
-            module = importlib.import_module(info.name)
+            yield importlib.import_module(info.name)
         except ModuleNotFoundError as err:
-            if err.name and err.name.split('.')[0] not in PACKAGE_NAMES:
-                continue
-            raise
-        for value in vars(module).values():
-            function = (vars(value).get('__init__')
-                        if inspect.isclass(value) else value)
-            declaration = getattr(function, 'declaration', None)
-            if declaration is not None and \
-                    getattr(value, '__module__', None) == info.name:
-                found.append((value, declaration))
-    return sorted(found, key=lambda pair: (pair[0].__module__,
-                                           pair[1].entry))
+            if err.name and err.name.split('.')[0] in PACKAGE_NAMES:
+                raise
 
 
-DECLARED = _declared_entry_points()
+def _registered():
+    """Every class of the package in an MMSeg or mmengine registry."""
+    import mmengine.registry
+    import mmseg.registry
+    for module in (mmengine.registry, mmseg.registry):
+        for registry in vars(module).values():
+            if isinstance(registry, mmengine.registry.Registry):
+                for value in registry.module_dict.values():
+                    if getattr(value, '__module__', '').startswith(
+                            PACKAGE_NAMES):
+                        yield value
+
+
+def _is_entry_point(value) -> bool:
+    """A function or a class the package defines, not an error class (the
+    errors are held by test_errors.py)."""
+    if not (inspect.isfunction(value) or inspect.isclass(value)):
+        return False
+    if inspect.isclass(value) and issubclass(value, BaseException):
+        return False
+    return getattr(value, '__module__', '').startswith(PACKAGE_NAMES)
+
+
+def _public_entry_points():
+    """``name -> callable`` of every public entry point."""
+    found = {}
+    for package in PACKAGES:
+        for module in _public_modules(package):
+            for name in getattr(module, '__all__', ()):
+                value = getattr(module, name)
+                if _is_entry_point(value):
+                    found[value.__name__] = value
+    for value in _registered():
+        if _is_entry_point(value):
+            found[value.__name__] = value
+    return dict(sorted(found.items()))
+
+
+ENTRY_POINTS = _public_entry_points()
 
 #: seconds and bytes of peak memory one call may add (generous: a refusal
 #: takes microseconds, and accepted values build small modules)
@@ -97,9 +182,13 @@ def _files(tmp_path_factory, wrong_file_kinds):
 
 
 def _required(entry):
-    """Valid values for arguments an entry point has no default for, and
-    for those whose defaults would make an accepted call slow."""
-    files = FIXTURE_FILES
+    """Valid values for the parameters an entry point has no default for,
+    and for those whose defaults would make an accepted call slow."""
+    from wgse_mmseg.models.reconstruction import DEFAULT_WEIGHTS
+    # before the fixture has made the files (as tests are collected), the
+    # kinds of the values suffice
+    files = collections.defaultdict(lambda: 'file', FIXTURE_FILES)
+    files.setdefault('root', pathlib.Path('root'))
     frames = np.full((2, 4, 6), 0.5)
     return {
         'SimulateSpikes': dict(num_steps=9),
@@ -113,7 +202,6 @@ def _required(entry):
             num_val=0, height=16, width=16, num_steps=3, num_frames=2,
             progress=False),
         'SpikeRandomCrop': dict(crop_size=(4, 4)),
-        'ResidualBlock': dict(channels=4),
         'SimulatedSpikeImageDataset': dict(
             image_dir=files['images'], num_samples=2, crop_size=(8, 8),
             num_steps=5, max_side=32, pipeline=[], lazy_init=True),
@@ -122,10 +210,8 @@ def _required(entry):
         'SpikeReconstructor': dict(num_steps=9, channels=8, num_blocks=1,
                                    mid_channels=4),
         'WGSE': dict(hidden_channels=4),
-        'BandNetwork': dict(hidden_channels=4),
         'ExperimentSettings': dict(grid=files['clip'], data_root='data',
                                    work_dir='work', seeds=[0], epochs=1),
-        'auto_exposure': dict(image=frames[0]),
         'apply_exposure': dict(image=frames[0]),
         'convert_cityscapes': dict(
             root=files['cityscapes'], out_dir=str(files['root'] / 'spikes'),
@@ -134,88 +220,112 @@ def _required(entry):
             splits=('train',), progress=False),
         'time_calls': dict(fn=lambda: None, device=torch.device('cpu'),
                            repeat=1, warmup=0),
-        'schedule_options': dict(epochs=None, max_iters=10),
-        'band_lengths': dict(length=16, wavelet='haar'),
-        'analysis_matrix': dict(length=16, wavelet='haar'),
-        'synthesis_matrix': dict(lengths=(8, 8), wavelet='haar'),
         'wavedec': dict(data=torch.zeros(2, 16), wavelet='haar'),
         'waverec': dict(coeffs=[torch.zeros(2, 8)] * 2, wavelet='haar'),
         'tfp': dict(spikes=np.zeros((3, 4, 5))),
         'tfi': dict(spikes=np.zeros((3, 4, 5))),
-        'tfi_spatial_mean': dict(spikes=np.zeros((3, 4, 5))),
-        'tfi_temporal_mean': dict(spikes=np.zeros((3, 4, 5))),
         'export_training_images': dict(out_dir=str(files['root'] / 'images'),
                                        sources=('matplotlib',)),
         'score_recording': dict(path=files['clip'], methods=['tfp'],
                                 num_steps=5),
         'ssim': dict(pred=np.full((12, 12), 0.5), gt=np.full((12, 12), 0.5)),
-        'plan_walk': dict(total=100, length=9, stride=10),
+        'psnr': dict(pred=np.full((4, 4), 0.5), gt=np.full((4, 4), 0.5)),
+        'entropy_2d': dict(image=np.full((4, 4), 0.5)),
         'walk_recording': dict(
             path=files['clip'], video=str(files['root'] / 'walk.gif'),
             model=lambda spikes: spikes.mean(1),
             render=lambda window, rate: np.zeros((4, 6), np.uint8),
             length=3, stride=2, progress=False),
-        'export_onnx': dict(graph=torch.nn.Identity(),
-                            path=str(files['root'] / 'model.onnx'),
+        # a stand-in the export refuses once the other arguments pass
+        'export_onnx': dict(graph=None, path=str(files['root'] / 'model.onnx'),
                             num_steps=2, height=4, width=4),
         'measure_deployment': dict(name='x', config=files['missing'],
                                    cfg_options=None, shape=(2, 4, 4)),
+        'load_grid': dict(path=files['missing']),
+        'read_scene_file': dict(path=files['missing']),
+        'export_weights': dict(checkpoint=DEFAULT_WEIGHTS,
+                               out=str(files['root'] / 'weights.pth')),
     }.get(entry, {})
 
 
-ENTRIES = [pytest.param(call, declaration, name,
-                        id=f'{declaration.entry}.{name}')
-           for call, declaration in DECLARED
-           for name in declaration.arguments]
+def _valid_values(name):
+    """The valid value of every parameter of ``name``: the test's, else
+    the default."""
+    parameters = inspect.signature(ENTRY_POINTS[name]).parameters
+    given = _required(name)
+    return {p: given.get(p, parameter.default)
+            for p, parameter in parameters.items()
+            if parameter.kind not in (parameter.VAR_KEYWORD,
+                                      parameter.VAR_POSITIONAL)}
 
 
-def test_the_public_entry_points_are_declared():
-    entries = {declaration.entry for _, declaration in DECLARED}
+_PLAIN = (type(None), bool, int, float, str, os.PathLike)
+
+
+def _fuzzed(name):
+    """The parameters of entry point ``name`` that take plain values."""
+    parameters = inspect.signature(ENTRY_POINTS[name]).parameters
+    fuzzed = []
+    for parameter, value in _valid_values(name).items():
+        annotation = parameters[parameter].annotation
+        text = '' if annotation is inspect.Parameter.empty else (
+            annotation if isinstance(annotation, str) else repr(annotation))
+        plain = isinstance(value, _PLAIN) or (
+            isinstance(value, (list, tuple)) and
+            all(isinstance(v, _PLAIN) for v in value))
+        if plain and not NOT_PLAIN.search(text) and \
+                parameter not in PASSED_THROUGH.get(name, ()):
+            fuzzed.append(parameter)
+    return fuzzed
+
+
+CALLED = [name for name in ENTRY_POINTS if name not in NOT_CALLED]
+ENTRIES = [pytest.param(name, parameter, id=f'{name}.{parameter}')
+           for name in CALLED for parameter in _fuzzed(name)]
+
+
+def test_the_public_entry_points_are_found():
+    """The API's entry points, found without reading any check, each
+    called here or listed with the reason it is not, and called with a
+    valid value of every parameter it has no default for."""
     assert {
-        'WGSE', 'BandNetwork', 'TFP', 'TemporalMeanFilter',
-        'SpatialMeanFilter', 'SpikeSegDataPreProcessor', 'LoadSpikeFromFile',
-        'SpikeRandomCrop', 'SpikeRandomFlip', 'SimulateSpikes',
-        'LoadSpikeImagePair', 'SimulatedSpikeImageDataset',
-        'REDSSpikeDataset', 'SpikeReconstructor', 'ResidualBlock',
-        'load_spikes', 'spike_shape', 'save_spikes', 'simulate_spikes',
+        'WGSE', 'TFP', 'TFI', 'TemporalMeanFilter', 'SpatialMeanFilter',
+        'SpikeSegDataPreProcessor', 'LoadSpikeFromFile', 'SpikeRandomCrop',
+        'SpikeRandomFlip', 'SimulateSpikes', 'LoadSpikeImagePair',
+        'PackReconstructionInputs', 'SimulatedSpikeImageDataset',
+        'REDSSpikeDataset', 'SpikeReconstructor', 'SpikeCityscapesDataset',
+        'SpikeVisualizationHook', 'ReconstructionMetric', 'load_spikes',
+        'spike_shape', 'save_spikes', 'simulate_spikes',
         'make_synthetic_dataset', 'ConversionSettings', 'convert_cityscapes',
-        'SpikeCityscapesDataset', 'auto_exposure', 'apply_exposure',
-        'time_calls', 'schedule_options', 'wavedec', 'waverec',
-        'analysis_matrix', 'band_lengths', 'synthesis_matrix', 'tfp', 'tfi',
-        'tfi_spatial_mean', 'tfi_temporal_mean', 'export_training_images',
-        'ExperimentSettings', 'score_recording'
-    } <= entries
-    for _, declaration in DECLARED:
-        parameters = inspect.signature(declaration.function).parameters
+        'apply_exposure', 'time_calls', 'wavedec', 'waverec', 'tfp', 'tfi',
+        'ssim', 'export_training_images', 'ExperimentSettings',
+        'score_recording', 'walk_recording', 'export_onnx',
+        'load_reconstructor', 'measure_deployment',
+    } <= set(CALLED)
+    assert set(NOT_CALLED) <= set(ENTRY_POINTS), (
+        f'not entry points (any more): '
+        f'{sorted(set(NOT_CALLED) - set(ENTRY_POINTS))}')
+    for name in CALLED:
+        parameters = inspect.signature(ENTRY_POINTS[name]).parameters
         required = {n for n, p in parameters.items()
-                    if p.default is p.empty and n != 'self' and
+                    if p.default is p.empty and
                     p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)}
-        assert required <= set(_required(declaration.entry)), (
-            f'{declaration.entry}: give the test valid values of '
-            f'{sorted(required)}')
+        assert required <= set(_required(name)), (
+            f'{name}: give the test valid values of {sorted(required)}, or '
+            f'list it in NOT_CALLED with the reason')
+    assert len(ENTRIES) > 150
 
 
-def test_every_reader_of_a_recording_declares_the_layout():
-    """One declared kind for the layout of a recording, ``'THW'`` or
-    ``'HWT'`` or ``None`` (what the file records), on every entry point
-    that reads one."""
-    readers = {'load_spikes', 'spike_shape', 'LoadSpikeFromFile',
-               'LoadSpikeImagePair', 'score_recording', 'walk_recording'}
-    declaring = {declaration.entry for _, declaration in DECLARED
-                 if 'layout' in declaration.arguments}
-    assert declaring == readers
-    for _, declaration in DECLARED:
-        if declaration.entry in readers:
-            layout = declaration.arguments['layout']
-            assert isinstance(layout, Choice) and layout.optional
-            assert layout.choices == LAYOUT.choices == ('THW', 'HWT')
-            parameter = inspect.signature(
-                declaration.function).parameters['layout']
-            assert parameter.default is None, declaration.entry
+def _never_valid(value) -> bool:
+    """A value no plain parameter takes."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return True
+    return isinstance(value, (complex, bytes)) or type(value) is object
 
 
-def _bad_values(argument):
-    """What a careless or hostile caller passes."""
+def _bad_values(valid):
+    """What a careless or hostile caller passes (mostly wrong file kinds
+    where the valid value is a string, a path)."""
     numbers = st.one_of(
         st.sampled_from([math.nan, math.inf, -math.inf, 0, 0.0, -1, -0.5,
                          2**31, 10**8, 10**18, 1e300, True, False]),
@@ -228,51 +338,53 @@ def _bad_values(argument):
         st.text(alphabet='\'"\\ab/.\0', max_size=8))
     files = st.sampled_from(['directory', 'empty', 'text', 'missing']).map(
         lambda kind: FIXTURE_FILES[kind])
-    if isinstance(argument, Path):  # mostly wrong file kinds for paths
-        return st.one_of(files, files, numbers, others)
+    if isinstance(valid, str):
+        return st.one_of(files, numbers, others)
     return st.one_of(numbers, others, files)
 
 
-@pytest.mark.parametrize('call, declaration, name', ENTRIES)
-def test_bad_arguments(call, declaration, name, single_thread,
-                       monkeypatch, bounded):
+@pytest.mark.parametrize('name, parameter', ENTRIES)
+def test_bad_arguments(name, parameter, single_thread, monkeypatch,
+                       bounded):
     # relative paths drawn for outputs land in the fixture folder
     monkeypatch.chdir(FIXTURE_FILES['root'])
-    argument = declaration.arguments[name]
+    call = ENTRY_POINTS[name]
+    valid = _valid_values(name)
+    given_files = [v for v in _required(name).values() if isinstance(v, str)]
 
     @settings(max_examples=6, deadline=None, database=None,
               suppress_health_check=list(HealthCheck))
-    @given(value=_bad_values(argument))
+    @given(value=_bad_values(valid[parameter]))
     def check(value):
         # 'missing' stays missing: an example that fuzzed an output with it
         # rightly created it, and a later input would find a file there
         _remove(FIXTURE_FILES['missing'])
-        kwargs = dict(_required(declaration.entry), **{name: value})
-        accepted = argument.accepts(value) or (value is None and
-                                               argument.optional)
+        kwargs = dict(_required(name), **{parameter: value})
         try:
             with bounded(TIME_BOUND_S, MEMORY_BOUND):
                 call(**kwargs)
         except ArgumentError as err:
-            assert err.entry == declaration.entry, err
-            assert name in err.argument, err
-            assert 'wgse_mmseg/core/arguments.py' in \
-                _traceback_files(err)[-1]
-        except (ValueError, TypeError, OSError) as err:
-            # a file the reader refused, named; or a relation between
-            # arguments, named; a value the declaration accepts lets the
-            # call go on to the other arguments, which may stop it (a
-            # missing file among the required ones), named by the package
+            # the parameter named; or one the test gave a stand-in for
+            # (a missing file), where the value passed its check
+            assert err.entry == name, err
+            assert parameter in err.argument or \
+                err.argument in _required(name), err
+        except (WgseError, ValueError, TypeError, OSError) as err:
+            # the parameter or the file named; or a file the test gave,
+            # where the value passed its check and the call went on
             message = str(err)
-            assert accepted or (isinstance(value, str) and value in message) \
-                or name in message, f'{type(err).__name__}: {message}'
+            named = [parameter] + given_files + (
+                [value] if isinstance(value, str) and value else [])
+            assert any(word in message for word in named), (
+                f'{name}({parameter}={value!r}): '
+                f'{type(err).__name__}: {message}')
             raised_in = _traceback_files(err)[-1]
-            assert any(package in raised_in for package in PACKAGE_NAMES), (
-                raised_in, message)
+            assert raised_in.startswith(PACKAGE_DIRS), (
+                f'{name}({parameter}={value!r}) raised deep in '
+                f'{raised_in}: {type(err).__name__}: {message}')
         else:
-            assert accepted, (
-                f'{declaration.entry}({name}={value!r}) was accepted but '
-                f'the declaration refuses it')
+            assert not _never_valid(value), (
+                f'{name}({parameter}={value!r}) was accepted')
 
     check()
 
@@ -295,9 +407,9 @@ def _traceback_files(err):
 
 def test_an_argument_error_crosses_a_process_boundary():
     """Pickled (as a spawned worker returns it) it keeps its class, message
-    and parts; unpicklable, it used to break the benchmark's process pool."""
+    and parts, so that a refusal in a spawned worker (the benchmarks')
+    reaches the parent as it was raised."""
     import pickle
-    from wgse_mmseg.core.arguments import ArgumentError
     error = ArgumentError('WGSE', 'level', 'an integer >= 1', 10**6)
     copy = pickle.loads(pickle.dumps(error))
     assert type(copy) is ArgumentError and str(copy) == str(error)

@@ -50,7 +50,8 @@ def test_wgse_arguments(kwargs, match):
 @pytest.mark.parametrize('spikes, match', [
     (torch.zeros(9, 4, 4), r'shaped \(B, T, H, W\)'),
     (torch.zeros(1, 1, 9, 4, 4), r'shaped \(B, T, H, W\)'),
-    (torch.zeros(1, 0, 4, 4), 'length must be an integer >= 1'),
+    (torch.zeros(1, 0, 4, 4),
+     r"WGSE: the spikes' time dimension T \(B, T, H, W\) must be at least 1"),
 ])
 def test_wgse_inputs(spikes, match):
     _raises(match, lambda: WGSE()(spikes))
@@ -168,7 +169,8 @@ def test_all_good_binary_dtypes_pass():
     (dict(type='SpikeRandomCrop', crop_size=(-1, 4)), r'crop_size must be'),
     (dict(type='SpikeRandomCrop', crop_size=(4, 4), cat_max_ratio=-1),
      'cat_max_ratio must be a finite number > 0 and <= 1'),
-    (dict(type='SpikeRandomFlip', prob=2), 'prob must be a finite number'),
+    (dict(type='SpikeRandomFlip', prob=2),
+     r'prob must be a probability in \[0, 1\]'),
     (dict(type='SpikeRandomFlip', direction='diagonal'), 'direction must'),
     (dict(type='SimulateSpikes', num_steps=0), 'num_steps must be an'),
     (dict(type='LoadSpikeImagePair', num_steps=0), 'num_steps must be an'),

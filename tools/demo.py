@@ -35,12 +35,11 @@ import json
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.arguments import (LAYOUT, PROBABILITY, Choice, Path,
-                                       Text, add_frame_size_options,
-                                       check_frame_size)
-from wgse_mmseg.core.exposure import EXPOSURE
-from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.command_line import (EXPOSURE, LAYOUT, PROBABILITY, Choice,
+                                     Path, Text, add_frame_size_options,
+                                     check_frame_size)
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.apis.recording_walk import add_walk_options
 from wgse_mmseg.utils.config import add_config_options
 

@@ -13,9 +13,9 @@ import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.arguments import Number, Path
-from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.command_line import Number, Path
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,
                                      config_from_args)
 

@@ -11,7 +11,7 @@ import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.arguments import Path
+from wgse_mmseg.command_line import Path
 from wgse_mmseg.fileio.input_guard import OutputFolderError
 from wgse_mmseg.fileio.locks import add_wait_option
 from wgse_mmseg.utils.config import (add_runner_arguments, build_runner,

@@ -29,13 +29,15 @@ from mmseg.structures import SegDataSample
 from wgse_mmseg.apis.onnx_export import (SpikeSegmentorGraph, export_onnx,
                                          random_spikes)
 from wgse_mmseg.apis.onnx_segmentor import OnnxSpikeSegmentor
-from wgse_mmseg.core.arguments import Integer, declare
-from wgse_mmseg.limits import MAX_BATCH_SIZE, MAX_WORKERS
+from wgse_mmseg.argument_checks import (ArgumentError, check_integer,
+                                        check_path, check_text, is_integer)
+from wgse_mmseg.limits import (MAX_BATCH_SIZE, MAX_IMAGE_SIDE, MAX_NUM_STEPS,
+                               MAX_WORKERS)
 from wgse_mmseg.utils.config import load_config
 
 from .machine import machine_record
 from .markdown import markdown_table
-from .timing import summarize, time_calls
+from .timing import check_repeats, summarize, time_calls
 
 __all__ = ['measure_deployment']
 
@@ -56,8 +58,6 @@ def _batch(spikes: torch.Tensor) -> dict:
     return dict(inputs=list(spikes.to(torch.uint8)), data_samples=samples)
 
 
-@declare(batch_size=Integer(1, MAX_BATCH_SIZE),
-         threads=Integer(1, MAX_WORKERS).or_none())
 def measure_deployment(name: str, config: str,
                        cfg_options: Optional[Dict[str, Any]],
                        shape: Sequence[int], batch_size: int = 1,
@@ -78,7 +78,18 @@ def measure_deployment(name: str, config: str,
         (device, CPU, load, versions). ``repeat`` and ``warmup`` are
         :func:`~.timing.time_calls`'s, checked before anything is built.
     """
-    time_calls(lambda: None, 'cpu', repeat, warmup)  # their checks, first
+    entry = 'measure_deployment'
+    check_text(entry, 'name', name)
+    if not (isinstance(shape, (list, tuple)) and len(shape) == 3 and
+            is_integer(shape[0], 1, MAX_NUM_STEPS) and
+            all(is_integer(side, 1, MAX_IMAGE_SIDE) for side in shape[1:])):
+        raise ArgumentError(entry, 'shape', f'(T, H, W), T an integer in '
+                            f'[1, {MAX_NUM_STEPS}] and H, W in '
+                            f'[1, {MAX_IMAGE_SIDE}]', shape)
+    check_integer(entry, 'batch_size', batch_size, 1, MAX_BATCH_SIZE)
+    check_integer(entry, 'threads', threads, 1, MAX_WORKERS, optional=True)
+    check_repeats(entry, repeat, warmup)
+    check_path(entry, 'config', config, exists='file')
     previous = torch.get_num_threads()
     if threads is not None:
         torch.set_num_threads(threads)

@@ -182,7 +182,7 @@ def format_rows(rows: List[Dict[str, Any]], machine: Dict[str, Any],
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from wgse_mmseg.core.arguments import Integer, Path, Text
+    from wgse_mmseg.command_line import Integer, Path, Text
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--num-steps', type=Integer(1, 1024), default=8,
                         help='T of the spike input')

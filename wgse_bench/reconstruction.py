@@ -47,14 +47,17 @@ from wgse_mmseg import register_all_modules
 # a command line (``python -m``): its own explicit set-up of the MMSeg layer,
 # as the tools make it, before the layer's packages are imported
 register_all_modules()
-from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, SIDE,
-                                       Choice, Integer, Path, SequenceOf, Text,
-                                       add_frame_size_options,
-                                       check_frame_size, declare)
-from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
+from wgse_mmseg.argument_checks import (ArgumentError, check_integer,
+                                        check_layout, check_path, check_text,
+                                        is_choice, is_integer)
+from wgse_mmseg.command_line import (EXPOSURE, LAYOUT, LAYOUT_HELP, NUM_STEPS,
+                                     Choice, Integer, Path, SequenceOf, Text,
+                                     add_frame_size_options, check_frame_size)
+from wgse_mmseg.core.exposure import apply_exposure
+from wgse_mmseg.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from wgse_mmseg.core.spike_formats import SpikeFileError, centered_window
-from wgse_mmseg.fileio.images import to_uint8
 from wgse_mmseg.fileio.spike_files import load_spikes, spike_shape
+from wgse_mmseg.fileio.images import to_uint8
 from wgse_mmseg.evaluation.quality import (NO_REFERENCE_METRICS,
                                            no_reference_scores)
 from wgse_mmseg.datasets.reds import (LoadSpikeImagePair,
@@ -236,12 +239,6 @@ def format_table(results: Dict[str, Dict[str, float]],
             f'wgse_mmseg {machine["wgse_mmseg"]}\n\n' + table)
 
 
-@declare(path=Path(), methods=SequenceOf(Choice(METHODS),
-                                         max_length=len(METHODS)),
-         checkpoint=Path(optional=True), num_steps=NUM_STEPS,
-         frames=SequenceOf(Integer(), optional=True),
-         exposure=EXPOSURE, height=SIDE.or_none(), width=SIDE.or_none(),
-         device=Text(empty=False), layout=LAYOUT.or_none())
 def score_recording(path: str, methods: Sequence[str] = METHODS,
                     checkpoint: Optional[str] = None, num_steps: int = 41,
                     frames: Optional[Sequence[int]] = None,
@@ -261,6 +258,25 @@ def score_recording(path: str, methods: Sequence[str] = METHODS,
     ``num_steps``-frame windows, ``wgse`` its model's. ``layout``: as
     :func:`~wgse_mmseg.fileio.load_spikes` takes it.
     """
+    entry = 'score_recording'
+    check_path(entry, 'path', path)
+    if not (isinstance(methods, (list, tuple)) and
+            1 <= len(methods) <= len(METHODS) and
+            all(is_choice(method, METHODS) for method in methods)):
+        raise ArgumentError(entry, 'methods', f'a sequence of 1 to '
+                            f'{len(METHODS)} of {list(METHODS)}', methods)
+    check_path(entry, 'checkpoint', checkpoint, optional=True)
+    check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
+    if frames is not None and not (
+            isinstance(frames, (list, tuple)) and frames and
+            all(is_integer(frame) for frame in frames)):
+        raise ArgumentError(entry, 'frames', 'a non-empty sequence of '
+                            'integers (frame indices), or None', frames)
+    EXPOSURE.check(exposure, entry, 'exposure')
+    check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE, optional=True)
+    check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE, optional=True)
+    check_text(entry, 'device', device, empty=False)
+    check_layout(entry, layout)
     total, _, _ = spike_shape(path, height, width, layout)
     frames = list(frames) if frames else [total // 2]
     results = {}

@@ -5,7 +5,7 @@ import time
 from typing import (TYPE_CHECKING, Any, Callable, Dict, List, NamedTuple,
                     Sequence, Union)
 
-from wgse_mmseg.core.arguments import Integer, declare
+from wgse_mmseg.argument_checks import check_integer
 from wgse_mmseg.limits import MAX_REPEAT
 
 if TYPE_CHECKING:  # torch where a call is timed (a tool's --help needs none)
@@ -27,7 +27,13 @@ def _synchronize(device: 'torch.device') -> None:
         torch.cuda.synchronize(device)
 
 
-@declare(repeat=Integer(1, MAX_REPEAT), warmup=Integer(0, MAX_REPEAT))
+def check_repeats(entry: str, repeat: int, warmup: int) -> None:
+    """``entry``'s ``repeat`` (timed calls, >= 1) and ``warmup`` (untimed
+    ones first, >= 0), each at most :data:`MAX_REPEAT`."""
+    check_integer(entry, 'repeat', repeat, 1, MAX_REPEAT)
+    check_integer(entry, 'warmup', warmup, 0, MAX_REPEAT)
+
+
 def time_calls(fn: Callable[[], Any], device: Union[str, 'torch.device'],
                repeat: int, warmup: int) -> Timings:
     """Seconds taken by each of ``repeat`` calls of ``fn`` after ``warmup``
@@ -37,8 +43,11 @@ def time_calls(fn: Callable[[], Any], device: Union[str, 'torch.device'],
     The CPU time is the steadier figure on a machine shared with other
     work; on an idle one, with one thread, the two agree.
     """
-    import torch
-    device = torch.device(device)
+    from wgse_mmseg.core.checks import check_device
+    check_repeats('time_calls', repeat, warmup)
+    if not callable(fn):
+        raise TypeError(f'time_calls: fn must be callable, got {fn!r}')
+    device = check_device('time_calls', 'device', device)
     result = None
     for _ in range(warmup):
         result = fn()

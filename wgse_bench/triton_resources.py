@@ -45,7 +45,7 @@ import sys
 import tempfile
 from typing import Dict, List, NamedTuple, Optional, Sequence
 
-from wgse_mmseg.core.arguments import Choice, Integer, Path
+from wgse_mmseg.command_line import Choice, Integer, Path
 from wgse_mmseg.limits import MAX_WORKERS
 
 __all__ = []

@@ -3,7 +3,7 @@
 :mod:`.gpu_report` and ``dev/sweep_band_kernels.py`` run, importable without
 torch, so that their command lines answer ``--help`` and argument errors at
 once (tests/bench/test_wgse_choices.py holds them equal to the kernels')."""
-from wgse_mmseg.core.arguments import NUM_STEPS, SIDE, Integer, SequenceOf
+from wgse_mmseg.command_line import NUM_STEPS, SIDE, Integer, SequenceOf
 from wgse_mmseg.limits import MAX_BATCH_SIZE
 
 __all__ = []

@@ -77,7 +77,7 @@ def measure(backend: str, shape: List[int], repeat: int,
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from wgse_mmseg.core.arguments import Integer, Path, Text
+    from wgse_mmseg.command_line import Integer, Path, Text
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--baseline', type=Path(exists='directory'),
                         help='a work tree of another commit')

@@ -35,6 +35,7 @@ the OpenMMLab stack it says what to install.
 """
 import importlib
 
+from .errors import WgseError
 from .version import __version__
 
 #: the packages that register with MMSeg
@@ -77,5 +78,5 @@ def spike_config(config, enhancer: dict = None, cfg_options: dict = None):
     return combine(config, enhancer, cfg_options)
 
 
-__all__ = ['__version__', 'load_config', 'register_all_modules',
+__all__ = ['__version__', 'WgseError', 'load_config', 'register_all_modules',
            'spike_config']

@@ -20,7 +20,7 @@ from mmseg.registry import MODELS
 from wgse_mmseg import register_all_modules
 from wgse_bench import experiments as runner
 from wgse_bench.experiments import ExperimentSettings, StaleRunError
-from wgse_mmseg.core.arguments import ArgumentError
+from wgse_mmseg.argument_checks import ArgumentError
 from wgse_mmseg.utils.config import add_runner_arguments, load_config
 from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
 

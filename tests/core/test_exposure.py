@@ -7,8 +7,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from wgse_mmseg.core.exposure import (EXPOSURE, UNDER_EXPOSED_BELOW,
-                                      apply_exposure, exposure_gain)
+from wgse_mmseg.command_line import EXPOSURE
+from wgse_mmseg.core.exposure import (UNDER_EXPOSED_BELOW, apply_exposure,
+                                      exposure_gain)
 
 
 def test_a_dark_image_gets_its_bright_end_to_white_ignoring_hot_pixels():

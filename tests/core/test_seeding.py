@@ -10,7 +10,7 @@ import pytest
 import torch
 from hypothesis import given, settings, strategies as st
 
-from wgse_mmseg.core.arguments import ArgumentError
+from wgse_mmseg.argument_checks import ArgumentError
 from wgse_mmseg.limits import MAX_SEED
 from wgse_mmseg.core.seeding import (_string_key_word, check_seed,
                                      derive_generator, derive_seed,

@@ -236,3 +236,24 @@ def test_public_functions_follow_pywavelets_signature(ours, theirs):
     np.testing.assert_allclose(
         [c.numpy() for c in wavedec(x, 'db2')][0],
         pywt.wavedec(x.numpy(), 'db2')[0])
+
+
+@given(wavelet=wavelets, n=st.integers(1, 64), level=st.integers(0, 24))
+def test_a_level_too_high_warns_as_pywavelets_does(wavelet, n, level):
+    """A level above ``pywt.dwt_max_level`` is transformed (no cap) and
+    warns exactly where PyWavelets' own ``wavedec`` warns."""
+    x = np.linspace(0, 1, n)
+    with warnings.catch_warnings(record=True) as theirs:
+        warnings.simplefilter('always')
+        expected = pywt.wavedec(x, wavelet, mode='zero', level=level)
+    with warnings.catch_warnings(record=True) as ours:
+        warnings.simplefilter('always')
+        got = wavedec(torch.from_numpy(x), wavelet, mode='zero', level=level)
+    assert [str(w.message) for w in ours] == [str(w.message) for w in theirs]
+    assert [c.shape[0] for c in got] == [len(c) for c in expected]
+
+
+def test_an_empty_signal_is_named():
+    with pytest.raises(ValueError, match=r'wavedec: data\.shape\[axis\] '
+                       r'must be an integer >= 1, got 0'):
+        wavedec(torch.zeros(3, 0), 'haar', level=1)

@@ -12,9 +12,9 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
+from wgse_mmseg.argument_checks import ArgumentError
 from wgse_mmseg.core import spike_formats
 from wgse_mmseg.fileio import atomic, images, spike_arrays, spike_files
-from wgse_mmseg.core.arguments import ArgumentError
 from wgse_mmseg.core.spike_formats import SpikeFileError
 from wgse_mmseg.fileio.spike_files import load_spikes, save_spikes, spike_shape
 

@@ -260,26 +260,29 @@ def test_a_checkpoint_config_chooses_no_code_at_any_depth(
     assert not (tmp_path / 'out.pth').exists()
 
 
-# (where the bomb sits in the exported model config, its key path)
+# (the key path of the config of the class that refuses the bomb, and the
+# argument its error names)
 SIZE_BOMBS = [
-    (dict(channels=200000), '.channels'),
-    (dict(num_blocks=10**8), '.num_blocks'),
+    (dict(channels=200000), '', 'channels'),
+    (dict(num_blocks=10**8), '', 'num_blocks'),
     (dict(enhancer=dict(type='WGSE', wavelet='haar', level=10**6,
-                        hidden_channels=4)), '.enhancer.level'),
-    (dict(num_steps=10**8), '.num_steps'),
-    # each within its limit, together over MAX_PARAMETERS
-    (dict(channels=1024, mid_channels=1024, num_blocks=16), ''),
+                        hidden_channels=4)), '.enhancer', 'level'),
+    (dict(num_steps=10**8), '', 'num_steps'),
+    # each of a usual size, together over MAX_PARAMETERS
+    (dict(channels=1024, mid_channels=1024, num_blocks=16), '', 'channels'),
 ]
 
 
 @pytest.mark.parametrize('form', ['model', 'cfg'])
-@pytest.mark.parametrize('bomb, key', SIZE_BOMBS,
-                         ids=[key or 'parameters' for _, key in SIZE_BOMBS])
+@pytest.mark.parametrize('bomb, key, argument', SIZE_BOMBS,
+                         ids=[f'{key}.{argument}' for _, key, argument
+                              in SIZE_BOMBS])
 def test_a_checkpoint_asking_for_huge_sizes_is_refused_naming_the_file(
-        tmp_path, form, bomb, key):
+        tmp_path, form, bomb, key, argument):
     """A crafted checkpoint's sizes are checked against the stated limits
     before anything is allocated: refused within 5 s and 200 MB, the error
-    naming the file, the key path and the argument."""
+    naming the file, the key path of the refusing config and the
+    argument."""
     model = dict(_exported_model_config(), **bomb)
     meta = dict(model=model) if form == 'model' else dict(
         cfg=f'model = {model!r}\n')
@@ -295,7 +298,6 @@ def test_a_checkpoint_asking_for_huge_sizes_is_refused_naming_the_file(
     assert grown < 200 << 20, f'{grown} bytes more at the peak'
     message = str(info.value)
     assert message.startswith(f'{path}: {where}{key}: '), message
-    argument = key.rsplit('.', 1)[-1] or 'channels'
     assert argument in message.split(': ', 3)[-1]
     assert 'must be' in message
 

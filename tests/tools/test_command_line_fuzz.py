@@ -1,8 +1,8 @@
 """Every option of every tool's command line, fuzzed in-process.
 
 Each tool builds its parser with ``build_parser()``, and every option that
-takes a value is typed with a declared kind (:mod:`wgse_mmseg.core.arguments`)
-or is ``--cfg-options`` (:class:`wgse_mmseg.utils.config.ConfigOptions`,
+takes a value is typed with a kind of :mod:`wgse_mmseg.command_line` or
+is ``--cfg-options`` (:class:`wgse_mmseg.utils.config.ConfigOptions`,
 whose spike settings are declared too). For every option, hypothesis draws
 wrong types as text, NaN, Inf, negative, zero, huge and fractional numbers,
 quotes and backslashes, the declaration's own boundaries and, for paths, a
@@ -27,8 +27,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from wgse_mmseg.core.arguments import (LAYOUT, Argument, Choice, Integer,
-                                       Number, OneOf, Path, SequenceOf, Text)
+from wgse_mmseg.command_line import (LAYOUT, Argument, Choice, Integer, Number,
+                                     OneOf, Path, SequenceOf, Text)
 from wgse_mmseg.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
 from wgse_mmseg.data_generation.shards import Shard, ShardArgument
 from wgse_mmseg.utils.config import SPIKE_SETTING_KINDS, ConfigOptions

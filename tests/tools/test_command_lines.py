@@ -235,7 +235,7 @@ def test_no_tool_writes_its_output_over_its_input(tool, args, source, link,
 
 def test_the_figure_tool_pairs_height_and_width(load_tool, files, capsys):
     """The maintainers' figure tool shares the same check (written once,
-    ``core.arguments.check_frame_size``)."""
+    ``command_line.check_frame_size``)."""
     tool = load_tool('dev/make_reconstruction_figure.py')
     with pytest.raises(SystemExit) as info:
         tool.parse_args([str(files / 'ok.npy'), '--out',

@@ -33,7 +33,7 @@ def test_the_check_sees_a_heavy_import(startup):
 
 def test_importing_the_package_imports_nothing_heavy(startup):
     assert startup.heavy_imports(['-c', 'import wgse_mmseg']) == []
-    # nor the argument declarations the tools' parsers are built from
+    # nor the command-line kinds the tools' parsers are built from
     assert startup.heavy_imports(
-        ['-c', 'import wgse_mmseg.core.arguments, '
+        ['-c', 'import wgse_mmseg.command_line, '
          'wgse_mmseg.apis.recording_walk, wgse_mmseg.utils.config']) == []

@@ -16,15 +16,11 @@ import argparse
 import json
 import sys
 
-from wgse_bench.timing import time_calls
-from wgse_mmseg.core.arguments import SIDE, Integer, Path, Text
+from wgse_mmseg.command_line import REPEAT, SIDE, WARMUP, Integer, Path, Text
 from wgse_mmseg.limits import MAX_BATCH_SIZE, MAX_WORKERS
-from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.utils.config import add_config_options
-
-#: the declarations of a measurement's repeats and warm-up calls
-TIMING = time_calls.declaration.arguments
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -36,9 +32,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='cpu, cuda or cuda:N (default: cpu)')
     parser.add_argument('--crop', type=SIDE, nargs=2, metavar=('H', 'W'),
                         help="input size (default: the config's crop_size)")
-    parser.add_argument('--repeat', type=TIMING['repeat'], default=10,
+    parser.add_argument('--repeat', type=REPEAT, default=10,
                         help='timed repeats of each measurement')
-    parser.add_argument('--warmup', type=TIMING['warmup'], default=2,
+    parser.add_argument('--warmup', type=WARMUP, default=2,
                         help='untimed calls before each measurement')
     parser.add_argument('--batch-size', type=Integer(1, MAX_BATCH_SIZE),
                         help='batch of the throughput and training-step '

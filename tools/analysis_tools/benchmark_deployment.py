@@ -20,14 +20,10 @@ import json
 import sys
 
 from wgse_mmseg.apis.onnx_settings import SHAPE_ENTRY
-from wgse_bench.timing import time_calls
-from wgse_mmseg.core.arguments import Integer, Path, Text
+from wgse_mmseg.command_line import REPEAT, WARMUP, Integer, Path, Text
 from wgse_mmseg.limits import MAX_BATCH_SIZE, MAX_WORKERS
-from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
-
-#: the declarations of a measurement's repeats and warm-up calls
-TIMING = time_calls.declaration.arguments
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -45,9 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
                         '128 256)')
     parser.add_argument('--batch-size', type=Integer(1, MAX_BATCH_SIZE),
                         default=1, help='streams per call (default: 1)')
-    parser.add_argument('--repeat', type=TIMING['repeat'], default=5,
+    parser.add_argument('--repeat', type=REPEAT, default=5,
                         help='timed calls per backend')
-    parser.add_argument('--warmup', type=TIMING['warmup'], default=1,
+    parser.add_argument('--warmup', type=WARMUP, default=1,
                         help='untimed calls before them')
     parser.add_argument('--threads', type=Integer(1, MAX_WORKERS),
                         help='torch and ONNX Runtime intra-op threads, the '

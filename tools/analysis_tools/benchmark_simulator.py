@@ -27,8 +27,7 @@ count, so the ratio compares algorithms, not core counts).
 """
 import argparse
 
-from wgse_mmseg.core.arguments import (NUM_STEPS, SIDE, Integer, SequenceOf,
-                                       Text)
+from wgse_mmseg.command_line import NUM_STEPS, SIDE, Integer, SequenceOf, Text
 from wgse_mmseg.limits import MAX_NUM_STEPS, MAX_REPEAT, MAX_WORKERS
 
 

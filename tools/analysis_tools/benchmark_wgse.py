@@ -32,10 +32,10 @@ import argparse
 import sys
 
 from wgse_bench.wgse_choices import DEFAULT_SHAPES, IMPLEMENTATIONS, SHAPE
-from wgse_mmseg.core.arguments import Choice, Integer, Path
+from wgse_mmseg.command_line import Choice, Integer, Path
 from wgse_mmseg.limits import MAX_REPEAT
-from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -37,10 +37,10 @@ import shlex
 import sys
 import time
 
-from wgse_mmseg.core.arguments import EPOCHS, ITERATIONS, SEED, Path, Text
+from wgse_mmseg.command_line import EPOCHS, ITERATIONS, SEED, Path, Text
 from wgse_mmseg.fileio.input_guard import OutputFolderError, keeps_inputs
-from wgse_mmseg.fileio.locks import own_folder
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.locks import own_folder
 from wgse_mmseg.utils.config import add_config_options
 
 

@@ -11,29 +11,28 @@ import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.command_line import (NUM_STEPS, SEED, SIDE, Integer, Number,
+                                     Path)
+from wgse_mmseg.limits import MAX_SAMPLES
 from wgse_mmseg.fileio.locks import add_wait_option
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.data_generation.synthetic import make_synthetic_dataset
-
-
-#: the declarations of the dataset maker's arguments
-DECLARED = make_synthetic_dataset.declaration.arguments
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('out_dir', type=DECLARED['out_dir'],
-                        help='dataset root to write')
-    parser.add_argument('--num-train', type=DECLARED['num_train'], default=48)
-    parser.add_argument('--num-val', type=DECLARED['num_val'], default=12)
-    parser.add_argument('--height', type=DECLARED['height'], default=128)
-    parser.add_argument('--width', type=DECLARED['width'], default=256)
-    parser.add_argument('--num-steps', type=DECLARED['num_steps'], default=41,
+    parser.add_argument('out_dir', type=Path(), help='dataset root to write')
+    count = Integer(0, MAX_SAMPLES)
+    parser.add_argument('--num-train', type=count, default=48)
+    parser.add_argument('--num-val', type=count, default=12)
+    parser.add_argument('--height', type=SIDE, default=128)
+    parser.add_argument('--width', type=SIDE, default=256)
+    parser.add_argument('--num-steps', type=NUM_STEPS, default=41,
                         help='T, spike frames per sample')
-    parser.add_argument('--threshold', type=DECLARED['threshold'],
+    parser.add_argument('--threshold', type=Number(0, strict_minimum=True),
                         default=1 / 0.6)
-    parser.add_argument('--seed', type=DECLARED['seed'], default=0)
+    parser.add_argument('--seed', type=SEED, default=0)
     add_wait_option(parser)
     return parser
 

@@ -12,38 +12,38 @@ wgse_mmseg/data_generation/cityscapes_conversion.py.
 import argparse
 import time
 
-from wgse_mmseg.core.arguments import Text
-from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.command_line import (NUM_STEPS, SEED, SIDE, Choice, Integer,
+                                     Number, Path, Text)
+from wgse_mmseg.limits import MAX_SAMPLES, MAX_WORKERS
 from wgse_mmseg.fileio.locks import add_wait_option
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.data_generation.cityscapes_conversion import (
-    ConversionSettings, convert_cityscapes, load_scene)
+    ANNOTATED_INDEX, CITYSCAPES_SPLITS, SNIPPET_LENGTH, ConversionSettings,
+    convert_cityscapes, load_scene)
 from wgse_mmseg.data_generation.shards import SHARD, WHOLE
-
-#: the declarations of the converter's and its settings' arguments
-CONVERTER = convert_cityscapes.declaration.arguments
-SETTINGS = ConversionSettings.__init__.declaration.arguments
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('cityscapes_root', type=CONVERTER['root'],
+    parser.add_argument('cityscapes_root', type=Path(),
                         help='holds leftImg8bit/, gtFine/ and optionally '
                         'leftImg8bit_sequence/')
-    parser.add_argument('out_dir', type=CONVERTER['out_dir'],
+    parser.add_argument('out_dir', type=Path(),
                         help='Spike-Cityscapes root to write')
     parser.add_argument('--splits', nargs='+', default=['train', 'val'],
-                        type=CONVERTER['splits'].item)
-    parser.add_argument('--height', type=SETTINGS['height'], default=512)
-    parser.add_argument('--width', type=SETTINGS['width'], default=1024)
-    parser.add_argument('--num-steps', type=SETTINGS['num_steps'],
+                        type=Choice(CITYSCAPES_SPLITS))
+    parser.add_argument('--height', type=SIDE, default=512)
+    parser.add_argument('--width', type=SIDE, default=1024)
+    parser.add_argument('--num-steps', type=NUM_STEPS,
                         default=129,
                         help='T, spike readout steps per sample')
-    parser.add_argument('--threshold', type=SETTINGS['threshold'],
+    parser.add_argument('--threshold', type=Number(0, strict_minimum=True),
                         default=1 / 0.6,
                         help='firing threshold (default: REDS convention '
                         '1/0.6, white fires 0.6 spikes per step)')
-    parser.add_argument('--frames-around', type=SETTINGS['frames_around'],
+    parser.add_argument('--frames-around',
+                        type=Integer(0, SNIPPET_LENGTH - 1 - ANNOTATED_INDEX),
                         default=1,
                         help='K: the sequence frames frame-K..frame+K span '
                         'the stream (2K/17 s of scene time); 0 always uses '
@@ -51,11 +51,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--scene', type=Text(empty=False), default=None,
                         help='extra simulator effects: a JSON/YAML file or '
                         'inline JSON, e.g. \'{"shot_noise": {}}\'')
-    parser.add_argument('--seed', type=SETTINGS['seed'], default=0,
+    parser.add_argument('--seed', type=SEED, default=0,
                         help='base seed; each sample also hashes its name')
-    parser.add_argument('--nproc', type=CONVERTER['nproc'], default=1,
+    parser.add_argument('--nproc', type=Integer(1, MAX_WORKERS), default=1,
                         help='worker processes')
-    parser.add_argument('--limit', type=CONVERTER['limit'], default=None,
+    parser.add_argument('--limit', type=Integer(1, MAX_SAMPLES), default=None,
                         help='at most N samples per split (for trials)')
     parser.add_argument('--shard', type=SHARD, default=WHOLE, metavar='K/N',
                         help='convert only the K-th of N disjoint parts '

@@ -29,9 +29,9 @@ import sys
 from wgse_mmseg.apis.onnx_settings import (LOGITS_TOLERANCE,
                                            MIN_ARGMAX_AGREEMENT, OPSET, OPSETS,
                                            SHAPE_ENTRY)
-from wgse_mmseg.core.arguments import SEED, Path
-from wgse_mmseg.fileio.input_guard import check_output_kind, keeps_inputs
+from wgse_mmseg.command_line import SEED, Path
 from wgse_mmseg.fileio.locks import add_wait_option, own_folder
+from wgse_mmseg.fileio.input_guard import check_output_kind, keeps_inputs
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
 from wgse_mmseg.utils.config import add_config_options
 

@@ -52,15 +52,15 @@ import argparse
 import os.path as osp
 import sys
 
-from wgse_mmseg.core.arguments import (LAYOUT, LAYOUT_HELP, NUM_STEPS, Choice,
-                                       Integer, Path, SequenceOf, Text,
-                                       add_frame_size_options,
-                                       check_frame_size)
+from wgse_mmseg.command_line import (EXPOSURE, LAYOUT, LAYOUT_HELP, NUM_STEPS,
+                                     Choice, Integer, Path, SequenceOf, Text,
+                                     add_frame_size_options,
+                                     check_frame_size)
 from wgse_mmseg.core.constants import RECONSTRUCTION_METHODS as METHODS
-from wgse_mmseg.core.exposure import EXPOSURE, apply_exposure
+from wgse_mmseg.core.exposure import apply_exposure
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
 from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.fileio.locks import own_folder
-from wgse_mmseg.fileio.output_folder import check_tool_outputs
 from wgse_mmseg.apis.recording_walk import add_walk_options
 
 # torch, OpenCV and the MMSeg layer are imported where they are used, after

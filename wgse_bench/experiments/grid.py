@@ -8,13 +8,14 @@ train and test tools (:func:`enhancer_options`, :func:`schedule_options`,
 :func:`as_cli`).
 """
 import fnmatch
+import os
 import os.path as osp
 from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 from mmengine.config import Config
 
 import wgse_mmseg
-from wgse_mmseg.core.arguments import EPOCHS, ITERATIONS, declare
+from wgse_mmseg.argument_checks import ArgumentError, check_path
 from wgse_mmseg.errors import excerpt
 from wgse_mmseg.utils.config import parse_option_value
 
@@ -72,6 +73,9 @@ def load_grid(path: str) -> Tuple[Config, List[Entry]]:
     type=...), cfg_options=dict(...))``: a variant that also changes the
     training recipe.
     """
+    check_path('load_grid', 'path', path, exists='file')
+    if not os.fspath(path).endswith('.py'):
+        raise ArgumentError('load_grid', 'path', 'a grid file (.py)', path)
     grid = Config.fromfile(path)
     for key in ('models', 'enhancers', 'cfg_options', 'epochs', 'seeds',
                 'latency'):
@@ -139,7 +143,6 @@ def enhancer_options(enhancer: Optional[dict]) -> Dict[str, Any]:
     return options
 
 
-@declare(epochs=EPOCHS.or_none(), max_iters=ITERATIONS.or_none())
 def schedule_options(epochs: Optional[int],
                      max_iters: Optional[int]) -> Tuple[Dict[str, Any], str]:
     """``--cfg-options`` for the schedule and the final checkpoint's name.
@@ -150,7 +153,7 @@ def schedule_options(epochs: Optional[int],
     (a tenth of the iterations), so an interrupted run resumes; validation
     during training is off (the run is tested afterwards).
     """
-    length = check_schedule(epochs, max_iters)
+    length = check_schedule('schedule_options', epochs, max_iters)
     warmup = max(1, length // 10)
     options = {
         'val_cfg': None, 'val_dataloader': None, 'val_evaluator': None,

@@ -10,26 +10,24 @@ import os
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
-from wgse_mmseg.core.arguments import (EPOCHS, ITERATIONS, SEED, Flag, Path,
-                                       SequenceOf, Text, declare_fields)
+from wgse_mmseg.argument_checks import (ArgumentError, check_flag,
+                                        check_integer, check_path, is_integer)
+from wgse_mmseg.limits import MAX_EPOCHS, MAX_ITERS, MAX_SEED
 
 
-def check_schedule(epochs: Optional[int], max_iters: Optional[int]) -> int:
-    """The length of a schedule given by exactly one of ``epochs`` and
-    ``max_iters`` (their ranges are checked where they are declared); a
-    ``ValueError`` otherwise."""
+def check_schedule(entry: str, epochs: Optional[int],
+                   max_iters: Optional[int]) -> int:
+    """The length of ``entry``'s schedule, given by exactly one of
+    ``epochs`` (at most :data:`MAX_EPOCHS`) and ``max_iters`` (at most
+    :data:`MAX_ITERS`); an error naming them otherwise."""
+    check_integer(entry, 'epochs', epochs, 1, MAX_EPOCHS, optional=True)
+    check_integer(entry, 'max_iters', max_iters, 1, MAX_ITERS, optional=True)
     if (epochs is None) == (max_iters is None):
-        raise ValueError('give exactly one of epochs and max_iters')
+        raise ValueError(f'{entry}: give exactly one of epochs and '
+                         f'max_iters')
     return epochs if max_iters is None else max_iters
 
 
-@declare_fields(grid=Path(exists='file'), data_root=Path(),
-                work_dir=Path(), seeds=SequenceOf(SEED),
-                epochs=EPOCHS.or_none(), max_iters=ITERATIONS.or_none(),
-                only=SequenceOf(Text(empty=False), optional=True),
-                report_dir=Path(optional=True), keep_checkpoints=Flag(),
-                benchmark=Flag(), report_only=Flag(),
-                deployment=Path(exists='file', optional=True))
 @dataclass(frozen=True)
 class ExperimentSettings:
     """What one run of a grid trains, where, and what it reports.
@@ -64,7 +62,25 @@ class ExperimentSettings:
     deployment: Optional[str] = None
 
     def __post_init__(self):
-        check_schedule(self.epochs, self.max_iters)
+        entry = 'ExperimentSettings'
+        check_path(entry, 'grid', self.grid, exists='file')
+        check_path(entry, 'data_root', self.data_root)
+        check_path(entry, 'work_dir', self.work_dir)
+        if not (isinstance(self.seeds, (list, tuple)) and self.seeds and
+                all(is_integer(seed, 0, MAX_SEED) for seed in self.seeds)):
+            raise ArgumentError(entry, 'seeds', f'a non-empty sequence of '
+                                f'integers in [0, {MAX_SEED}]', self.seeds)
+        check_schedule(entry, self.epochs, self.max_iters)
+        if self.only is not None and not (
+                isinstance(self.only, (list, tuple)) and self.only and
+                all(isinstance(p, str) and p for p in self.only)):
+            raise ArgumentError(entry, 'only', 'a non-empty sequence of '
+                                'non-empty patterns, or None', self.only)
+        check_path(entry, 'report_dir', self.report_dir, optional=True)
+        for name in ('keep_checkpoints', 'benchmark', 'report_only'):
+            check_flag(entry, name, getattr(self, name))
+        check_path(entry, 'deployment', self.deployment, exists='file',
+                   optional=True)
         if len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f'ExperimentSettings: seeds must not repeat '
                              f'(a run would count twice), got '

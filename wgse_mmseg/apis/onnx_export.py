@@ -26,6 +26,7 @@ from ..openmmlab_stack import check_mmseg_layer
 check_mmseg_layer('wgse_mmseg.apis.onnx_export')  # before MMSeg is imported
 
 import json
+import os
 import warnings
 from typing import Any, Callable, Dict, Optional, Sequence
 
@@ -34,7 +35,8 @@ import torch
 from mmengine.model import revert_sync_batchnorm
 from torch import nn
 
-from ..core.arguments import NUM_STEPS, SIDE, declare
+from ..argument_checks import ArgumentError, check_integer, check_path
+from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from ..core.wgse import WGSE
 from ..fileio.atomic import atomic_path
 from ..utils.cross_checks import check_input_fits
@@ -86,7 +88,6 @@ def random_spikes(shape: Sequence[int], seed: int) -> torch.Tensor:
             SPIKE_PROBABILITY).float()
 
 
-@declare(num_steps=NUM_STEPS, height=SIDE, width=SIDE, opset=OPSETS)
 def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
                 height: int, width: int, opset: int = OPSET,
                 dataset_meta: Optional[dict] = None,
@@ -112,6 +113,18 @@ def export_onnx(graph: SpikeSegmentorGraph, path: str, num_steps: int,
             (TFI's data-dependent scans), metadata that is not classes and
             a palette, or a file its own checks refuse; nothing is left.
     """
+    check_integer('export_onnx', 'num_steps', num_steps, 1, MAX_NUM_STEPS)
+    check_integer('export_onnx', 'height', height, 1, MAX_IMAGE_SIDE)
+    check_integer('export_onnx', 'width', width, 1, MAX_IMAGE_SIDE)
+    check_integer('export_onnx', 'opset', opset, OPSETS.minimum,
+                  OPSETS.maximum)
+    check_path('export_onnx', 'path', path)
+    if os.path.isdir(path):
+        raise ArgumentError('export_onnx', 'path', 'the path of the file to '
+                            'write, not a folder', path)
+    if not isinstance(graph, SpikeSegmentorGraph):
+        raise ArgumentError('export_onnx', 'graph', 'a SpikeSegmentorGraph '
+                            '(a built segmentor as one module)', graph)
     if dataset_meta is not None:
         dataset_meta = check_dataset_meta(f'{path} (dataset_meta)',
                                           dataset_meta)

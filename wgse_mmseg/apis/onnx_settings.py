@@ -2,7 +2,7 @@
 offers, the input sizes a command line accepts and the agreement with the
 torch model it requires. Kept apart from the export, which needs torch,
 ONNX and MMSeg, so that the tools' command lines read them at once."""
-from ..core.arguments import Integer
+from ..command_line import Integer
 from ..limits import MAX_NUM_STEPS
 
 __all__ = []
@@ -15,7 +15,8 @@ LOGITS_TOLERANCE = 1e-4
 #: graph must give as the torch model does
 MIN_ARGMAX_AGREEMENT = 0.999
 #: the ONNX opsets the export offers (the dynamo exporter's range that
-#: ONNX Runtime 1.32 runs); :data:`OPSET` is the default
+#: ONNX Runtime 1.32 runs), as a command line reads one; :data:`OPSET` is
+#: the default
 OPSETS = Integer(18, 23)
 OPSET = 18
 #: each of ``T``, ``H`` and ``W`` of an export, on a command line (a side

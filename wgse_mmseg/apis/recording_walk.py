@@ -68,12 +68,13 @@ from typing import (TYPE_CHECKING, Any, Callable, Dict, NamedTuple, Optional,
 import numpy as np
 from tqdm import tqdm
 
-from ..core.arguments import (LAYOUT, NUM_STEPS, SIDE, Flag, Integer, Number,
-                              Path, declare)
+from ..argument_checks import (check_flag, check_integer, check_layout,
+                               check_number, check_path)
+from ..command_line import Integer, Number
 from ..fileio.images import write_png
 from ..fileio.locks import add_wait_option, own_folder
 from ..fileio.output_folder import open_append
-from ..limits import MAX_BATCH_SIZE
+from ..limits import MAX_BATCH_SIZE, MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from .walk_plan import (STRIDE, WalkError, WalkOutputs, WalkPlan,
                         plan_recording_walk, read_windows, walk_outputs)
 from .walk_state import PROGRESS_NAME, csv_line, frame_name, open_state
@@ -128,10 +129,6 @@ def _identity(path: str, height: Optional[int], width: Optional[int],
                 settings=json.loads(json.dumps(settings, default=str)))
 
 
-@declare(path=Path(), video=Path(), length=NUM_STEPS, stride=STRIDE,
-         batch_size=BATCH_SIZE, fps=FPS, save_frames=Flag(),
-         height=SIDE.or_none(), width=SIDE.or_none(),
-         layout=LAYOUT.or_none(), progress=Flag(), wait=Flag())
 def walk_recording(path: str, video: str,
                    model: Callable[['torch.Tensor'], Sequence[Any]],
                    render: Callable[[np.ndarray, Any], np.ndarray],
@@ -171,7 +168,21 @@ def walk_recording(path: str, video: str,
             video or the CSV goes.
         OutputFolderError: another process walks into ``video``.
         SpikeFileError: for a recording that cannot be read.
+        ArgumentError: for an argument of the wrong kind.
     """
+    entry = 'walk_recording'
+    for name, value in (('path', path), ('video', video)):
+        check_path(entry, name, value)
+    check_integer(entry, 'length', length, 1, MAX_NUM_STEPS)
+    check_integer(entry, 'stride', stride, 1)
+    check_integer(entry, 'batch_size', batch_size, 1, MAX_BATCH_SIZE)
+    check_number(entry, 'fps', fps, 0, 1000, strict_minimum=True)
+    for name, side in (('height', height), ('width', width)):
+        check_integer(entry, name, side, 1, MAX_IMAGE_SIDE, optional=True)
+    check_layout(entry, layout)
+    for name, value in (('save_frames', save_frames),
+                        ('progress', progress), ('wait', wait)):
+        check_flag(entry, name, value)
     plan = plan_recording_walk(path, length, stride, height, width, layout)
     outputs = walk_outputs(video, save_frames, [path])
     identity = _identity(path, height, width, layout, plan, settings or {})

@@ -7,12 +7,15 @@ from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from ..core.arguments import NUM_STEPS, Integer, declare
+from ..argument_checks import check_integer
+from ..command_line import Integer
+from ..errors import WgseError
 from ..fileio.bounded_reads import check_utf8_path
 from ..fileio.input_guard import check_output, check_output_kind
 from ..fileio.locks import check_named_folder
 from ..fileio.output_folder import check_output_folder
 from ..fileio.spike_files import load_spikes, spike_shape
+from ..limits import MAX_NUM_STEPS
 
 __all__ = []
 
@@ -24,7 +27,7 @@ VIDEO_EXTENSIONS = ('.mp4', '.gif')
 STRIDE = Integer(1)
 
 
-class WalkError(ValueError):
+class WalkError(WgseError, ValueError):
     """A walk that cannot run as asked; names the file or folder."""
 
 
@@ -67,10 +70,12 @@ class WalkPlan(NamedTuple):
                 f'{listed(self.skipped_end)}')
 
 
-@declare(total=Integer(1), length=NUM_STEPS, stride=STRIDE)
 def plan_walk(total: int, length: int, stride: int) -> WalkPlan:
     """The windows of a ``total``-readout recording that a walk with
     ``length``-readout windows every ``stride`` readouts visits."""
+    check_integer('plan_walk', 'total', total, 1)
+    check_integer('plan_walk', 'length', length, 1, MAX_NUM_STEPS)
+    check_integer('plan_walk', 'stride', stride, 1)
     half = length // 2
     grid_end = (total - 1) // stride + 1  # grid points 0..total-1
     first = -(-half // stride)  # first k with k * stride - half >= 0

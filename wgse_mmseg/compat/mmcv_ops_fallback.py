@@ -39,6 +39,8 @@ import sys
 import types
 from typing import Dict, Set
 
+from ..errors import WgseError
+
 __all__ = []
 
 #: op name -> the mmcv.ops module that defines it without the compiled
@@ -53,7 +55,7 @@ _INSTALL_HINT = ('install mmcv with its ops: `MMCV=full bash '
                  'onedl MMCV=full MMCV_WHEELS=...`), see docs/install.md')
 
 
-class MissingCompiledOpError(RuntimeError):
+class MissingCompiledOpError(WgseError, RuntimeError):
     """An mmcv op that needs the compiled extension was used without it."""
 
 

@@ -1,6 +1,8 @@
-"""The check of tensor data every enhancer shares: free of NaN and Inf.
-(Arguments are checked by their declarations, :mod:`.arguments`.)"""
+"""The checks that need torch: tensor data free of NaN and Inf, a device.
+(Plain arguments: :mod:`wgse_mmseg.argument_checks`.)"""
 import torch
+
+from ..argument_checks import ArgumentError
 
 __all__ = []
 
@@ -66,3 +68,13 @@ def check_finite_parameters(owner: str, module: torch.nn.Module) -> None:
             f'{owner}: {name} is not finite ({nan} NaN, {bad - nan} +-Inf '
             f'of {tensor.numel()} values); the weights are broken (a '
             f'diverged training leaves them so): load a good checkpoint')
+
+
+def check_device(entry: str, name: str, device) -> torch.device:
+    """``device`` (a ``torch.device`` or its name, ``'cpu'``, ``'cuda:0'``)
+    as a ``torch.device``; else an error naming ``entry`` and ``name``."""
+    try:
+        return torch.device(device)
+    except (RuntimeError, TypeError, ValueError):
+        raise ArgumentError(entry, name, "a torch device ('cpu', 'cuda', "
+                            "'cuda:0', ...)", device) from None

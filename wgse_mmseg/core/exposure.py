@@ -17,15 +17,10 @@ from typing import NamedTuple, Tuple, Union
 
 import numpy as np
 
-from .arguments import Choice, Number, OneOf, declare
+from ..argument_checks import (EXPOSURE_CHOICES, ArgumentError,
+                               check_number, is_choice, is_number)
 
 __all__ = ['apply_exposure']
-
-#: the non-numeric values of an ``exposure`` argument
-_EXPOSURE_CHOICES = ('auto', 'none')
-#: an ``exposure`` argument (and the tools' ``--exposure``): ``'auto'``,
-#: ``'none'`` or a gain
-EXPOSURE = OneOf(Choice(_EXPOSURE_CHOICES), Number(0, strict_minimum=True))
 
 #: ``'auto'`` brightens an image only when its bright end is below this
 #: fraction of white, i.e. when it would need a gain above 4. Calibrated
@@ -58,9 +53,6 @@ def _bright_end(image: np.ndarray, percentile: float) -> float:
     return float(np.percentile(values, percentile))
 
 
-@declare(percentile=Number(0, 100, strict_minimum=True),
-         max_gain=Number(1),
-         under_exposed_below=Number(0, 1, strict_minimum=True))
 def auto_exposure(image: np.ndarray, percentile: float = 99.5,
                   max_gain: float = 64.0,
                   under_exposed_below: float = UNDER_EXPOSED_BELOW
@@ -79,6 +71,11 @@ def auto_exposure(image: np.ndarray, percentile: float = 99.5,
     Returns:
         ``(gain, reason)``: a gain >= 1, and one sentence saying why.
     """
+    check_number('auto_exposure', 'percentile', percentile, 0, 100,
+                 strict_minimum=True)
+    check_number('auto_exposure', 'max_gain', max_gain, 1)
+    check_number('auto_exposure', 'under_exposed_below', under_exposed_below,
+                 0, 1, strict_minimum=True)
     bright = _bright_end(image, percentile)
     where = f'bright end ({percentile:g}th percentile) {bright:.3g} of white'
     if bright >= under_exposed_below:
@@ -101,7 +98,6 @@ def exposure_gain(image: np.ndarray, **kwargs) -> float:
     return auto_exposure(image, **kwargs)[0]
 
 
-@declare(exposure=EXPOSURE)
 def apply_exposure(image: np.ndarray, exposure: Exposure = 'auto') -> Exposed:
     """``image`` times a gain, clipped to ``[0, 1]``.
 
@@ -115,6 +111,11 @@ def apply_exposure(image: np.ndarray, exposure: Exposure = 'auto') -> Exposed:
         The ``(H, W)`` float32 image in ``[0, 1]`` (``image``), the gain
         applied (``gain``) and the reason (``reason``), as a named tuple.
     """
+    if not (is_choice(exposure, EXPOSURE_CHOICES) or
+            is_number(exposure, 0, strict_minimum=True)):
+        raise ArgumentError('apply_exposure', 'exposure',
+                            "'auto', 'none' or a finite number > 0",
+                            exposure)
     if exposure == 'auto':
         gain, reason = auto_exposure(image)
     elif exposure == 'none':

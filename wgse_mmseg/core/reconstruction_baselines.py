@@ -23,26 +23,22 @@ the image". The package's simulator produces the same scale with
 import numpy as np
 import torch
 
-from .arguments import Integer, Number, declare
+from ..argument_checks import check_integer, check_number
 from .constants import REDS_WHITE_RATE
-from ..limits import MAX_WINDOW
 from .representations import (TFI, TFP, SpatialMeanFilter,
                               TemporalMeanFilter)
 
 __all__ = ['tfp', 'tfi']
 
-#: the spike rate drawn as white
-_WHITE_RATE = Number(0, strict_minimum=True)
-#: a mean filter's odd size
-_ODD_KERNEL = Integer(1, MAX_WINDOW, odd=True)
 
-
-def _check(spikes) -> torch.Tensor:
-    """``(1, T, H, W)`` float64 from a ``(T, H, W)`` array."""
+def _check(entry: str, spikes, white_rate) -> torch.Tensor:
+    """``(1, T, H, W)`` float64 from ``entry``'s ``(T, H, W)`` array, and
+    its white rate checked."""
+    check_number(entry, 'white_rate', white_rate, 0, strict_minimum=True)
     spikes = np.asarray(spikes)
     if spikes.ndim != 3 or 0 in spikes.shape:
         raise ValueError(
-            f'spikes must be a non-empty (T, H, W) array, got shape '
+            f'{entry}: spikes must be a non-empty (T, H, W) array, got shape '
             f'{spikes.shape}')
     return torch.from_numpy(spikes.astype(np.float64))[None]
 
@@ -53,20 +49,18 @@ def _image(rates: torch.Tensor, white_rate: float) -> np.ndarray:
     return np.clip(centre / white_rate, 0.0, 1.0)
 
 
-@declare(white_rate=_WHITE_RATE)
 def tfp(spikes, white_rate: float = REDS_WHITE_RATE) -> np.ndarray:
     """Window average: ``(T, H, W)`` spikes -> ``(H, W)`` image in [0, 1].
 
     ``mean_t(spikes) / white_rate``, clipped to [0, 1]: TFP with a window
     that covers the whole clip at its centre frame.
     """
-    stream = _check(spikes)
+    stream = _check('tfp', spikes, white_rate)
     steps = stream.shape[1]
     window = steps if steps % 2 else steps + 1  # odd, reaches both ends
     return _image(TFP(window=window)(stream), white_rate)
 
 
-@declare(white_rate=_WHITE_RATE)
 def tfi(spikes, white_rate: float = REDS_WHITE_RATE) -> np.ndarray:
     """Inter-spike interval at the centre: ``(T, H, W)`` -> ``(H, W)``.
 
@@ -77,10 +71,9 @@ def tfi(spikes, white_rate: float = REDS_WHITE_RATE) -> np.ndarray:
     the nearest complete interval stands in; a pixel with fewer than two
     spikes in the window takes its spike count / ``T`` as its rate.
     """
-    return _image(TFI()(_check(spikes)), white_rate)
+    return _image(TFI()(_check('tfi', spikes, white_rate)), white_rate)
 
 
-@declare(kernel_size=_ODD_KERNEL, white_rate=_WHITE_RATE)
 def tfi_spatial_mean(spikes, kernel_size: int = 3,
                      white_rate: float = REDS_WHITE_RATE) -> np.ndarray:
     """TFI, then the mean over ``kernel_size x kernel_size`` pixels:
@@ -90,11 +83,12 @@ def tfi_spatial_mean(spikes, kernel_size: int = 3,
     rates (at the borders, the mean of the pixels inside the image) at frame
     ``T // 2``, over ``white_rate``, clipped.
     """
-    rates = TFI()(_check(spikes))
+    check_integer('tfi_spatial_mean', 'kernel_size', kernel_size, 1,
+                  odd=True)
+    rates = TFI()(_check('tfi_spatial_mean', spikes, white_rate))
     return _image(SpatialMeanFilter(kernel_size)(rates), white_rate)
 
 
-@declare(kernel_size=_ODD_KERNEL, white_rate=_WHITE_RATE)
 def tfi_temporal_mean(spikes, kernel_size: int = 9,
                       white_rate: float = REDS_WHITE_RATE) -> np.ndarray:
     """TFI, then the mean over the ``kernel_size`` steps centred on frame
@@ -103,5 +97,7 @@ def tfi_temporal_mean(spikes, kernel_size: int = 9,
     :class:`~wgse_mmseg.core.representations.TemporalMeanFilter` of the TFI
     rates at frame ``T // 2``, over ``white_rate``, clipped.
     """
-    rates = TFI()(_check(spikes))
+    check_integer('tfi_temporal_mean', 'kernel_size', kernel_size, 1,
+                  odd=True)
+    rates = TFI()(_check('tfi_temporal_mean', spikes, white_rate))
     return _image(TemporalMeanFilter(kernel_size)(rates), white_rate)

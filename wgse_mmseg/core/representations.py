@@ -38,14 +38,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..argument_checks import check_integer
 from .checks import check_finite
-from .arguments import Integer, declare
-from ..limits import MAX_WINDOW
 
 __all__ = ['TemporalMeanFilter', 'TFP', 'TFI', 'SpatialMeanFilter']
-
-#: a window centred on each step or pixel
-_WINDOW = Integer(1, MAX_WINDOW, odd=True)
 
 
 class _FixedRepresentation(nn.Module):
@@ -85,14 +81,19 @@ class TemporalMeanFilter(_FixedRepresentation):
             window is then cut to the whole stream near its centre).
     """
 
-    @declare(kernel_size=_WINDOW)
     def __init__(self, kernel_size: int = 3):
         super().__init__()
-        self.kernel_size = kernel_size
+        self.kernel_size = check_integer(type(self).__name__,
+                                         self._size_name, kernel_size, 1,
+                                         odd=True)
+
+    #: what the constructor calls the window's length
+    _size_name = 'kernel_size'
 
     def represent(self, spikes: torch.Tensor) -> torch.Tensor:
         num_steps = spikes.shape[1]
-        half = self.kernel_size // 2
+        # a window beyond the stream's ends is cut to it
+        half = min(self.kernel_size // 2, num_steps)
         # totals[:, i] = sum of spikes[:, :i]
         totals = F.pad(spikes.cumsum(dim=1), (0, 0, 0, 0, 1, 0))
         steps = torch.arange(num_steps, device=spikes.device)
@@ -116,7 +117,8 @@ class TFP(TemporalMeanFilter):
             of steps).
     """
 
-    @declare(window=_WINDOW)
+    _size_name = 'window'
+
     def __init__(self, window: int = 33):
         super().__init__(kernel_size=window)
 
@@ -131,14 +133,16 @@ class SpatialMeanFilter(_FixedRepresentation):
         kernel_size: odd side of the square window.
     """
 
-    @declare(kernel_size=_WINDOW)
     def __init__(self, kernel_size: int = 3):
         super().__init__()
-        self.kernel_size = kernel_size
+        self.kernel_size = check_integer('SpatialMeanFilter', 'kernel_size',
+                                         kernel_size, 1, odd=True)
 
     def represent(self, spikes: torch.Tensor) -> torch.Tensor:
-        return F.avg_pool2d(spikes, self.kernel_size, stride=1,
-                            padding=self.kernel_size // 2,
+        # a window wider than the image is cut to it: from any pixel,
+        # 2 * max(H, W) - 1 covers the whole image
+        size = min(self.kernel_size, 2 * max(spikes.shape[-2:]) - 1)
+        return F.avg_pool2d(spikes, size, stride=1, padding=size // 2,
                             count_include_pad=False)
 
 

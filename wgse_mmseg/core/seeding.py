@@ -1,8 +1,8 @@
 """Seeds: the one range, the one check and the one derivation rule.
 
 A seed is an integer in ``0 ..`` :data:`~.limits.MAX_SEED` (63 bits, which
-NumPy and torch both accept); :data:`~.arguments.SEED` declares it for the
-public entry points and :func:`check_seed` checks it everywhere else.
+NumPy and torch both accept); :func:`check_seed` checks it, for the public
+entry points and everywhere else.
 
 Every seed the package makes from another is :func:`derive_seed`'s: the
 parent seed and a tuple of keys (a sample's name or index, a random
@@ -30,7 +30,7 @@ from typing import Any, List, Optional, Union
 
 import numpy as np
 
-from .arguments import SEED
+from ..argument_checks import check_integer
 from ..limits import MAX_SEED
 
 __all__ = []
@@ -45,8 +45,7 @@ def check_seed(value: Any, name: str = 'seed', entry: str = 'seed',
     ``None`` where allowed); else an error naming ``entry`` and ``name``."""
     if value is None and allow_none:
         return None
-    SEED.check(value, entry, name)
-    return int(value)
+    return int(check_integer(entry, name, value, 0, MAX_SEED))
 
 
 def _string_key_word(key: str) -> int:

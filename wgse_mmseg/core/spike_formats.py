@@ -32,6 +32,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
+from ..errors import WgseError
 from ..limits import READ_LIMIT_BYTES
 
 __all__ = []
@@ -45,7 +46,7 @@ SPK_VERSION = 1
 SPK_HEADER = struct.Struct('<8sIIII8x')  # magic, version, T, H, W, reserved
 
 
-class SpikeFileError(ValueError):
+class SpikeFileError(WgseError, ValueError):
     """A spike file that cannot be read as asked; names the file."""
 
 

@@ -20,14 +20,16 @@ Conventions mirror PyWavelets:
 from __future__ import annotations
 
 import functools
+import warnings
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 import pywt
 import torch
 
-from .arguments import Choice, Integer, declare
-from ..limits import MAX_LEVEL, MAX_NUM_STEPS
+from ..argument_checks import (ArgumentError, check_choice, check_integer,
+                               is_integer)
+from ..limits import check_allocation
 
 __all__ = ['wavedec', 'waverec']
 
@@ -35,24 +37,38 @@ __all__ = ['wavedec', 'waverec']
 SUPPORTED_MODES = ('zero', 'constant', 'symmetric', 'reflect', 'periodic',
                    'antisymmetric', 'periodization')
 
-#: the declarations the transforms share: a boundary mode, a number of
-#: levels (``None``: ``pywt.dwt_max_level``) and a signal's length (the
-#: matrices are dense, ``length**2`` values: up to ``T`` samples)
-_MODE = Choice(SUPPORTED_MODES)
-_LEVEL = Integer(0, MAX_LEVEL, optional=True)
-_LENGTH = Integer(1, MAX_NUM_STEPS)
 
-
-def _get_wavelet(wavelet) -> pywt.Wavelet:
+def _get_wavelet(entry: str, wavelet) -> pywt.Wavelet:
     """A ``pywt.Wavelet`` for a name or wavelet object; only discrete ones."""
     if isinstance(wavelet, pywt.Wavelet):
         return wavelet
     if not isinstance(wavelet, str) or wavelet not in pywt.wavelist(
             kind='discrete'):
-        raise ValueError(
-            f'wavelet must be a discrete wavelet known to PyWavelets '
-            f'(pywt.wavelist(kind="discrete")), got {wavelet!r}')
+        raise ArgumentError(
+            entry, 'wavelet', 'a discrete wavelet known to PyWavelets '
+            '(pywt.wavelist(kind="discrete")) or a pywt.Wavelet', wavelet)
     return pywt.Wavelet(wavelet)
+
+
+def _checked(entry: str, length: int, wavelet, level: Optional[int],
+             mode: str, length_name: str = 'length'
+             ) -> Tuple[pywt.Wavelet, int]:
+    """The wavelet and the number of levels (``None``:
+    ``pywt.dwt_max_level``) of a transform of a signal of ``length``
+    samples, checked for ``entry``; the matrices are dense, so their size
+    is held to the allocation limit (:func:`~.limits.check_allocation`)."""
+    check_integer(entry, length_name, length, 1)
+    check_integer(entry, 'level', level, 0, optional=True)
+    check_choice(entry, 'mode', mode, SUPPORTED_MODES)
+    wavelet = _get_wavelet(entry, wavelet)
+    if level is None:
+        level = pywt.dwt_max_level(length, wavelet.dec_len)
+    # at most length + level * taps coefficients, each a row of length
+    # float64 values, the matrix and the product that builds it
+    rows = length + level * wavelet.dec_len
+    check_allocation(2 * 8 * rows * length, f'{entry}\'s wavelet matrix',
+                     f'{length_name} and level')
+    return wavelet, level
 
 
 def _extend(positions: np.ndarray, length: int,
@@ -153,13 +169,6 @@ def _single_level_synthesis(wavelet: pywt.Wavelet, n_coeffs: int,
     return mats[0], mats[1]
 
 
-def _resolve_level(level: Optional[int], length: int,
-                   wavelet: pywt.Wavelet) -> int:
-    if level is None:
-        return pywt.dwt_max_level(length, wavelet.dec_len)
-    return level
-
-
 @functools.lru_cache(maxsize=256)
 def _analysis(wavelet_name: str, mode: str, length: int,
               level: int) -> Tuple[np.ndarray, Tuple[int, ...]]:
@@ -199,16 +208,13 @@ def _synthesis(wavelet_name: str, mode: str,
     return approx
 
 
-@declare(length=_LENGTH, level=_LEVEL, mode=_MODE)
 def band_lengths(length: int, wavelet, level: Optional[int] = None,
                  mode: str = 'symmetric') -> Tuple[int, ...]:
     """Coefficient counts ``(len(cA_n), len(cD_n), ..., len(cD_1))``."""
-    wavelet = _get_wavelet(wavelet)
-    return _analysis(wavelet.name, mode, length,
-                     _resolve_level(level, length, wavelet))[1]
+    wavelet, level = _checked('band_lengths', length, wavelet, level, mode)
+    return _analysis(wavelet.name, mode, length, level)[1]
 
 
-@declare(length=_LENGTH, level=_LEVEL, mode=_MODE)
 def analysis_matrix(length: int, wavelet, level: Optional[int] = None,
                     mode: str = 'symmetric') -> np.ndarray:
     """The ``(sum(band_lengths), length)`` float64 matrix of :func:`wavedec`
@@ -216,12 +222,11 @@ def analysis_matrix(length: int, wavelet, level: Optional[int] = None,
 
     Rows are ordered ``cA_n, cD_n, ..., cD_1``. Read-only and cached.
     """
-    wavelet = _get_wavelet(wavelet)
-    return _analysis(wavelet.name, mode, length,
-                     _resolve_level(level, length, wavelet))[0]
+    wavelet, level = _checked('analysis_matrix', length, wavelet, level,
+                              mode)
+    return _analysis(wavelet.name, mode, length, level)[0]
 
 
-@declare(mode=_MODE)
 def synthesis_matrix(lengths: Sequence[int], wavelet,
                      mode: str = 'symmetric',
                      length: Optional[int] = None) -> np.ndarray:
@@ -231,15 +236,37 @@ def synthesis_matrix(lengths: Sequence[int], wavelet,
     ``pywt.waverec`` returns, or ``length`` when given (the first ``length``
     samples of it).
     """
-    wavelet = _get_wavelet(wavelet)
+    return _synthesis_matrix('synthesis_matrix', lengths, wavelet, mode,
+                             length)
+
+
+def _synthesis_matrix(entry: str, lengths: Sequence[int], wavelet,
+                      mode: str, length: Optional[int]) -> np.ndarray:
+    """:func:`synthesis_matrix`, its arguments checked for ``entry``."""
+    check_choice(entry, 'mode', mode, SUPPORTED_MODES)
+    wavelet = _get_wavelet(entry, wavelet)
+    if not (isinstance(lengths, (list, tuple)) and lengths and
+            all(is_integer(n, 1) for n in lengths)):
+        raise ArgumentError(entry, 'the coefficient lengths',
+                            'a non-empty sequence of integers >= 1',
+                            lengths)
+    check_allocation(2 * 8 * (2 * sum(lengths)) * sum(lengths),
+                     f"{entry}'s wavelet matrix", 'the coefficient lengths')
     matrix = _synthesis(wavelet.name, mode, tuple(int(n) for n in lengths))
     if length is not None:
-        if not 1 <= length <= matrix.shape[0]:
-            raise ValueError(
-                f'length must be in [1, {matrix.shape[0]}] for coefficient '
-                f'lengths {list(lengths)}, got {length}')
+        check_integer(entry, 'length', length, 1, matrix.shape[0])
         matrix = matrix[:length]
     return matrix
+
+
+def _check_tensor(entry: str, name: str, data, axis) -> None:
+    """``data`` a tensor with an axis ``axis``."""
+    if not isinstance(data, torch.Tensor):
+        raise ArgumentError(entry, name, 'a torch.Tensor', data)
+    if not (isinstance(axis, int) and not isinstance(axis, bool) and
+            -data.dim() <= axis < data.dim()):
+        raise ArgumentError(entry, 'axis', f'an axis of the {data.dim()}-D '
+                            f'{name}', axis)
 
 
 def _apply(matrix: np.ndarray, data: torch.Tensor, axis: int) -> torch.Tensor:
@@ -251,7 +278,6 @@ def _apply(matrix: np.ndarray, data: torch.Tensor, axis: int) -> torch.Tensor:
     return torch.matmul(moved, weight.T).movedim(-1, axis)
 
 
-@declare(level=_LEVEL, mode=_MODE)
 def wavedec(data: torch.Tensor, wavelet, mode: str = 'symmetric',
             level: Optional[int] = None, axis: int = -1) -> List[torch.Tensor]:
     """Multi-level DWT of ``data`` along ``axis``: ``pywt.wavedec``'s
@@ -265,19 +291,28 @@ def wavedec(data: torch.Tensor, wavelet, mode: str = 'symmetric',
             periodic, antisymmetric, periodization (PyWavelets' default,
             ``'symmetric'``; WGSE uses the paper's ``'zero'``).
         level: number of levels; ``None`` uses ``pywt.dwt_max_level``.
+            A level above it warns, as PyWavelets does: every coefficient
+            then feels the boundary.
         axis: the axis to transform.
 
     Returns:
         ``[cA_n, cD_n, ..., cD_1]``, each shaped like ``data`` except along
         ``axis``. Differentiable with respect to ``data``.
     """
-    matrix = analysis_matrix(data.shape[axis], wavelet, level, mode)
-    lengths = band_lengths(data.shape[axis], wavelet, level, mode)
+    _check_tensor('wavedec', 'data', data, axis)
+    wavelet, checked_level = _checked('wavedec', data.shape[axis], wavelet,
+                                      level, mode, 'data.shape[axis]')
+    if level is not None and level > pywt.dwt_max_level(
+            data.shape[axis], wavelet.dec_len):
+        warnings.warn(f'Level value of {level} is too high: all '
+                      f'coefficients will experience boundary effects.',
+                      stacklevel=2)
+    matrix, lengths = _analysis(wavelet.name, mode, data.shape[axis],
+                                checked_level)
     coeffs = _apply(matrix, data, axis)
     return list(torch.split(coeffs, list(lengths), dim=axis))
 
 
-@declare(mode=_MODE)
 def waverec(coeffs: Sequence[torch.Tensor], wavelet,
             mode: str = 'symmetric', axis: int = -1,
             length: Optional[int] = None) -> torch.Tensor:
@@ -289,8 +324,11 @@ def waverec(coeffs: Sequence[torch.Tensor], wavelet,
         length: if given, return exactly this many samples (the original
             signal length); ``pywt.waverec`` may return one more.
     """
-    if len(coeffs) == 0:
-        raise ValueError('coeffs must hold at least the approximation')
+    if not (isinstance(coeffs, (list, tuple)) and coeffs):
+        raise ArgumentError('waverec', 'coeffs', 'a non-empty list of '
+                            'tensors [cA_n, cD_n, ..., cD_1]', coeffs)
+    for index, band in enumerate(coeffs):
+        _check_tensor('waverec', f'coeffs[{index}]', band, axis)
     lengths = [c.shape[axis] for c in coeffs]
-    matrix = synthesis_matrix(lengths, wavelet, mode, length)
+    matrix = _synthesis_matrix('waverec', lengths, wavelet, mode, length)
     return _apply(matrix, torch.cat(list(coeffs), dim=axis), axis)

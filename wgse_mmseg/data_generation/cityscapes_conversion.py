@@ -69,22 +69,20 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from tqdm import tqdm
 
-from ..core.arguments import (NUM_STEPS, SEED, SIDE, Choice, Flag, Integer,
-                              Number, Path, SequenceOf, declare,
-                              declare_fields)
+from ..argument_checks import (ArgumentError, check_flag, check_integer,
+                               check_number, check_path, is_choice)
 from ..fileio.folder_walk import files_under
 from ..core.constants import READOUT_HZ, REDS_THRESHOLD
-from ..fileio.images import read_image
-from ..fileio.atomic import temporaries_of
-from ..fileio.images import write_png
+from ..fileio.images import read_image, write_png
 from ..fileio.spike_files import save_spikes
+from ..fileio.atomic import temporaries_of
+from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES, MAX_WORKERS
 from ..errors import excerpt
 from ..fileio.bounded_reads import parse_json
-from ..limits import MAX_SAMPLES, MAX_WORKERS
 from ..fileio.markers import invalidate, is_complete, write_marker
-from ..fileio.locks import own_folder
 from ..fileio.output_folder import OwnedFolder
-from ..core.seeding import derive_seed
+from ..fileio.locks import own_folder
+from ..core.seeding import check_seed, derive_seed
 from .shards import SHARD, WHOLE, Shard
 
 __all__ = ['ConversionSettings', 'convert_cityscapes']
@@ -155,10 +153,6 @@ class CityscapesSample:
     sequence: Tuple[str, ...] = ()
 
 
-@declare_fields(height=SIDE, width=SIDE, num_steps=NUM_STEPS,
-                threshold=Number(0, strict_minimum=True),
-                frames_around=Integer(0, SNIPPET_LENGTH - 1 - ANNOTATED_INDEX),
-                seed=SEED)
 @dataclass(frozen=True)
 class ConversionSettings:
     """What a converted sample depends on besides its source files.
@@ -181,6 +175,20 @@ class ConversionSettings:
     frames_around: int = 1
     scene: Dict[str, Optional[dict]] = field(default_factory=dict)
     seed: int = 0
+
+    def __post_init__(self):
+        entry = 'ConversionSettings'
+        check_integer(entry, 'height', self.height, 1, MAX_IMAGE_SIDE)
+        check_integer(entry, 'width', self.width, 1, MAX_IMAGE_SIDE)
+        check_integer(entry, 'num_steps', self.num_steps, 1, MAX_NUM_STEPS)
+        check_number(entry, 'threshold', self.threshold, 0,
+                     strict_minimum=True, float32=True)
+        check_integer(entry, 'frames_around', self.frames_around, 0,
+                      SNIPPET_LENGTH - 1 - ANNOTATED_INDEX)
+        if not isinstance(self.scene, dict):
+            raise ArgumentError(entry, 'scene', 'a dict of simulator '
+                                'effects, name -> parameters', self.scene)
+        check_seed(self.seed, entry=entry)
 
 
 def _require_dir(path: str, what: str) -> None:
@@ -453,11 +461,6 @@ def _init_worker() -> None:
     cv2.setNumThreads(1)
 
 
-@declare(root=Path(), out_dir=Path(),
-         splits=SequenceOf(Choice(CITYSCAPES_SPLITS)),
-         nproc=Integer(1, MAX_WORKERS),
-         limit=Integer(1, MAX_SAMPLES, optional=True), progress=Flag(),
-         shard=SHARD, wait=Flag())
 def convert_cityscapes(root: str, out_dir: str,
                        settings: Optional[ConversionSettings] = None,
                        splits: Sequence[str] = ('train', 'val'),
@@ -490,6 +493,21 @@ def convert_cityscapes(root: str, out_dir: str,
         How many samples were made from a ``'sequence'``, made by the
         ``'static'`` model, and ``'skipped'`` as already done.
     """
+    entry = 'convert_cityscapes'
+    check_path(entry, 'root', root)
+    check_path(entry, 'out_dir', out_dir)
+    if settings is not None and not isinstance(settings, ConversionSettings):
+        raise ArgumentError(entry, 'settings', 'a ConversionSettings or None',
+                            settings)
+    if not (isinstance(splits, (list, tuple)) and splits and
+            all(is_choice(split, CITYSCAPES_SPLITS) for split in splits)):
+        raise ArgumentError(entry, 'splits', f'a non-empty sequence of '
+                            f'{list(CITYSCAPES_SPLITS)}', splits)
+    check_integer(entry, 'nproc', nproc, 1, MAX_WORKERS)
+    check_integer(entry, 'limit', limit, 1, MAX_SAMPLES, optional=True)
+    check_flag(entry, 'progress', progress)
+    SHARD.check(shard, entry, 'shard')
+    check_flag(entry, 'wait', wait)
     settings = settings or ConversionSettings()
     samples = find_samples(root, splits, settings.frames_around)
     if limit is not None:

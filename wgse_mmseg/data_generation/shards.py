@@ -8,7 +8,7 @@ shard of the same job, make exactly what one process makes alone.
 """
 from typing import List, NamedTuple, Sequence, TypeVar
 
-from ..core.arguments import Argument
+from ..command_line import Argument
 from ..limits import MAX_SAMPLES
 
 __all__ = []

@@ -16,15 +16,16 @@ from typing import Tuple
 import numpy as np
 from tqdm import tqdm
 
-from ..core.arguments import (NUM_STEPS, SEED, SIDE, Flag, Integer, Number,
-                              Path, declare)
-from ..limits import MAX_SAMPLES, check_allocation
+from ..argument_checks import (check_flag, check_integer, check_number,
+                               check_path)
+from ..limits import (MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES,
+                      check_allocation)
 from ..core.constants import REDS_THRESHOLD
-from ..fileio.images import write_png
 from ..fileio.spike_files import save_spikes
+from ..fileio.images import write_png
 from ..fileio.markers import invalidate, is_complete, write_marker
 from ..fileio.locks import own_folder
-from ..core.seeding import derive_generator, derive_seed
+from ..core.seeding import check_seed, derive_generator, derive_seed
 
 __all__ = ['make_synthetic_dataset']
 
@@ -132,14 +133,10 @@ def render_street_scene(rng: np.random.Generator, height: int, width: int,
     return np.clip(frames, 0, 1), label
 
 
-#: how many scenes of a split one run may make
-_COUNT = Integer(0, MAX_SAMPLES)
+#: the most frames a scene is rendered in
+MAX_FRAMES = 1024
 
 
-@declare(out_dir=Path(), num_train=_COUNT, num_val=_COUNT, height=SIDE,
-         width=SIDE, num_steps=NUM_STEPS, num_frames=Integer(1, 1024),
-         threshold=Number(0, strict_minimum=True), seed=SEED,
-         progress=Flag(), wait=Flag())
 def make_synthetic_dataset(out_dir: str, num_train: int = 48,
                            num_val: int = 12, height: int = 128,
                            width: int = 256, num_steps: int = 41,
@@ -160,6 +157,20 @@ def make_synthetic_dataset(out_dir: str, num_train: int = 48,
     at a sample's file is replaced, a linked folder refused. Returns the
     number of samples written now.
     """
+    entry = 'make_synthetic_dataset'
+    check_path(entry, 'out_dir', out_dir)
+    check_integer(entry, 'num_train', num_train, 0, MAX_SAMPLES)
+    check_integer(entry, 'num_val', num_val, 0, MAX_SAMPLES)
+    check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE)
+    check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE)
+    check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
+    check_integer(entry, 'num_frames', num_frames, 1, MAX_FRAMES)
+    # the simulator's rule, before any file is written
+    check_number(entry, 'threshold', threshold, 0, strict_minimum=True,
+                 float32=True)
+    check_seed(seed, entry=entry)
+    check_flag(entry, 'progress', progress)
+    check_flag(entry, 'wait', wait)
     from ..core.simulation import simulate_spikes  # torch, where it runs
     written = 0
     recipe = dict(height=height, width=width, num_steps=num_steps,

@@ -34,11 +34,11 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from ..core.arguments import (Choice, Flag, Integer, Path, SequenceOf,
-                              declare)
+from ..argument_checks import (ArgumentError, check_flag, check_integer,
+                               check_path, is_choice)
+from ..command_line import Choice, Integer, Path, SequenceOf
 from ..fileio.folder_walk import files_under
-from ..fileio.images import read_image
-from ..fileio.images import write_png
+from ..fileio.images import read_image, write_png
 from ..fileio.input_guard import OutputFolderError
 from ..fileio.locks import add_wait_option, own_folder
 
@@ -113,8 +113,10 @@ def _holds(path: str, image: np.ndarray) -> bool:
         found.dtype == image.dtype and np.array_equal(found, image)
 
 
-@declare(out_dir=Path(), sources=SequenceOf(Choice(tuple(SOURCES))),
-         video_stride=Integer(1, 10000), wait=Flag())
+#: the longest step between the frames kept of a video
+MAX_VIDEO_STRIDE = 10000
+
+
 def export_training_images(out_dir: str,
                            sources: Sequence[str] = tuple(SOURCES),
                            video_stride: int = 10,
@@ -140,6 +142,14 @@ def export_training_images(out_dir: str,
             cannot be made a folder (a file is there), a source's folder in
             it is a link, or another run writes it.
     """
+    entry = 'export_training_images'
+    check_path(entry, 'out_dir', out_dir)
+    if not (isinstance(sources, (list, tuple)) and sources and
+            all(is_choice(source, tuple(SOURCES)) for source in sources)):
+        raise ArgumentError(entry, 'sources', f'a non-empty sequence of '
+                            f'{list(SOURCES)}', sources)
+    check_integer(entry, 'video_stride', video_stride, 1, MAX_VIDEO_STRIDE)
+    check_flag(entry, 'wait', wait)
     out_dir = os.fspath(out_dir)
     written: Dict[str, List[str]] = {}
     with contextlib.ExitStack() as stack:
@@ -175,7 +185,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--sources', type=SequenceOf(Choice(tuple(SOURCES))),
                         default=tuple(SOURCES),
                         help=f'comma-separated subset of {list(SOURCES)}')
-    parser.add_argument('--video-stride', type=Integer(1, 10000), default=10,
+    parser.add_argument('--video-stride', type=Integer(1, MAX_VIDEO_STRIDE),
+                        default=10,
                         help='keep every N-th video frame (default 10)')
     add_wait_option(parser)
     return parser

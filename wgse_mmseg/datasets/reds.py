@@ -30,12 +30,12 @@ from mmengine.dataset import BaseDataset
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
-from ..core.arguments import (FRAME_SIZE, LAYOUT, NUM_STEPS, SEED, SIDE,
-                              Integer, Number, Path, SequenceOf,
-                              Text, declare)
+from ..argument_checks import (ArgumentError, check_frame_size, check_integer,
+                               check_layout, check_number, check_path,
+                               check_text, is_number)
 from ..fileio.folder_walk import files_under
-from ..limits import MAX_SAMPLES
-from ..core.seeding import derive_generator, derive_seed
+from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
+from ..core.seeding import check_seed, derive_generator, derive_seed
 from ..core.constants import REDS_WHITE_RATE
 from ..core.simulation import simulate_spikes
 from ..data_generation.views import (load_images, read_grey_image,
@@ -65,11 +65,16 @@ class LoadSpikeImagePair(BaseTransform):
             (``LoadSpikeFromFile``'s ``layout``).
     """
 
-    @declare(num_steps=NUM_STEPS, height=SIDE.or_none(),
-             width=SIDE.or_none(), layout=LAYOUT.or_none())
     def __init__(self, num_steps: int = 41, height: Optional[int] = None,
                  width: Optional[int] = None, layout: Optional[str] = None):
         super().__init__()
+        entry = 'LoadSpikeImagePair'
+        check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
+        check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE,
+                      optional=True)
+        check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE,
+                      optional=True)
+        check_layout(entry, layout)
         if (height is None) != (width is None):
             raise ValueError('LoadSpikeImagePair: height and width go '
                              'together')
@@ -118,6 +123,11 @@ class PackReconstructionInputs(BaseTransform):
             'img_path', 'gt_path', 'gt_frame', 'ori_shape', 'img_shape',
             'num_steps', 'flip', 'flip_direction', 'sample_idx')):
         super().__init__()
+        if not (isinstance(meta_keys, (list, tuple)) and
+                all(isinstance(key, str) for key in meta_keys)):
+            raise ArgumentError('PackReconstructionInputs', 'meta_keys',
+                                'a sequence of key names (strings)',
+                                meta_keys)
         self.meta_keys = tuple(meta_keys)
 
     def transform(self, results: dict) -> dict:
@@ -153,12 +163,20 @@ class REDSSpikeDataset(BaseDataset):
             mmengine's ``BaseDataset``.
     """
 
-    @declare(spike_suffix=Text(empty=False), gt_suffix=Text(empty=False),
-             gt_frame=Integer(0, optional=True))
     def __init__(self, data_prefix: dict = dict(spike_path='spike',
                                                 gt_path='gt'),
                  spike_suffix: str = '.dat', gt_suffix: str = '.png',
                  gt_frame: Optional[int] = None, **kwargs):
+        entry = 'REDSSpikeDataset'
+        if not (isinstance(data_prefix, dict) and all(
+                isinstance(data_prefix.get(key), str)
+                for key in ('spike_path', 'gt_path'))):
+            raise ArgumentError(entry, 'data_prefix', "a dict of the "
+                                "folders' paths 'spike_path' and 'gt_path'",
+                                data_prefix)
+        check_text(entry, 'spike_suffix', spike_suffix, empty=False)
+        check_text(entry, 'gt_suffix', gt_suffix, empty=False)
+        check_integer(entry, 'gt_frame', gt_frame, 0, optional=True)
         self.spike_suffix = spike_suffix
         self.gt_suffix = gt_suffix
         self.gt_frame = gt_frame
@@ -196,8 +214,13 @@ def _default_image_dir() -> str:
 
 
 #: a ``(low, high)`` range of positive numbers
-_POSITIVE_RANGE = SequenceOf(Number(0, strict_minimum=True),
-                             names=('low', 'high'), ordered=True)
+def _check_range(entry: str, name: str, value) -> None:
+    """A ``(low, high)`` range of finite numbers ``0 < low <= high``."""
+    if not (isinstance(value, (list, tuple)) and len(value) == 2 and
+            all(is_number(v, 0, strict_minimum=True) for v in value) and
+            value[0] <= value[1]):
+        raise ArgumentError(entry, name, '(low, high) with low <= high, '
+                            'each a finite number > 0', value)
 
 
 @DATASETS.register_module()
@@ -234,14 +257,6 @@ class SimulatedSpikeImageDataset(BaseDataset):
         **kwargs: ``pipeline``, ``test_mode``, ... of ``BaseDataset``.
     """
 
-    @declare(image_dir=Path(optional=True),
-             num_samples=Integer(1, MAX_SAMPLES), crop_size=FRAME_SIZE,
-             num_steps=NUM_STEPS, seed=SEED,
-             white_rate=Number(0, strict_minimum=True),
-             max_speed=Number(0), max_rotation=Number(0),
-             max_zoom=Number(0), scale_range=_POSITIVE_RANGE,
-             gain_range=_POSITIVE_RANGE, gamma_range=_POSITIVE_RANGE,
-             max_side=SIDE)
     def __init__(self, image_dir: Optional[str] = None,
                  num_samples: int = 10000,
                  crop_size: Tuple[int, int] = (64, 64), num_steps: int = 41,
@@ -252,6 +267,22 @@ class SimulatedSpikeImageDataset(BaseDataset):
                  gain_range: Tuple[float, float] = (0.5, 1.0),
                  gamma_range: Tuple[float, float] = (0.7, 1.4),
                  max_side: int = 1024, **kwargs):
+        entry = 'SimulatedSpikeImageDataset'
+        check_path(entry, 'image_dir', image_dir, optional=True)
+        check_integer(entry, 'num_samples', num_samples, 1, MAX_SAMPLES)
+        check_frame_size(entry, 'crop_size', crop_size)
+        check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
+        check_seed(seed, entry=entry)
+        check_number(entry, 'white_rate', white_rate, 0, strict_minimum=True)
+        for name, value in (('max_speed', max_speed),
+                            ('max_rotation', max_rotation),
+                            ('max_zoom', max_zoom)):
+            check_number(entry, name, value, 0)
+        for name, value in (('scale_range', scale_range),
+                            ('gain_range', gain_range),
+                            ('gamma_range', gamma_range)):
+            _check_range(entry, name, value)
+        check_integer(entry, 'max_side', max_side, 1, MAX_IMAGE_SIDE)
         self.image_dir = image_dir or _default_image_dir()
         self.image_paths, self.images = load_images(self.image_dir,
                                                     max_side)

@@ -8,7 +8,7 @@ from mmengine.logging import print_log
 from mmseg.datasets import CityscapesDataset
 from mmseg.registry import DATASETS
 
-from ..core.arguments import Choice, Text, declare
+from ..argument_checks import check_choice, check_text
 from ..fileio.folder_walk import files_under
 from ..fileio.markers import sample_problem
 
@@ -48,13 +48,15 @@ class SpikeCityscapesDataset(CityscapesDataset):
             ``'none'`` (no marker needed: folders written by other tools).
     """
 
-    @declare(img_suffix=Text(empty=False), seg_map_suffix=Text(empty=False),
-             verify=Choice(_VERIFY_MODES))
     def __init__(self,
                  img_suffix: str = '_spike.spk',
                  seg_map_suffix: str = '_gtFine_labelTrainIds.png',
                  verify: str = 'size',
                  **kwargs) -> None:
+        entry = 'SpikeCityscapesDataset'
+        check_text(entry, 'img_suffix', img_suffix, empty=False)
+        check_text(entry, 'seg_map_suffix', seg_map_suffix, empty=False)
+        check_choice(entry, 'verify', verify, _VERIFY_MODES)
         self.verify = verify
         self.skipped: Dict[str, int] = {}
         super().__init__(

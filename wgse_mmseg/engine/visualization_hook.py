@@ -11,8 +11,10 @@ from mmengine.runner import Runner
 from mmseg.engine.hooks import SegVisualizationHook
 from mmseg.registry import HOOKS
 from mmseg.structures import SegDataSample
+from ..argument_checks import check_integer, check_layout
 from ..core.exposure import apply_exposure
 from ..fileio.images import to_uint8
+from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from ..core.reconstruction_baselines import tfp
 from ..datasets.transforms import LoadSpikeFromFile
 
@@ -60,6 +62,14 @@ class SpikeVisualizationHook(SegVisualizationHook):
     def __init__(self, num_steps: Optional[int] = None,
                  height: Optional[int] = None, width: Optional[int] = None,
                  layout: Optional[str] = None, **kwargs):
+        entry = 'SpikeVisualizationHook'
+        check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS,
+                      optional=True)
+        check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE,
+                      optional=True)
+        check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE,
+                      optional=True)
+        check_layout(entry, layout)
         with warnings.catch_warnings():
             # MMSeg's hook warns whenever draw is False, its default: not
             # news in every run

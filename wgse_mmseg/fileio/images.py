@@ -16,6 +16,7 @@ from typing import Tuple
 import numpy as np
 
 from ..core.image_values import as_unit_grey
+from ..errors import WgseError
 from ..limits import MAX_IMAGE_SIDE, check_allocation
 from .atomic import WrittenFile, write_bytes
 from .bounded_reads import check_utf8_path
@@ -27,7 +28,7 @@ __all__ = []
 IMREAD_UNCHANGED = -1
 
 
-class ImageFileError(ValueError):
+class ImageFileError(WgseError, ValueError):
     """An image file that is not read: of an unknown kind, larger than the
     limits, truncated or undecodable; names the file."""
 

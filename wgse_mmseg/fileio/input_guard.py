@@ -30,10 +30,12 @@ import stat
 import sys
 from typing import Callable, Dict, Iterable, Iterator, Optional, Tuple
 
+from ..errors import WgseError
+
 __all__ = ['OutputFolderError']
 
 
-class OutputFolderError(ValueError):
+class OutputFolderError(WgseError, ValueError):
     """An output folder this package cannot own as asked: another process
     writes it, or a path in it is a link or not what it must be; names the
     path."""

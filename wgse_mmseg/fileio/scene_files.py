@@ -7,6 +7,7 @@ from typing import Union
 
 import yaml
 
+from ..argument_checks import check_path
 from ..errors import EXCERPT_CHARS, cut
 from .bounded_reads import load_json_file, read_text_file
 
@@ -35,7 +36,7 @@ def read_scene_file(path: Union[str, os.PathLike]) -> dict:
     :data:`~wgse_mmseg.limits.TEXT_FILE_LIMIT_BYTES`; YAML aliases are
     refused.
     """
-    path = os.fspath(path)
+    path = os.fspath(check_path('read_scene_file', 'path', path))
     ext = osp.splitext(path)[1].lower()
     if ext not in ('.json', '.yaml', '.yml'):
         raise ValueError(

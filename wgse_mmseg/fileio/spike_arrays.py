@@ -14,7 +14,7 @@ from typing import BinaryIO, Iterator, List, Optional, Tuple
 
 import numpy as np
 
-from ..core.arguments import LAYOUT
+from ..argument_checks import LAYOUTS, is_choice
 from ..core.spike_formats import (NPZ_KEYS, NPZ_LAYOUT_KEY, SpikeFileError,
                                   check_binary, check_caller_size,
                                   check_window)
@@ -23,6 +23,14 @@ from ..limits import READ_LIMIT_BYTES
 from .bounded_reads import load_json_file
 
 __all__ = []
+
+#: the layouts a file may record, in words
+_LAYOUTS_TEXT = f'one of {list(LAYOUTS)}'
+
+
+def _is_layout(value) -> bool:
+    """Whether ``value`` is a layout name (:data:`LAYOUTS`)."""
+    return is_choice(value, LAYOUTS)
 
 
 def _npy_header(path: str, f: BinaryIO,
@@ -127,10 +135,10 @@ def _side_file_layout(path: str) -> List[Tuple[str, str]]:
         raise SpikeFileError(f'{path}: {err}') from err
     if not isinstance(meta, dict) or 'layout' not in meta:
         return []
-    if not LAYOUT.accepts(meta['layout']):
+    if not _is_layout(meta['layout']):
         raise SpikeFileError(
             f'{path}: side file {side} says "layout": '
-            f'{excerpt(meta["layout"])}; expected {LAYOUT.describe()}')
+            f'{excerpt(meta["layout"])}; expected {_LAYOUTS_TEXT}')
     return [(f'its side file {side}', meta['layout'])]
 
 
@@ -161,10 +169,10 @@ def _npz_layout(path: str) -> List[Tuple[str, str]]:
                              f'{type(err).__name__}: {cut(str(err))}') \
             from err
     if value is not None:
-        if not LAYOUT.accepts(value):
+        if not _is_layout(value):
             raise SpikeFileError(
                 f'{path}: member "{NPZ_LAYOUT_KEY}" holds {excerpt(value)}; '
-                f'expected {LAYOUT.describe()}')
+                f'expected {_LAYOUTS_TEXT}')
         records.append((f'its member "{NPZ_LAYOUT_KEY}"', value))
     return records
 
@@ -180,7 +188,7 @@ def _layout_member(path: str, f: BinaryIO) -> str:
     if shape != () or dtype.kind not in 'US' or dtype.itemsize > 64:
         raise SpikeFileError(
             f'{path}: member "{NPZ_LAYOUT_KEY}" is an array of shape {shape} '
-            f'and type {dtype}; expected a string, {LAYOUT.describe()}')
+            f'and type {dtype}; expected a string, {_LAYOUTS_TEXT}')
     data = f.read(dtype.itemsize)
     if len(data) != dtype.itemsize:
         raise SpikeFileError(f'{path}: member "{NPZ_LAYOUT_KEY}" is '

@@ -41,7 +41,8 @@ from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from ..core.arguments import LAYOUT, Integer, Path, declare
+from ..argument_checks import (check_integer, check_layout, check_path,
+                               integer_expected, is_integer)
 from ..core.spike_formats import (SPK_HEADER, SPK_MAGIC, SPK_VERSION,
                                   SpikeFileError, check_binary,
                                   check_caller_size, check_window, encode_dat,
@@ -66,12 +67,13 @@ def _dat_geometry(path: str, height: Optional[int],
             meta = load_json_file(side, 'side file')
         except (OSError, ValueError) as err:
             raise SpikeFileError(f'{path}: {err}') from err
-        if not (isinstance(meta, dict) and _SIDE.accepts(meta.get('height'))
-                and _SIDE.accepts(meta.get('width'))):
+        if not (isinstance(meta, dict) and
+                is_integer(meta.get('height'), 1, MAX_IMAGE_SIDE) and
+                is_integer(meta.get('width'), 1, MAX_IMAGE_SIDE)):
             raise SpikeFileError(
                 f'{path}: side file {side} must hold {{"height": H, '
-                f'"width": W}} with {_SIDE.describe()}, got '
-                f'{excerpt(meta)}')
+                f'"width": W}} with '
+                f'{integer_expected(1, MAX_IMAGE_SIDE)}, got {excerpt(meta)}')
         check_caller_size(path, f'its side file {side}',
                           (meta['height'], meta['width']), height, width)
         height, width = meta['height'], meta['width']
@@ -123,10 +125,6 @@ def _spk_geometry(path: str, height: Optional[int] = None,
             f'truncated or corrupted')
     check_caller_size(path, 'its header', (height, width), *given)
     return steps, height, width
-
-
-#: the frame size a caller gives for a ``.dat`` file
-_SIDE = Integer(1, MAX_IMAGE_SIDE, optional=True)
 
 
 def _read_packed(path: str, shape: Tuple[int, int, int], start: int,
@@ -233,19 +231,26 @@ def _existing(path: str) -> SpikeFormat:
     return fmt
 
 
-@declare(path=Path(), height=_SIDE, width=_SIDE, layout=LAYOUT.or_none())
+def _check_reader_arguments(entry: str, path, height, width,
+                            layout) -> None:
+    """The arguments every reader of a spike file takes, checked."""
+    check_path(entry, 'path', path)
+    for name, side in (('height', height), ('width', width)):
+        check_integer(entry, name, side, 1, MAX_IMAGE_SIDE, optional=True)
+    check_layout(entry, layout)
+
+
 def spike_shape(path: str, height: Optional[int] = None,
                 width: Optional[int] = None,
                 layout: Optional[str] = None) -> Tuple[int, int, int]:
     """``(T, H, W)`` of a spike file without reading its frames
     (arguments as :func:`load_spikes`'s)."""
+    _check_reader_arguments('spike_shape', path, height, width, layout)
     path = os.fspath(path)
     fmt = _existing(path)
     return fmt.shape(path, height, width, fmt.layout(path, layout))
 
 
-@declare(path=Path(), height=_SIDE, width=_SIDE, start=Integer(0),
-         length=Integer(1, optional=True), layout=LAYOUT.or_none())
 def load_spikes(path: str, height: Optional[int] = None,
                 width: Optional[int] = None, start: int = 0,
                 length: Optional[int] = None,
@@ -274,7 +279,11 @@ def load_spikes(path: str, height: Optional[int] = None,
             does not fit its declared sizes, a layout that cannot be told
             or contradicts the file, or a window over the read limit (2 GiB,
             docs/security.md).
+        ArgumentError: for an argument of the wrong kind.
     """
+    _check_reader_arguments('load_spikes', path, height, width, layout)
+    check_integer('load_spikes', 'start', start, 0)
+    check_integer('load_spikes', 'length', length, 1, optional=True)
     path = os.fspath(path)
     fmt = _existing(path)
     layout = fmt.layout(path, layout)
@@ -282,7 +291,6 @@ def load_spikes(path: str, height: Optional[int] = None,
     return fmt.read(path, shape, start, length, layout)
 
 
-@declare(path=Path())
 def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
     """Write a ``(T, H, W)`` 0/1 array to ``path`` (format from extension),
     recording its layout ``'THW'`` where the format does not fix it
@@ -293,6 +301,7 @@ def save_spikes(path: str, spikes: np.ndarray) -> WrittenFile:
     ``path``, as a named tuple: ``size`` and ``sha256`` of the bytes, from
     memory.
     """
+    check_path('save_spikes', 'path', path)
     path = os.fspath(path)
     fmt = _format(path)
     spikes = np.asarray(spikes)

@@ -5,8 +5,10 @@ import torch
 
 from mmseg.models.data_preprocessor import SegDataPreProcessor
 from mmseg.registry import MODELS
-from ..core.arguments import (FRAME_SIZE, NUM_CLASSES, NUM_STEPS, SIDE,
-                              Choice, Integer, declare)
+from ..argument_checks import (ArgumentError, check_choice,
+                               check_frame_size, check_integer)
+from ..limits import MAX_CLASSES, MAX_IMAGE_SIDE
+from ..errors import WgseError
 
 __all__ = ['SpikeSegDataPreProcessor', 'SpikeModelMismatchError']
 
@@ -14,7 +16,7 @@ __all__ = ['SpikeSegDataPreProcessor', 'SpikeModelMismatchError']
 RECORD_KEY = '_extra_state'
 
 
-class SpikeModelMismatchError(ValueError):
+class SpikeModelMismatchError(WgseError, ValueError):
     """Weights made for another T or enhancer than the model's."""
 
 
@@ -109,10 +111,6 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
     without a record (saved before it existed) load as before.
     """
 
-    @declare(num_steps=NUM_STEPS.or_none(),
-             num_classes=NUM_CLASSES.or_none(), size=FRAME_SIZE.or_none(),
-             size_divisor=SIDE.or_none(), pad_val=Choice((0, 1, 0.0, 1.0)),
-             seg_pad_val=Integer(0, 255))
     def __init__(self,
                  num_steps: Optional[int] = None,
                  enhancer: Optional[dict] = None,
@@ -123,6 +121,19 @@ class SpikeSegDataPreProcessor(SegDataPreProcessor):
                  seg_pad_val: int = 255,
                  batch_augments: Optional[List[dict]] = None,
                  test_cfg: Optional[dict] = None):
+        entry = 'SpikeSegDataPreProcessor'
+        check_integer(entry, 'num_steps', num_steps, 1, optional=True)
+        if enhancer is not None and not isinstance(enhancer, dict):
+            raise ArgumentError(entry, 'enhancer', "a model config (a dict "
+                                "with 'type') or None", enhancer)
+        check_integer(entry, 'num_classes', num_classes, 1, MAX_CLASSES,
+                      optional=True)
+        if size is not None:
+            check_frame_size(entry, 'size', size)
+        check_integer(entry, 'size_divisor', size_divisor, 1, MAX_IMAGE_SIDE,
+                      optional=True)
+        check_choice(entry, 'pad_val', pad_val, (0, 1, 0.0, 1.0))
+        check_integer(entry, 'seg_pad_val', seg_pad_val, 0, 255)
         super().__init__(
             mean=None,
             std=None,

@@ -23,13 +23,12 @@ from mmengine.model import BaseModel, ImgDataPreprocessor
 from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import MODELS
-from ..core.checks import check_finite
-from ..core.arguments import (NUM_STEPS, Integer, check_parameter_count,
-                              declare)
+from ..argument_checks import (ArgumentError, check_integer,
+                               check_parameter_count, check_path)
+from ..core.checks import check_device, check_finite
 from ..fileio.atomic import atomic_output
 from ..core import reconstruction_baselines
 from ..core.constants import RECONSTRUCTION_METHODS
-from ..limits import MAX_CHANNELS, MAX_NUM_BLOCKS
 from ..utils.checkpoint import CheckpointError, read_checkpoint
 from ..utils.config_data import ConfigDataError, read_config_data
 from ..utils.safe_build import build_from_file_config, check_file_config
@@ -60,9 +59,9 @@ def _conv3x3_parameters(in_channels: int, out_channels: int) -> int:
 
 
 class ResidualBlock(nn.Module):
-    """``x + conv(relu(conv(x)))``, 3x3 convolutions, no normalisation."""
+    """``x + conv(relu(conv(x)))``, 3x3 convolutions, no normalisation.
+    A part of :class:`SpikeReconstructor`, which checks ``channels``."""
 
-    @declare(channels=Integer(1, MAX_CHANNELS))
     def __init__(self, channels: int):
         super().__init__()
         self.conv1 = _conv3x3(channels, channels)
@@ -98,15 +97,20 @@ class SpikeReconstructor(BaseModel):
     ``pred_image`` ``(1, H, W)`` clipped to [0, 1].
     """
 
-    @declare(num_steps=NUM_STEPS, channels=Integer(1, MAX_CHANNELS),
-             num_blocks=Integer(0, MAX_NUM_BLOCKS),
-             mid_channels=Integer(1, MAX_CHANNELS))
     def __init__(self, num_steps: int = 41,
                  enhancer: Optional[dict] = dict(type='WGSE'),
                  channels: int = 256, num_blocks: int = 3,
                  mid_channels: int = 64,
                  data_preprocessor: Optional[dict] = None,
                  init_cfg: Optional[dict] = None):
+        entry = 'SpikeReconstructor'
+        check_integer(entry, 'num_steps', num_steps, 1)
+        if enhancer is not None and not isinstance(enhancer, dict):
+            raise ArgumentError(entry, 'enhancer', "a model config (a dict "
+                                "with 'type') or None", enhancer)
+        check_integer(entry, 'channels', channels, 1)
+        check_integer(entry, 'num_blocks', num_blocks, 0)
+        check_integer(entry, 'mid_channels', mid_channels, 1)
         super().__init__(
             data_preprocessor=data_preprocessor or dict(
                 type='ImgDataPreprocessor'),
@@ -226,6 +230,8 @@ def load_reconstructor(checkpoint: Optional[str] = None,
             (``wgse_mmseg/weights/wgse_reconstruction_cpu.pth``).
         device: torch device.
     """
+    check_path('load_reconstructor', 'checkpoint', checkpoint, optional=True)
+    device = check_device('load_reconstructor', 'device', device)
     path = checkpoint or DEFAULT_WEIGHTS
     state = _read_weights(path)
     config, key = _model_config(state, path)
@@ -246,6 +252,8 @@ def export_weights(checkpoint: str, out: str) -> None:
     optimiser state or logs) is what :func:`load_reconstructor` and
     ``tools/misc/reconstruct.py`` read; about 4 bytes per parameter.
     """
+    check_path('export_weights', 'checkpoint', checkpoint)
+    check_path('export_weights', 'out', out)
     state = _read_weights(checkpoint)
     config, key = _model_config(state, checkpoint)
     model_cfg = check_file_config(config, RECONSTRUCTION_BUILDS, checkpoint,

@@ -9,13 +9,13 @@ from typing import Dict
 import numpy as np
 import torch
 
-from ..errors import cut, excerpt
+from ..errors import WgseError, cut, excerpt
 from ..fileio.input_guard import note_input
 
 __all__ = []
 
 
-class CheckpointError(ValueError):
+class CheckpointError(WgseError, ValueError):
     """A file that cannot be read as a checkpoint; names the file."""
 
 

@@ -17,11 +17,11 @@ import os.path as osp
 import re
 from typing import TYPE_CHECKING, Any, Dict, List, Optional, Union
 
-from ..openmmlab_stack import prepare_mmseg_layer
-from ..core.arguments import Choice, Integer, Path
+from ..command_line import Choice, Integer, Path
 from ..errors import excerpt
-from ..limits import MAX_WORKERS
 from ..fileio.input_guard import note_input
+from ..limits import MAX_WORKERS
+from ..openmmlab_stack import prepare_mmseg_layer
 from .spike_settings import (SPIKE_SETTINGS, SpikeSettingsError,
                              apply_spike_settings, check_setting)
 

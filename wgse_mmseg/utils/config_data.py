@@ -17,11 +17,12 @@ import ast
 from typing import Any, Dict
 
 from ..limits import MAX_JSON_DEPTH, TEXT_FILE_LIMIT_BYTES
+from ..errors import WgseError
 
 __all__ = []
 
 
-class ConfigDataError(ValueError):
+class ConfigDataError(WgseError, ValueError):
     """Config text that is not plain data (or not parseable)."""
 
 

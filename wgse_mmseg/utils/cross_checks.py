@@ -39,8 +39,8 @@ import torch
 from torch import nn
 from torch._subclasses import fake_tensor
 
-from ..errors import cut
 from ..limits import MAX_IMAGE_SIDE
+from ..errors import WgseError, cut
 
 __all__ = ['ModelFitError']
 
@@ -56,12 +56,12 @@ _NO_SHAPE_ONLY_FORM = tuple(getattr(fake_tensor, name) for name in (
 _REFUSALS = (RuntimeError, ValueError, AssertionError, IndexError)
 
 
-class ModelFitError(ValueError):
+class ModelFitError(WgseError, ValueError):
     """Settings that are each valid but do not fit the model or each
     other; names the setting and the smallest value that works."""
 
 
-class _WrongWidth(Exception):
+class _WrongWidth(WgseError, ValueError):
     """A layer given another number of channels than it takes."""
 
     def __init__(self, name: str, layer: nn.Module, given: int):

@@ -29,7 +29,7 @@ file and the key path (``ckpt.pth: meta['model'].data_preprocessor.type:
 :func:`build_from_file_config` then builds it with every ``type`` replaced
 by the allowed class itself, so no registry looks up a name that came from
 a file; a value a built class refuses (its declared arguments and stated
-limits, :mod:`wgse_mmseg.core.arguments`: ``channels=200000``) is reported
+limits, :mod:`wgse_mmseg.argument_checks`: ``channels=0``) is reported
 as a :class:`ConfigDataError` naming the file and the argument's key path
 (``ckpt.pth: meta['model'].channels: SpikeReconstructor: channels must be
 ...``), before anything is allocated. Every build from file data in the package
@@ -38,7 +38,7 @@ goes through it (``tests/utils/test_safe_build.py`` audits the call sites).
 import inspect
 from typing import Any, Dict, FrozenSet, Mapping, Optional
 
-from ..core.arguments import ArgumentError
+from ..argument_checks import ArgumentError
 from .config_data import ConfigDataError
 
 __all__ = []
@@ -185,7 +185,7 @@ def build_from_file_config(registry, cfg: Any, allowed: _AllowList,
 
     Raises:
         ConfigDataError: as :func:`check_file_config`, and for an argument
-            a built class refuses (:class:`~wgse_mmseg.core.arguments.
+            a built class refuses (:class:`~wgse_mmseg.argument_checks.
             ArgumentError`), naming ``source`` and the argument's key path.
     """
     resolved = _config(cfg, allowed, source, key, 0, resolve=True)

@@ -42,14 +42,13 @@ import inspect
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
-from ..core.arguments import (FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf,
-                              Path)
-from ..errors import excerpt
+from ..command_line import FRAME_SIZE, NUM_STEPS, SIDE, Argument, OneOf, Path
+from ..errors import WgseError, excerpt
 
 __all__ = []
 
 
-class SpikeSettingsError(ValueError):
+class SpikeSettingsError(WgseError, ValueError):
     """A spike setting is not valid, or its fields cannot be made to agree
     with it."""
 

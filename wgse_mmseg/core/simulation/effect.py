@@ -27,7 +27,8 @@ from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Type
 
 import torch
 
-from ..arguments import Choice, Number, SequenceOf
+from ... import argument_checks
+from ...argument_checks import ArgumentError, is_number
 from ...errors import excerpt
 from ..seeding import derive_seed
 
@@ -78,22 +79,24 @@ def check_number(effect: str, name: str, value: Any,
     """A finite real number in ``[low, high]`` (``(low, high]`` if
     ``low_open``), 0 or a normal float32 (it enters float32 arithmetic), as
     a float."""
-    Number(low, high, strict_minimum=low_open, float32=True).check(
-        value, _EFFECTS, f'{effect}.{name}')
+    argument_checks.check_number(_EFFECTS, f'{effect}.{name}', value, low,
+                                 high, strict_minimum=low_open, float32=True)
     return float(value)
 
 
 def check_choice(effect: str, name: str, value: Any,
                  choices: Sequence[str]) -> str:
     """One of ``choices``."""
-    Choice(choices).check(value, _EFFECTS, f'{effect}.{name}')
-    return value
+    return argument_checks.check_choice(_EFFECTS, f'{effect}.{name}', value,
+                                        choices)
 
 
 def check_pair(effect: str, name: str, value: Any) -> list:
     """Two finite numbers, as a list (JSON's form of a pair)."""
-    SequenceOf(Number(), names=('a', 'b')).check(value, _EFFECTS,
-                                                 f'{effect}.{name}')
+    if not (isinstance(value, (list, tuple)) and len(value) == 2 and
+            all(is_number(v) for v in value)):
+        raise ArgumentError(_EFFECTS, f'{effect}.{name}',
+                            '(a, b), each a finite number', value)
     return [float(v) for v in value]
 
 

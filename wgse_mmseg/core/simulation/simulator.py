@@ -4,10 +4,12 @@ from typing import Any, Dict, Tuple
 import numpy as np
 import torch
 
-from ..arguments import (FLOAT32_RANGE, NUM_STEPS, SEED, Choice, Number,
-                         declare)
+from ...argument_checks import (FLOAT32_RANGE, check_choice, check_integer,
+                                check_number)
+from ..checks import check_device
 from ..constants import READOUT_HZ
-from ...limits import check_allocation
+from ...limits import MAX_NUM_STEPS, check_allocation
+from ..seeding import check_seed
 from .effect import SimulationContext
 from .fixed_point import CHOICES, MAX_BLOCK_STEPS, Integrator, quantise
 from .intensity import frames_to_intensity
@@ -35,11 +37,6 @@ def _output(context: SimulationContext) -> torch.Tensor:
     return torch.empty(shape, dtype=torch.uint8, device=context.device)
 
 
-@declare(num_steps=NUM_STEPS,
-         threshold=Number(0, strict_minimum=True, float32=True),
-         gain=Number(0, float32=True), seed=SEED,
-         readout_hz=Number(0, strict_minimum=True, float32=True),
-         backend=Choice(CHOICES))
 def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
                     gain: float = 1.0, effects=None, seed: int = 0,
                     device='cpu',
@@ -80,6 +77,16 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
         ``'flow'`` or ``'camera_motion'``) and ``effects``: name -> every
         parameter used, for each effect that ran (``{}`` when none).
     """
+    entry = 'simulate_spikes'
+    check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
+    check_number(entry, 'threshold', threshold, 0, strict_minimum=True,
+                 float32=True)
+    check_number(entry, 'gain', gain, 0, float32=True)
+    seed = check_seed(seed, entry=entry)
+    check_number(entry, 'readout_hz', readout_hz, 0, strict_minimum=True,
+                 float32=True)
+    check_choice(entry, 'backend', backend, CHOICES)
+    device = check_device(entry, 'device', device)
     threshold, gain, readout_hz = (float(threshold), float(gain),
                                    float(readout_hz))
     low, high = FLOAT32_RANGE
@@ -89,9 +96,7 @@ def simulate_spikes(frames, num_steps: int, threshold: float = 1.0,
             f'collects per step, in thresholds) is {gain / threshold:.4g} '
             f'for gain={gain!r} and threshold={threshold!r}; it must be 0 or '
             f'of magnitude in [{low:.4g}, {high:.4g}] (a normal float32)')
-    seed = int(seed)
     parsed = parse_effects(effects)
-    device = torch.device(device)
     intensity = frames_to_intensity(frames, torch.float32, device)
     count, height, width = intensity.shape
     check_allocation(int(num_steps) * height * width,

@@ -56,6 +56,7 @@ from . import compiled_band_networks, triton_band_networks
 from .first_use_check import (PASSES, CheckResult, FirstUseCheckFailed,
                               check_on_first_use, passes_of)
 from .torch_band_networks import torch_band_networks
+from ...argument_checks import ArgumentError
 
 __all__ = []
 
@@ -385,27 +386,27 @@ def _choices() -> str:
     return "'auto', " + ', '.join(lines)
 
 
-def get_backend(name: str, networks: Sequence[nn.Module]
+def get_backend(entry: str, name: str, networks: Sequence[nn.Module]
                 ) -> Optional[BandNetworkBackend]:
-    """Check a configured backend name against the networks before any
-    input is seen.
+    """Check ``entry``'s configured backend name against the networks
+    before any input is seen.
 
     Returns:
         The backend, or ``None`` for ``'auto'``.
 
     Raises:
-        ValueError: an unknown name, or a backend that this installation
+        ArgumentError: an unknown name, or a backend that this installation
             or these networks rule out, with the reason and the choices.
     """
     if name == 'auto':
         return None
-    if name not in BACKENDS:
-        raise ValueError(f'backend must be one of {_choices()}; got '
-                         f'{name!r}')
+    if not isinstance(name, str) or name not in BACKENDS:
+        raise ArgumentError(entry, 'backend', f'one of {_choices()}', name)
     reason = BACKENDS[name].cannot_run(networks)
     if reason:
-        raise ValueError(f'backend={name!r} cannot run these band networks: '
-                         f'{reason}. Choices: {_choices()}')
+        raise ArgumentError(
+            entry, 'backend', f'a backend that can run these band networks '
+            f'({name!r}: {reason}); choices: {_choices()}', name)
     return BACKENDS[name]
 
 
@@ -414,9 +415,10 @@ def resolve_backend(name: str, networks: Sequence[nn.Module],
                     ) -> Tuple[BandNetworkBackend, Optional[CheckResult]]:
     """The backend that runs ``networks`` on ``coeffs`` ``(B, C, P)`` (bands
     of ``lengths``) for the configured ``name`` (``'auto'`` or one of
-    :data:`BACKENDS`), and the first-use check behind the choice: the one
-    the backend passed, the one ``'auto'`` fell back from to ``'torch'``,
-    or ``None`` where no check applies (:mod:`.first_use_check`).
+    :data:`BACKENDS`, checked by :func:`get_backend` where it was set), and
+    the first-use check behind the choice: the one the backend passed, the one
+    ``'auto'`` fell back from to ``'torch'``, or ``None`` where no check
+    applies (:mod:`.first_use_check`).
 
     Raises:
         ValueError: a named backend cannot run this call (say, ``'triton'``
@@ -424,7 +426,7 @@ def resolve_backend(name: str, networks: Sequence[nn.Module],
         FirstUseCheckFailed: a named backend failed its first-use check
             here; the message says what failed and how to report it.
     """
-    backend = get_backend(name, networks)
+    backend = None if name == 'auto' else BACKENDS[name]
     if backend is None:
         if torch.jit.is_tracing():  # FLOP counters, jit.trace: see convs
             return BACKENDS['torch'], None

@@ -56,7 +56,7 @@ from typing import Dict, List, NamedTuple, Optional, Sequence
 import torch
 from torch import Tensor, nn
 
-from ...errors import cut
+from ...errors import WgseError, cut
 
 __all__ = ['FirstUseCheckFailed']
 
@@ -66,7 +66,7 @@ REPORT_TO = ("the project's bug tracker with this line and the docs/gpu.md "
              'machine')
 
 
-class FirstUseCheckFailed(RuntimeError):
+class FirstUseCheckFailed(WgseError, RuntimeError):
     """A backend named explicitly failed its first-use check."""
 
 

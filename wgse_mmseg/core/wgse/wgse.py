@@ -29,12 +29,11 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from .band_network_backends import CHOICES, get_backend, resolve_backend
+from .band_network_backends import get_backend, resolve_backend
 from .first_use_check import CheckResult
-from ..arguments import (Choice, Flag, Integer, check_parameter_count,
-                         declare)
+from ...argument_checks import (ArgumentError, check_choice, check_flag,
+                                check_integer, check_parameter_count)
 from ..checks import check_finite, check_finite_parameters
-from ...limits import MAX_CHANNELS, MAX_KERNEL_SIZE, MAX_LEVEL, MAX_NUM_BLOCKS
 from ..wavelets import (SUPPORTED_MODES, analysis_matrix, band_lengths,
                         synthesis_matrix)
 
@@ -231,12 +230,9 @@ class BandNetwork(nn.Module):
     + input, ReLU, Conv 32->1, ReLU``.
 
     Input and output: ``(N, 1, L)`` for ``dim=1``, ``(B, 1, L, H, W)`` else.
+    A part of :class:`WGSE`, which checks the arguments.
     """
 
-    @declare(dim=Choice((1, 2, 3)),
-             kernel_size=Integer(1, MAX_KERNEL_SIZE, odd=True),
-             hidden_channels=Integer(1, MAX_CHANNELS),
-             num_blocks=Integer(1, MAX_NUM_BLOCKS))
     def __init__(self, dim: int = 1, kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1):
         super().__init__()
@@ -361,21 +357,24 @@ class WGSE(nn.Module):
     ``nn.Conv3d`` modules of ``dim`` 2 and 3 follow autocast.
     """
 
-    @declare(dim=Choice((1, 2, 3)),
-             wavelet=Choice(pywt.wavelist(kind='discrete'), optional=True,
-                            description='a discrete PyWavelets wavelet name '
-                            '(pywt.wavelist(kind="discrete"))'),
-             level=Integer(1, MAX_LEVEL), mode=Choice(SUPPORTED_MODES),
-             kernel_size=Integer(1, MAX_KERNEL_SIZE, odd=True),
-             hidden_channels=Integer(1, MAX_CHANNELS),
-             num_blocks=Integer(1, MAX_NUM_BLOCKS), backend=Choice(CHOICES),
-             init=Choice(INITS), output_norm=Flag())
     def __init__(self, dim: int = 1, wavelet: Optional[str] = 'db8',
                  level: int = 5, mode: str = 'zero', kernel_size: int = 3,
                  hidden_channels: int = 32, num_blocks: int = 1,
                  backend: str = 'auto', init: str = 'default',
                  output_norm: bool = False):
         super().__init__()
+        check_choice('WGSE', 'dim', dim, (1, 2, 3))
+        check_choice('WGSE', 'wavelet', wavelet,
+                     pywt.wavelist(kind='discrete'), optional=True,
+                     description='a discrete PyWavelets wavelet name '
+                     '(pywt.wavelist(kind="discrete"))')
+        check_integer('WGSE', 'level', level, 1)
+        check_choice('WGSE', 'mode', mode, SUPPORTED_MODES)
+        check_integer('WGSE', 'kernel_size', kernel_size, 1, odd=True)
+        check_integer('WGSE', 'hidden_channels', hidden_channels, 1)
+        check_integer('WGSE', 'num_blocks', num_blocks, 1)
+        check_choice('WGSE', 'init', init, INITS)
+        check_flag('WGSE', 'output_norm', output_norm)
         num_bands = 1 if wavelet is None else level + 1
         check_parameter_count(
             'WGSE', num_bands * BandNetwork.parameter_count(
@@ -389,13 +388,23 @@ class WGSE(nn.Module):
             BandNetwork(dim, kernel_size, hidden_channels, num_blocks)
             for _ in range(num_bands)
         ])
-        get_backend(backend, self.band_networks)  # a clear error, early
         self.backend = backend
         self.backend_in_use: Optional[str] = None
         self.backend_check: Optional[CheckResult] = None
         self.output_norm = nn.BatchNorm1d(1) if output_norm else None
         if init == 'lowpass':
             self.init_lowpass()
+
+    @property
+    def backend(self) -> str:
+        """The configured backend's name (the constructor's ``backend``),
+        checked against the band networks where it is set."""
+        return self._backend_name
+
+    @backend.setter
+    def backend(self, name: str) -> None:
+        get_backend('WGSE', name, self.band_networks)
+        self._backend_name = name
 
     def init_lowpass(self) -> None:
         """Start at the stream's low-pass part: the approximation band's
@@ -483,11 +492,16 @@ class WGSE(nn.Module):
         (:func:`~wgse_mmseg.core.checks.check_finite`), and so do weights
         that are not finite (naming the parameter) or whose activations
         could leave float32's range (:meth:`_check_range`)."""
-        if spikes.dim() != 4:
-            raise ValueError(
-                f'WGSE expects spikes shaped (B, T, H, W), got '
-                f'{tuple(spikes.shape)}')
+        if not isinstance(spikes, torch.Tensor) or spikes.dim() != 4:
+            raise ArgumentError(
+                'WGSE', 'spikes', 'a tensor shaped (B, T, H, W)',
+                tuple(spikes.shape) if isinstance(spikes, torch.Tensor)
+                else spikes)
         batch, num_steps, height, width = spikes.shape
+        if not num_steps:
+            raise ArgumentError(
+                'WGSE', "the spikes' time dimension T (B, T, H, W)",
+                'at least 1 frame', tuple(spikes.shape))
         module_dtype = self.band_networks[0].output_convs[-1].weight.dtype
         dtype = (torch.float64 if module_dtype == torch.float64
                  else torch.float32)

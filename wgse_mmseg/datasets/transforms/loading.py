@@ -12,7 +12,8 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
-from ...core.arguments import LAYOUT, NUM_STEPS, SIDE, Integer, declare
+from ...argument_checks import check_integer, check_layout
+from ...limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
 from ...core.spike_formats import centered_window
 from ...fileio.spike_files import load_spikes, spike_shape
 
@@ -49,13 +50,19 @@ class LoadSpikeFromFile(BaseTransform):
     ``num_steps``.
     """
 
-    @declare(num_steps=NUM_STEPS.or_none(), height=SIDE.or_none(),
-             width=SIDE.or_none(), center=Integer(0, optional=True),
-             layout=LAYOUT.or_none())
     def __init__(self, num_steps: Optional[int] = None,
                  height: Optional[int] = None, width: Optional[int] = None,
                  center: Optional[int] = None, layout: Optional[str] = None):
         super().__init__()
+        entry = 'LoadSpikeFromFile'
+        check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS,
+                      optional=True)
+        check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE,
+                      optional=True)
+        check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE,
+                      optional=True)
+        check_integer(entry, 'center', center, 0, optional=True)
+        check_layout(entry, layout)
         self.num_steps = num_steps
         self.height = height
         self.width = width

@@ -19,9 +19,11 @@ from cv2 import IMREAD_COLOR
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
-from ...core.arguments import NUM_STEPS, SEED, Choice, Number, declare
+from ...argument_checks import check_choice, check_integer, check_number
+from ...core.checks import check_device
 from ...fileio.images import read_image
-from ...core.seeding import derive_seed, draw_seed
+from ...limits import MAX_NUM_STEPS
+from ...core.seeding import check_seed, derive_seed, draw_seed
 from ...core.simulation import parse_effects, simulate_spikes
 from ...fileio.scene_files import read_scene_file
 
@@ -81,14 +83,20 @@ class SimulateSpikes(BaseTransform):
     simulator's metadata: settings, seed and the effects that ran).
     """
 
-    @declare(num_steps=NUM_STEPS, threshold=Number(0, strict_minimum=True),
-             gain=Number(0), seed=SEED.or_none(),
-             channel_order=Choice(('bgr', 'rgb')))
     def __init__(self, num_steps: int, threshold: float = 1.0,
                  gain: float = 1.0, effects=None,
                  seed: Optional[int] = None, channel_order: str = 'bgr',
                  device: str = 'cpu'):
         super().__init__()
+        entry = 'SimulateSpikes'
+        check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
+        # the simulator's rules, when the transform is built
+        check_number(entry, 'threshold', threshold, 0, strict_minimum=True,
+                     float32=True)
+        check_number(entry, 'gain', gain, 0, float32=True)
+        check_seed(seed, entry=entry, allow_none=True)
+        check_choice(entry, 'channel_order', channel_order, ('bgr', 'rgb'))
+        check_device(entry, 'device', device)
         if isinstance(effects, (str, os.PathLike)):
             effects = read_scene_file(effects)  # once, not per sample
         parse_effects(effects)  # fail at build time, not in a worker

@@ -10,8 +10,9 @@ from mmcv.transforms import BaseTransform
 
 from mmseg.datasets.transforms import RandomCrop
 from mmseg.registry import TRANSFORMS
-from ...core.arguments import (FRAME_SIZE, PROBABILITY, SIDE, Choice,
-                               Number, OneOf, SequenceOf, declare)
+from ...argument_checks import (ArgumentError, check_frame_size,
+                                check_integer, check_number, is_choice,
+                                is_number)
 
 __all__ = ['SpikeRandomCrop', 'SpikeRandomFlip']
 
@@ -46,12 +47,13 @@ class SpikeRandomCrop(RandomCrop):
         ignore_index: label not counted for ``cat_max_ratio``.
     """
 
-    @declare(crop_size=OneOf(FRAME_SIZE, SIDE),
-             cat_max_ratio=Number(0, 1, strict_minimum=True))
     def __init__(self, crop_size, cat_max_ratio: float = 1.,
                  ignore_index: int = 255):
-        sizes = (crop_size, crop_size) if SIDE.accepts(crop_size) else \
-            tuple(crop_size)
+        entry = 'SpikeRandomCrop'
+        sizes = check_frame_size(entry, 'crop_size', crop_size, side=True)
+        check_number(entry, 'cat_max_ratio', cat_max_ratio, 0, 1,
+                     strict_minimum=True)
+        check_integer(entry, 'ignore_index', ignore_index)
         super().__init__(sizes, cat_max_ratio, ignore_index)
 
     def transform(self, results: dict) -> dict:
@@ -66,7 +68,15 @@ class SpikeRandomCrop(RandomCrop):
         return super().transform(results)
 
 
-_DIRECTION = Choice(('horizontal', 'vertical'))
+#: the directions of a flip
+_DIRECTIONS = ('horizontal', 'vertical')
+
+
+def _one_or_two(value, accepts) -> bool:
+    """``value`` is accepted, or a list or tuple of one or two accepted."""
+    return accepts(value) or (isinstance(value, (list, tuple)) and
+                              1 <= len(value) <= 2 and
+                              all(accepts(v) for v in value))
 
 
 @TRANSFORMS.register_module()
@@ -83,16 +93,22 @@ class SpikeRandomFlip(BaseTransform):
     ``'horizontal'``, ``'vertical'`` or ``'diagonal'`` for both, as in mmcv).
     """
 
-    @declare(prob=OneOf(PROBABILITY, SequenceOf(PROBABILITY, max_length=2)),
-             direction=OneOf(_DIRECTION, SequenceOf(_DIRECTION, max_length=2)))
     def __init__(self, prob: Union[float, Sequence[float]] = 0.5,
                  direction: Union[str, Sequence[str]] = ('horizontal',
                                                          'vertical')):
         super().__init__()
+        entry = 'SpikeRandomFlip'
+        if not _one_or_two(prob, lambda p: is_number(p, 0, 1)):
+            raise ArgumentError(entry, 'prob', 'a probability in [0, 1], or '
+                                'a sequence of one or two', prob)
+        if not _one_or_two(direction,
+                           lambda d: is_choice(d, _DIRECTIONS)):
+            raise ArgumentError(entry, 'direction', f'one of '
+                                f'{list(_DIRECTIONS)}, or a sequence of one '
+                                f'or two', direction)
         directions = [direction] if isinstance(direction, str) else list(
             direction)
-        probs = [prob] * len(directions) if PROBABILITY.accepts(prob) else \
-            list(prob)
+        probs = [prob] * len(directions) if is_number(prob) else list(prob)
         if len(probs) != len(directions):
             raise ValueError(
                 f'SpikeRandomFlip: prob must be one probability or one per '

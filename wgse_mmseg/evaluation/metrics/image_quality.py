@@ -12,7 +12,7 @@ as ``value / 255``).
 import cv2
 import numpy as np
 
-from ...core.arguments import Integer, Number, declare
+from ...argument_checks import check_integer, check_number
 from ...limits import MAX_IMAGE_SIDE
 from ..quality import as_unit_grey, entropy_2d
 
@@ -36,15 +36,22 @@ def psnr(pred, gt) -> float:
     return float('inf') if mse == 0 else float(10 * np.log10(1.0 / mse))
 
 
-#: the declared window of :func:`ssim` and :func:`gaussian_window`: an odd
-#: side (a centred window) and a finite standard deviation > 0
-WINDOW = dict(size=Integer(1, MAX_IMAGE_SIDE, odd=True),
-              sigma=Number(0, MAX_IMAGE_SIDE, strict_minimum=True))
+def _check_window(entry: str, size: int, sigma: float) -> None:
+    """The window of :func:`ssim` and :func:`gaussian_window`: an odd side
+    (a centred window) and a finite standard deviation > 0."""
+    check_integer(entry, 'size', size, 1, MAX_IMAGE_SIDE, odd=True)
+    check_number(entry, 'sigma', sigma, 0, MAX_IMAGE_SIDE,
+                 strict_minimum=True)
 
 
-@declare(**WINDOW)
 def gaussian_window(size: int = 11, sigma: float = 1.5) -> np.ndarray:
     """``(size, size)`` Gaussian weights summing to 1 (MATLAB ``fspecial``)."""
+    _check_window('gaussian_window', size, sigma)
+    return _gaussian_window(size, sigma)
+
+
+def _gaussian_window(size: int, sigma: float) -> np.ndarray:
+    """:func:`gaussian_window`, its arguments checked."""
     axis = np.arange(size, dtype=np.float64) - (size - 1) / 2
     with np.errstate(over='ignore'):  # a tiny sigma: weight 0 off centre
         g = np.exp(-0.5 * (axis / sigma) ** 2)
@@ -52,7 +59,6 @@ def gaussian_window(size: int = 11, sigma: float = 1.5) -> np.ndarray:
     return np.outer(g, g)
 
 
-@declare(**WINDOW)
 def ssim(pred, gt, size: int = 11, sigma: float = 1.5) -> float:
     """Mean structural similarity (Wang et al., 2004), data range 1.
 
@@ -64,11 +70,12 @@ def ssim(pred, gt, size: int = 11, sigma: float = 1.5) -> float:
     data_range=1)``. ``size`` (odd, >= 1) and ``sigma`` (finite, > 0)
     are checked: an error naming the parameter.
     """
+    _check_window('ssim', size, sigma)
     pred, gt = _pair(pred, gt)
     if min(pred.shape) < size:
         raise ValueError(f'SSIM needs images of at least {size}x{size}, got '
                          f'{pred.shape[0]}x{pred.shape[1]}')
-    window = gaussian_window(size, sigma)
+    window = _gaussian_window(size, sigma)
     pad = size // 2
 
     def local_mean(x):
