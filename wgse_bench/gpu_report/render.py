@@ -6,6 +6,8 @@ import os
 from typing import Any, Dict, List, Optional, Sequence, Union
 
 from wgse_mmseg.fileio.atomic import atomic_output
+from wgse_mmseg.fileio.bounded_reads import load_json_file
+from wgse_mmseg.limits import LOG_FILE_LIMIT_BYTES
 
 from .. import wgse_choices, wgse_profile
 from ..markdown import markdown_table
@@ -345,8 +347,7 @@ def read_report(path: str) -> Dict[str, Any]:
             holds no JSON object.
     """
     try:
-        with open(path, 'rb') as f:
-            report = json.loads(f.read())
+        report = load_json_file(path, 'GPU report', LOG_FILE_LIMIT_BYTES)
     except (OSError, ValueError) as err:
         raise ValueError(f'{path} cannot be read as a report ({err})')
     if not isinstance(report, dict):
