@@ -123,8 +123,7 @@ class Layout(NamedTuple):
         ``bytes_per_lane`` each: one per line its pixels touch."""
         if self.pixel_bytes >= 128:
             return self.lanes
-        span = 31 * self.pixel_bytes + bytes_per_lane
-        return max(1, -(-span // 128))
+        return max(1, -(-32 * max(bytes_per_lane, self.pixel_bytes) // 128))
 
 
 _LAYOUT = re.compile(r'^#(\w+) = #ttg\.(\w+)<(.*)>\s*$', re.M)
@@ -186,8 +185,13 @@ def parse_sass(sass: str) -> List[Instruction]:
 
 def loop_bounds(code: Sequence[Instruction]) -> Tuple[int, int]:
     """``(first, last)`` indices of the step loop in ``code``: the shortest
-    range a backward branch closes that loads from global memory (see
-    :func:`~.triton_resources.step_loop`)."""
+    range that a backward branch closes and that loads from global memory
+    (the step over a band's coefficients, which loads the next ones; the
+    backward kernel's loop over tiles encloses it, and on sm_100 the waits
+    for the tensor cores' barriers are shorter loops that load nothing). A
+    branch's target is its last operand, after a uniform predicate
+    (``BRA.U UP0, 0x...``) where it has one, before the scheduling notes
+    sm_120's code carries (``?trans6``)."""
     addresses = [i.address for i in code]
     loops = []
     for index, ins in enumerate(code):
@@ -195,7 +199,7 @@ def loop_bounds(code: Sequence[Instruction]) -> Tuple[int, int]:
         if ins.opcode.startswith('BRA') and target and \
                 int(target.group(1), 16) < ins.address:
             start = addresses.index(int(target.group(1), 16))
-            if any(i.opcode.startswith('LDG') for i in code[start:index]):
+            if any(i.opcode.startswith('LDG') for i in code[start:index + 1]):
                 loops.append((start, index))
     if not loops:
         raise ValueError('no loop that loads from global memory in the '
@@ -230,11 +234,10 @@ def _matrix_fmas(opcode: str) -> Tuple[int, str]:
     if shape:
         m, n, k = map(int, shape.groups())
         return m * n * k, kind
-    mma = re.search(r'HMMA\.(\d)(\d)(\d+)', opcode)
+    mma = re.search(r'HMMA\.168(\d+)', opcode)  # m16n8kK
     if mma is None:
         raise ValueError(f'{opcode}: a tensor-core shape not understood')
-    m, n, k = (int(g) for g in mma.groups())
-    return m * n * k, kind
+    return 16 * 8 * int(mma.group(1)), kind
 
 
 class _Warp:

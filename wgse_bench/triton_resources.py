@@ -170,22 +170,14 @@ def step_loop(sass: str) -> List[str]:
     nothing). A branch's target is its last operand, after a uniform
     predicate (``BRA.U UP0, 0x...``) where it has one, before the
     scheduling notes sm_120's code carries (``?trans6``)."""
-    code = re.findall(r'/\*([0-9a-f]{4,})\*/\s+(@!?U?P\w+\s+)?([A-Z][\w.]*)'
-                      r'\s*([^;]*);', sass)
-    addresses = [int(address, 16) for address, *_ in code]
-    loops = []
-    for index, (address, _, opcode, operands) in enumerate(code):
-        target = re.search(r'(0x[0-9a-f]+)\s*\)?\s*(?:[&?].*)?$', operands)
-        if opcode.startswith('BRA') and target and \
-                int(target.group(1), 16) < addresses[index]:
-            start = addresses.index(int(target.group(1), 16))
-            body = code[start:index + 1]
-            if any(op.startswith('LDG') for _, _, op, _ in body):
-                loops.append(body)
-    if not loops:
-        raise ValueError('no loop that loads from global memory in the '
-                         'compiled kernel')
-    return [opcode for _, _, opcode, _ in min(loops, key=len)]
+    code = [sass_timing.Instruction(int(address, 16), opcode,
+                                    f'{opcode} {operands}'.strip(), 0, None,
+                                    None, 0)
+            for address, _, opcode, operands in re.findall(
+                r'/\*([0-9a-f]{4,})\*/\s+(@!?U?P\w+\s+)?([A-Z][\w.]*)'
+                r'\s*([^;]*);', sass)]
+    first, last = sass_timing.loop_bounds(code)
+    return [ins.opcode for ins in code[first:last + 1]]
 
 
 def step_cost(opcodes: Sequence[str]) -> tuple:
@@ -383,6 +375,26 @@ def _resources(variant: Variant, arch: str, compiled, sass: str,
                      *step_cost(step_loop(sass)))
 
 
+def cannot_compile() -> Optional[str]:
+    """Why the kernels cannot be compiled for GPUs here (no triton, or its
+    wheel without ``ptxas`` or ``cuobjdump``), or ``None``."""
+    try:
+        from triton import knobs
+        ptxas = knobs.nvidia.ptxas.path
+        _cuobjdump()
+    except (ImportError, FileNotFoundError, RuntimeError) as err:
+        return f'triton cannot compile for GPUs here ({err})'
+    return None if ptxas and os.path.isfile(ptxas) else \
+        f'triton has no ptxas here ({ptxas!r})'
+
+
+def ptxas_reports(precision: str) -> Dict[str, str]:
+    """:func:`ptxas_report` of each kernel's training variant at
+    ``precision`` for sm_90, by kernel name. Runs in a fresh process with
+    ``TRITON_INTERPRET`` unset."""
+    return _run_fresh(['--ptxas', precision])
+
+
 def ptxas_report(variant: Variant, arch: str) -> str:
     """What ``ptxas -v`` says of ``variant``'s PTX for ``arch`` (its
     notices, such as ``C7514``: ``wgmma`` products serialised, each waited
@@ -437,17 +449,22 @@ def _program_cycles(variant: Variant, arch: str, pixels: int,
                                       variant.num_warps, layout, hardware)
 
 
+def _training_variants(precision: str, hidden: int) -> List[Variant]:
+    """The forward's and the backward's variants a training pass runs."""
+    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
+                                                           backward_configs)
+    return [Variant('band_forward', hidden, precision, False,
+                    *FORWARD_CONFIGS[0]),
+            Variant('band_backward', hidden, precision, False,
+                    *backward_configs(False, precision)[0])]
+
+
 def _predict_here(precision: str, batch: int, pixels: int,
                   lengths: Sequence[int], hidden: int,
                   hardware: sass_timing.Hardware) -> Dict:
     """:func:`predict_band_kernels`, compiled in this process."""
-    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
-                                                           backward_configs,
-                                                           work_division)
-    forward = Variant('band_forward', hidden, precision, False,
-                      *FORWARD_CONFIGS[0])
-    backward = Variant('band_backward', hidden, precision, False,
-                       *backward_configs(False, precision)[0])
+    from wgse_mmseg.core.wgse.triton_band_networks import work_division
+    forward, backward = _training_variants(precision, hidden)
     found = dict(gpu=hardware.name, sms=hardware.sms,
                  clock_ghz=hardware.clock_ghz, precision=precision,
                  error=PREDICTION_ERROR)
@@ -519,8 +536,10 @@ def predict_band_kernels(precision: str = 'tf32', batch: int = 4,
         raise ValueError(f'predict_band_kernels: hidden must be one of '
                          f'{HIDDEN_CHANNELS}, got {hidden!r}')
     sizes = dict(batch=batch, height=height, width=width, sms=sms)
-    bad = [k for k, v in sizes.items() if not isinstance(v, int) or v < 1]
-    if bad or not (isinstance(clock_ghz, (int, float)) and clock_ghz > 0):
+    bad = [k for k, v in sizes.items() if isinstance(v, bool) or
+           not isinstance(v, int) or v < 1]
+    if bad or isinstance(clock_ghz, bool) or not (
+            isinstance(clock_ghz, (int, float)) and clock_ghz > 0):
         raise ValueError(f'predict_band_kernels: batch, height, width and '
                          f'sms must be positive integers and clock_ghz '
                          f'positive, got {sizes}, clock_ghz {clock_ghz!r}')
@@ -692,6 +711,10 @@ def build_parser() -> argparse.ArgumentParser:
                         type=Choice(['tf32', 'bf16', 'fp16']),
                         help='print the band kernels\' predicted times on a '
                         'Hopper GPU at this precision (predict_band_kernels)')
+    parser.add_argument('--ptxas', metavar='PRECISION',
+                        type=Choice(['tf32', 'bf16', 'fp16']),
+                        help='print ptxas\' report of each kernel\'s '
+                        'training variant for sm_90a at this precision')
     parser.add_argument('--shape', nargs=3, metavar=('B', 'H', 'W'),
                         type=Integer(1, 1 << 16), default=[4, 256, 512],
                         help='with --predict or --former: the spikes\' '
@@ -747,6 +770,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             sms=args.sms, clock_ghz=args.clock_mhz / 1e3)
         print(json.dumps(_predict_here(args.predict, batch, height * width,
                                        PAPER_BANDS, args.hidden, hardware)))
+        return 0
+    if args.ptxas:
+        print(json.dumps({v.kernel: ptxas_report(v, 'sm_90')
+                          for v in _training_variants(args.ptxas,
+                                                      args.hidden)}))
         return 0
     if args.former:
         print(json.dumps(_predict_former_here(
