@@ -325,8 +325,8 @@ def _compiled(variant: Variant, arch: str):
     from triton.compiler import ASTSource
 
     from wgse_mmseg.core.wgse import _triton_band_kernels as kernels
-    from wgse_mmseg.core.wgse.triton_band_networks import \
-        conv1_on_tensor_cores
+    from wgse_mmseg.core.wgse.triton_band_networks import (
+        conv1_on_tensor_cores, taps_as_one_product)
     signature = dict(_SIGNATURES[variant.kernel])
     signature.update({name: '*fp32' for name in _POINTERS})
     constants = dict(HIDDEN=variant.hidden, BLOCK=variant.block,
@@ -334,8 +334,11 @@ def _compiled(variant: Variant, arch: str):
     if variant.kernel == 'band_backward':
         constants['INPUT_GRAD'] = variant.input_grad
     else:
-        constants['CONV1_DOT'] = conv1_on_tensor_cores(
-            variant.precision, ARCHITECTURES[arch][0] // 10)
+        major = ARCHITECTURES[arch][0] // 10
+        constants['CONV1_DOT'] = conv1_on_tensor_cores(variant.precision,
+                                                       major)
+        constants['TAPS_01_AS_ONE'] = taps_as_one_product(
+            variant.precision, major)
     signature.update({name: 'constexpr' for name in constants})
     source = ASTSource(fn=getattr(kernels, variant.kernel),
                        signature=signature, constexprs=constants)
