@@ -423,8 +423,8 @@ def ptxas_report(variant: Variant, arch: str) -> str:
 PAPER_BANDS = (18, 18, 22, 29, 43, 72)
 #: The predictor's largest relative error on the one measurement of these
 #: kernels' kind there is (the former kernels on an H200; docs/wgse_speed.md,
-#: "A predictor"): what a prediction of :func:`predict_band_kernels` is
-#: stated with
+#: "A predictor"), with a point of margin: what a prediction of
+#: :func:`predict_band_kernels` is stated with
 PREDICTION_ERROR = 0.21
 
 
