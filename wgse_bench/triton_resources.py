@@ -45,8 +45,10 @@ import sys
 import tempfile
 from typing import Dict, List, NamedTuple, Optional, Sequence
 
-from wgse_mmseg.command_line import Choice, Integer, Path
+from wgse_mmseg.command_line import Choice, Integer, Number, Path
 from wgse_mmseg.limits import MAX_WORKERS
+
+from . import sass_timing
 
 __all__ = []
 
@@ -168,22 +170,14 @@ def step_loop(sass: str) -> List[str]:
     nothing). A branch's target is its last operand, after a uniform
     predicate (``BRA.U UP0, 0x...``) where it has one, before the
     scheduling notes sm_120's code carries (``?trans6``)."""
-    code = re.findall(r'/\*([0-9a-f]{4,})\*/\s+(@!?U?P\w+\s+)?([A-Z][\w.]*)'
-                      r'\s*([^;]*);', sass)
-    addresses = [int(address, 16) for address, *_ in code]
-    loops = []
-    for index, (address, _, opcode, operands) in enumerate(code):
-        target = re.search(r'(0x[0-9a-f]+)\s*\)?\s*(?:[&?].*)?$', operands)
-        if opcode.startswith('BRA') and target and \
-                int(target.group(1), 16) < addresses[index]:
-            start = addresses.index(int(target.group(1), 16))
-            body = code[start:index + 1]
-            if any(op.startswith('LDG') for _, _, op, _ in body):
-                loops.append(body)
-    if not loops:
-        raise ValueError('no loop that loads from global memory in the '
-                         'compiled kernel')
-    return [opcode for _, _, opcode, _ in min(loops, key=len)]
+    code = [sass_timing.Instruction(int(address, 16), opcode,
+                                    f'{opcode} {operands}'.strip(), 0, None,
+                                    None, 0)
+            for address, _, opcode, operands in re.findall(
+                r'/\*([0-9a-f]{4,})\*/\s+(@!?U?P\w+\s+)?([A-Z][\w.]*)'
+                r'\s*([^;]*);', sass)]
+    first, last = sass_timing.loop_bounds(code)
+    return [ins.opcode for ins in code[first:last + 1]]
 
 
 def step_cost(opcodes: Sequence[str]) -> tuple:
@@ -322,16 +316,17 @@ def _cuobjdump() -> str:
     return path
 
 
-def compile_variant(variant: Variant, arch: str) -> Resources:
-    """Compile ``variant`` for ``arch`` (``'sm_90'``, ...) and read its
-    resource use. Needs triton with ``TRITON_INTERPRET`` unset."""
+def _compiled(variant: Variant, arch: str):
+    """``(compiled kernel, its SASS text, cuobjdump's resource report)`` of
+    ``variant`` for ``arch``. Needs triton with ``TRITON_INTERPRET``
+    unset."""
     import triton
     from triton.backends.compiler import GPUTarget
     from triton.compiler import ASTSource
 
     from wgse_mmseg.core.wgse import triton_band_kernels as kernels
-    from wgse_mmseg.core.wgse.triton_band_networks import \
-        conv1_on_tensor_cores
+    from wgse_mmseg.core.wgse.triton_band_networks import (
+        conv1_on_tensor_cores, taps_as_one_product)
     signature = dict(_SIGNATURES[variant.kernel])
     signature.update({name: '*fp32' for name in _POINTERS})
     constants = dict(HIDDEN=variant.hidden, BLOCK=variant.block,
@@ -339,8 +334,11 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
     if variant.kernel == 'band_backward':
         constants['INPUT_GRAD'] = variant.input_grad
     else:
-        constants['CONV1_DOT'] = conv1_on_tensor_cores(
-            variant.precision, ARCHITECTURES[arch][0] // 10)
+        major = ARCHITECTURES[arch][0] // 10
+        constants['CONV1_DOT'] = conv1_on_tensor_cores(variant.precision,
+                                                       major)
+        constants['TAPS_01_AS_ONE'] = taps_as_one_product(
+            variant.precision, major)
     signature.update({name: 'constexpr' for name in constants})
     source = ASTSource(fn=getattr(kernels, variant.kernel),
                        signature=signature, constexprs=constants)
@@ -354,6 +352,18 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
             [_cuobjdump(), option, cubin.name], capture_output=True,
             text=True, check=True).stdout
             for option in ('--dump-resource-usage', '--dump-sass'))
+    return compiled, sass, dump
+
+
+def compile_variant(variant: Variant, arch: str) -> Resources:
+    """Compile ``variant`` for ``arch`` (``'sm_90'``, ...) and read its
+    resource use. Needs triton with ``TRITON_INTERPRET`` unset."""
+    return _resources(variant, arch, *_compiled(variant, arch))
+
+
+def _resources(variant: Variant, arch: str, compiled, sass: str,
+               dump: str) -> Resources:
+    """:class:`Resources` of a :func:`_compiled` kernel."""
     match = re.search(r'REG:(\d+) STACK:(\d+) SHARED:(\d+) LOCAL:(\d+)',
                       dump)
     if match is None:
@@ -366,6 +376,275 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
                                      arch),
                      loop_carried(compiled.asm['ttir']),
                      *step_cost(step_loop(sass)))
+
+
+def cannot_compile() -> Optional[str]:
+    """Why the kernels cannot be compiled for GPUs here (no triton, or its
+    wheel without ``ptxas`` or ``cuobjdump``), or ``None``."""
+    try:
+        from triton import knobs
+        ptxas = knobs.nvidia.ptxas.path
+        _cuobjdump()
+    except (ImportError, FileNotFoundError, RuntimeError) as err:
+        return f'triton cannot compile for GPUs here ({err})'
+    return None if ptxas and os.path.isfile(ptxas) else \
+        f'triton has no ptxas here ({ptxas!r})'
+
+
+def ptxas_reports(precision: str) -> Dict[str, str]:
+    """:func:`ptxas_report` of each kernel's training variant at
+    ``precision`` for sm_90, by kernel name. Runs in a fresh process with
+    ``TRITON_INTERPRET`` unset."""
+    return _run_fresh(['--ptxas', precision])
+
+
+def ptxas_report(variant: Variant, arch: str) -> str:
+    """What ``ptxas -v`` says of ``variant``'s PTX for ``arch`` (its
+    notices, such as ``C7514``: ``wgmma`` products serialised, each waited
+    for before the next; triton's own compile keeps none of it). Needs
+    triton with ``TRITON_INTERPRET`` unset."""
+    from triton import knobs
+    compiled, _, _ = _compiled(variant, arch)
+    target = f"{arch}a" if arch in ('sm_90', 'sm_100') else arch
+    tool = knobs.nvidia.ptxas_blackwell if ARCHITECTURES[arch][0] >= 100 \
+        else knobs.nvidia.ptxas
+    with tempfile.TemporaryDirectory() as folder:
+        ptx = os.path.join(folder, 'kernel.ptx')
+        with open(ptx, 'w') as f:
+            f.write(compiled.asm['ptx'])
+        return subprocess.run(
+            [tool.path, '-v', f'--gpu-name={target}', ptx, '-o',
+             os.path.join(folder, 'kernel.cubin')], capture_output=True,
+            text=True, check=True).stderr
+
+
+#: Coefficients of each band of WGSE's paper at T = 129 (db8, 5 levels):
+#: approximation, then details from the coarsest
+PAPER_BANDS = (18, 18, 22, 29, 43, 72)
+#: The predictor's largest relative error on the one measurement of these
+#: kernels' kind there is (the former kernels on an H200; docs/wgse_speed.md,
+#: "A predictor"), with a point of margin: what a prediction of
+#: :func:`predict_band_kernels` is stated with
+PREDICTION_ERROR = 0.21
+
+
+def makespan(durations: Sequence[float], slots: int) -> float:
+    """When the last of programs of ``durations`` (in launch order) ends on
+    ``slots`` resident places, each program taking the first place free:
+    how a GPU's block scheduler fills its SMs."""
+    import heapq
+    places = [0.0] * max(1, min(slots, len(durations)))
+    for duration in durations:
+        heapq.heappush(places, heapq.heappop(places) + duration)
+    return max(places)
+
+
+def _program_cycles(variant: Variant, arch: str, pixels: int,
+                    hardware: sass_timing.Hardware):
+    """:func:`.sass_timing.program_cycles` of ``variant`` compiled for
+    ``arch``, on band-major rows of ``pixels`` pixels, with the programs an
+    SM holds."""
+    compiled, sass, dump = _compiled(variant, arch)
+    resources = _resources(variant, arch, compiled, sass, dump)
+    layout = sass_timing.Layout(4, 4 * pixels, sass_timing.pixels_per_access(
+        compiled.asm['ttgir'], variant.block))
+    return sass_timing.program_cycles(sass, resources.programs_per_sm,
+                                      variant.num_warps, layout, hardware)
+
+
+def _training_variants(precision: str, hidden: int) -> List[Variant]:
+    """The forward's and the backward's variants a training pass runs."""
+    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
+                                                           backward_configs)
+    return [Variant('band_forward', hidden, precision, False,
+                    *FORWARD_CONFIGS[0]),
+            Variant('band_backward', hidden, precision, False,
+                    *backward_configs(False, precision)[0])]
+
+
+def _predict_here(precision: str, batch: int, pixels: int,
+                  lengths: Sequence[int], hidden: int,
+                  hardware: sass_timing.Hardware) -> Dict:
+    """:func:`predict_band_kernels`, compiled in this process."""
+    from wgse_mmseg.core.wgse.triton_band_networks import work_division
+    forward, backward = _training_variants(precision, hidden)
+    found = dict(gpu=hardware.name, sms=hardware.sms,
+                 clock_ghz=hardware.clock_ghz, precision=precision,
+                 error=PREDICTION_ERROR)
+    for variant, extra in ((forward, 2), (backward, 3)):
+        cycles = _program_cycles(variant, 'sm_90', pixels, hardware)
+        tiles = batch * -(-pixels // variant.block)
+        if variant.kernel == 'band_forward':  # a program a tile and band
+            durations = [cycles(length + extra) for length in lengths
+                         for _ in range(tiles)]
+        else:  # persistent: each program every step-th tile of its band
+            durations = [
+                cycles.fixed + cycles.per_step * (lengths[band] + extra) *
+                len(range(first, tiles, step)) for band, first, step in
+                work_division(lengths, tiles,
+                              hardware.sms * cycles.programs)]
+        found[variant.kernel] = makespan(
+            durations, hardware.sms * cycles.programs) / (
+                hardware.clock_ghz * 1e6)
+        found[f'{variant.kernel}_per_step_cycles'] = cycles.per_step
+        found[f'{variant.kernel}_programs_per_sm'] = cycles.programs
+    return found
+
+
+def predict_band_kernels(precision: str = 'tf32', batch: int = 4,
+                         height: int = 256, width: int = 512,
+                         hidden: int = 32, sms: int = 132,
+                         clock_ghz: float = 1.98) -> Dict:
+    """The band kernels' predicted times on a Hopper GPU (sm_90: H100,
+    H200) for one WGSE training pass, compiled here (no GPU).
+
+    Each kernel's training variant at ``precision`` (``'tf32'``, ``'bf16'``,
+    ``'fp16'``) is compiled for sm_90, and its SASS run through
+    :mod:`.sass_timing`'s model of one SM (ptxas' control bits, published
+    latencies and rates, the programs an SM holds); the forward's programs
+    (one a tile and band) and the backward's persistent ones
+    (:func:`~wgse_mmseg.core.wgse.triton_band_networks.work_division`) are
+    then placed on the GPU's ``sms`` SMs (:func:`makespan`). Runs in a
+    fresh process with ``TRITON_INTERPRET`` unset.
+
+    Args:
+        precision: of the tensor-core products.
+        batch, height, width: the spikes' ``B``, ``H``, ``W`` (the bands:
+            :data:`PAPER_BANDS`, the paper's T = 129).
+        hidden: the band networks' channels (16 or 32).
+        sms, clock_ghz: the GPU's SMs and SM clock under load (default:
+            the H200's).
+
+    Returns:
+        ``band_forward`` and ``band_backward``: predicted milliseconds of
+        each kernel's launch (what ``torch.profiler`` reports per kernel);
+        ``error``: the relative error to state them with
+        (:data:`PREDICTION_ERROR`); the GPU's ``gpu``, ``sms``,
+        ``clock_ghz``, the ``precision``, and per kernel its
+        ``*_per_step_cycles`` (one SM, all its programs) and
+        ``*_programs_per_sm``. The rest of a pass (the wavelet products,
+        ``d3``, conv3's bias gradient) is not in it.
+
+    Raises:
+        ValueError: an argument out of range.
+        RuntimeError: the kernels do not compile here.
+    """
+    from wgse_mmseg.core.wgse.triton_band_networks import (HIDDEN_CHANNELS,
+                                                           TOLERANCES)
+    if precision not in TOLERANCES or precision == 'ieee':
+        raise ValueError(f'predict_band_kernels: precision must be one of '
+                         f'the tensor-core ones {list(TOLERANCES)[1:]}, '
+                         f'got {precision!r}')
+    if hidden not in HIDDEN_CHANNELS:
+        raise ValueError(f'predict_band_kernels: hidden must be one of '
+                         f'{HIDDEN_CHANNELS}, got {hidden!r}')
+    sizes = dict(batch=batch, height=height, width=width, sms=sms)
+    bad = [k for k, v in sizes.items() if isinstance(v, bool) or
+           not isinstance(v, int) or v < 1]
+    if bad or isinstance(clock_ghz, bool) or not (
+            isinstance(clock_ghz, (int, float)) and clock_ghz > 0):
+        raise ValueError(f'predict_band_kernels: batch, height, width and '
+                         f'sms must be positive integers and clock_ghz '
+                         f'positive, got {sizes}, clock_ghz {clock_ghz!r}')
+    return _run_fresh(['--predict', precision, '--shape', str(batch),
+                       str(height), str(width), '--hidden', str(hidden),
+                       '--sms', str(sms), '--clock-mhz',
+                       str(clock_ghz * 1e3)])
+
+
+#: the former kernels' arguments (pixel-major ``(N, C)`` coefficients, a
+#: launch a band, its length a constant)
+_FORMER_SIGNATURES = {
+    'band_forward': dict(x_ptr='*fp32', y_ptr='*fp32', stride='i32',
+                         offset='i32', pixels='i32'),
+    'band_backward': dict(x_ptr='*fp32', gy_ptr='*fp32', gx_ptr='*fp32',
+                          partial_ptr='*fp32', stride='i32', offset='i32',
+                          pixels='i32'),
+}
+#: the launch entries the former kernels ran on an H200 (its autotuner's
+#: choice at 4x256x512 pixels): ``(block, warps)``, and the steps a band's
+#: program takes beyond its length
+_FORMER_ENTRIES = dict(band_forward=(64, 4, 2), band_backward=(16, 4, 5))
+
+
+def predict_former_kernels(source: str, batch: int = 4, height: int = 256,
+                           width: int = 512) -> Dict[str, Dict[str, float]]:
+    """The predictor applied to the kernels this repository's Triton
+    backend ran before its band-major rewrite (``source``: their module's
+    path, ``git show 3123fe6:wgse_mmseg/core/wgse/_triton_band_kernels.py``)
+    at TF32 and 32 channels on an H200: per kernel, each band length of
+    :data:`PAPER_BANDS` (as a string: JSON's keys) mapped to the predicted
+    milliseconds of its launch (a launch a band, pixel-major coefficients
+    of ``sum(PAPER_BANDS)`` columns), by the same model and hardware figures
+    as :func:`predict_band_kernels`. Runs in a fresh process with
+    ``TRITON_INTERPRET`` unset."""
+    return _run_fresh(['--former', os.fspath(source), '--shape', str(batch),
+                       str(height), str(width)])
+
+
+def _predict_former_here(source: str, batch: int, pixels: int,
+                         hidden: int, hardware: sass_timing.Hardware
+                         ) -> Dict[str, Dict[int, float]]:
+    """:func:`predict_former_kernels`, compiled in this process."""
+    import importlib.util
+
+    import triton
+    from triton.backends.compiler import GPUTarget
+    from triton.compiler import ASTSource
+    spec = importlib.util.spec_from_file_location('former_kernels', source)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    columns = sum(PAPER_BANDS)
+    found: Dict[str, Dict[int, float]] = {}
+    for kernel, (block, warps, extra) in _FORMER_ENTRIES.items():
+        for length in sorted(set(PAPER_BANDS)):
+            signature = dict(_FORMER_SIGNATURES[kernel])
+            signature.update({name: '*fp32' for name in _POINTERS})
+            constants = dict(LENGTH=length, HIDDEN=hidden, BLOCK=block,
+                             PRECISION='tf32')
+            if kernel == 'band_backward':
+                constants['INPUT_GRAD'] = False
+            signature.update({name: 'constexpr' for name in constants})
+            compiled = triton.compile(
+                ASTSource(fn=getattr(module, kernel), signature=signature,
+                          constexprs=constants),
+                target=GPUTarget('cuda', 90, 32),
+                options=dict(num_warps=warps))
+            with tempfile.NamedTemporaryFile(suffix='.cubin') as cubin:
+                cubin.write(compiled.asm['cubin'])
+                cubin.flush()
+                dump, sass = (subprocess.run(
+                    [_cuobjdump(), option, cubin.name], capture_output=True,
+                    text=True, check=True).stdout
+                    for option in ('--dump-resource-usage', '--dump-sass'))
+            registers, shared = (int(x) for x in re.search(
+                r'REG:(\d+) .*?SHARED:(\d+)', dump).groups())
+            programs = programs_per_sm(
+                registers, warps, shared + compiled.metadata.shared,
+                'sm_90')
+            layout = sass_timing.Layout(
+                4 * columns, 4, sass_timing.pixels_per_access(
+                    compiled.asm['ttgir'], block))
+            cycles = sass_timing.program_cycles(sass, programs, warps,
+                                                layout, hardware)
+            tiles = batch * -(-pixels // block)
+            found.setdefault(kernel, {})[length] = makespan(
+                [cycles(length + extra)] * tiles, hardware.sms * programs
+            ) / (hardware.clock_ghz * 1e6)
+    return found
+
+
+def _run_fresh(arguments: Sequence[str]):
+    """This module's command line run in a fresh process with
+    ``TRITON_INTERPRET`` unset, its JSON output read."""
+    env = {k: v for k, v in os.environ.items() if k != 'TRITON_INTERPRET'}
+    proc = subprocess.run([sys.executable, '-m', __name__, '--json',
+                           *arguments], capture_output=True, text=True,
+                          env=env)
+    if proc.returncode != 0:
+        raise RuntimeError(f'compiling the Triton kernels failed:\n'
+                           f'{proc.stderr}')
+    return json.loads(proc.stdout)
 
 
 def _compile_row(job) -> Dict:
@@ -393,14 +672,8 @@ def compile_all(archs: Sequence[str] = tuple(ARCHITECTURES),
     (``per_position``) and tensor-core ones. Runs in a
     fresh process with ``TRITON_INTERPRET`` unset, ``jobs`` compiles side by
     side (default: the CPUs)."""
-    env = {k: v for k, v in os.environ.items() if k != 'TRITON_INTERPRET'}
-    command = [sys.executable, '-m', __name__, '--json', '--jobs',
-               str(jobs or os.cpu_count() or 1), '--archs', *archs]
-    proc = subprocess.run(command, capture_output=True, text=True, env=env)
-    if proc.returncode != 0:
-        raise RuntimeError(f'compiling the Triton kernels failed:\n'
-                           f'{proc.stderr}')
-    return json.loads(proc.stdout)
+    return _run_fresh(['--jobs', str(jobs or os.cpu_count() or 1),
+                       '--archs', *archs])
 
 
 def format_table(rows: Sequence[Dict]) -> str:
@@ -437,6 +710,32 @@ def build_parser() -> argparse.ArgumentParser:
                         default=min(os.cpu_count() or 1, MAX_WORKERS))
     parser.add_argument('--json', action='store_true',
                         help='print the rows as JSON instead of a table')
+    parser.add_argument('--predict', metavar='PRECISION',
+                        type=Choice(['tf32', 'bf16', 'fp16']),
+                        help='print the band kernels\' predicted times on a '
+                        'Hopper GPU at this precision (predict_band_kernels)')
+    parser.add_argument('--ptxas', metavar='PRECISION',
+                        type=Choice(['tf32', 'bf16', 'fp16']),
+                        help='print ptxas\' report of each kernel\'s '
+                        'training variant for sm_90a at this precision')
+    parser.add_argument('--shape', nargs=3, metavar=('B', 'H', 'W'),
+                        type=Integer(1, 1 << 16), default=[4, 256, 512],
+                        help='with --predict or --former: the spikes\' '
+                        'batch, height and width (default 4 256 512)')
+    parser.add_argument('--hidden', type=Choice([16, 32]), default=32,
+                        help='with --predict or --former: the band '
+                        'networks\' channels')
+    parser.add_argument('--sms', type=Integer(1, 1024), default=132,
+                        help='with --predict: the GPU\'s SMs')
+    parser.add_argument('--clock-mhz', type=Number(1, 10000,
+                                                   strict_minimum=True),
+                        default=1980.0,
+                        help='with --predict: the GPU\'s SM clock under load')
+    parser.add_argument('--former', metavar='SOURCE', type=Path('file'),
+                        help='the former pixel-major kernels\' module '
+                        '(git show 3123fe6:wgse_mmseg/core/wgse/'
+                        '_triton_band_kernels.py): print the predictor\'s '
+                        'times of their launches on an H200 at TF32')
     parser.add_argument('--against', metavar='REPORT', type=Path(),
                         help="a GPU report's gpu.json (dev/gpu_report.py): "
                         'compile for its GPU and print each profiled band '
@@ -468,6 +767,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
         parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
                      'cannot be compiled')
+    batch, height, width = args.shape
+    if args.predict:
+        hardware = sass_timing.H200._replace(
+            sms=args.sms, clock_ghz=args.clock_mhz / 1e3)
+        print(json.dumps(_predict_here(args.predict, batch, height * width,
+                                       PAPER_BANDS, args.hidden, hardware)))
+        return 0
+    if args.ptxas:
+        print(json.dumps({v.kernel: ptxas_report(v, 'sm_90')
+                          for v in _training_variants(args.ptxas,
+                                                      args.hidden)}))
+        return 0
+    if args.former:
+        print(json.dumps(_predict_former_here(
+            args.former, batch, height * width, args.hidden,
+            sass_timing.H200)))
+        return 0
     if args.against:
         try:
             report = _report_of_this_code(args.against)

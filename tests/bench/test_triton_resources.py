@@ -9,6 +9,8 @@ docs/wgse_speed.md)."""
 import ast
 import inspect
 import json
+import os
+import subprocess
 import textwrap
 
 import pytest
@@ -16,7 +18,7 @@ import pytest
 from wgse_bench import triton_resources
 from wgse_mmseg.core.wgse import triton_band_networks
 
-_triton_band_kernels = pytest.importorskip(
+triton_band_kernels = pytest.importorskip(
     'wgse_mmseg.core.wgse.triton_band_kernels')
 
 pytestmark = pytest.mark.needs_triton
@@ -94,7 +96,7 @@ def _loop_variables(kernel, input_grad):
     """How many values a kernel's ``for`` loops must carry from one step to
     the next: the names each assigns that were assigned before it."""
     source = textwrap.dedent(inspect.getsource(
-        getattr(_triton_band_kernels, kernel).fn))
+        getattr(triton_band_kernels, kernel).fn))
     return _carried(ast.parse(source).body[0].body, set(), bool(input_grad))
 
 
@@ -309,3 +311,122 @@ def test_the_comparison_refuses_a_file_that_is_no_report(
     with pytest.raises(SystemExit):
         triton_resources.main(['--against', str(path)])
     assert f'{path} holds no report' in capsys.readouterr().err
+
+
+@pytest.fixture
+def hopper():
+    """A skip where triton cannot compile for sm_90a here."""
+    reason = triton_resources.cannot_compile()
+    if reason:
+        pytest.skip(reason)
+
+
+@pytest.fixture(scope='session')
+def predictions(built_once):
+    """The predictor's times of a training pass's band kernels on an H200
+    at 4x129x256x512, TF32 and bf16, compiled once a run."""
+    def build(path):
+        with open(path, 'w') as f:
+            json.dump({p: triton_resources.predict_band_kernels(p)
+                       for p in ('tf32', 'bf16')}, f)
+    with open(built_once('band_kernel_predictions.json', build)) as f:
+        return json.load(f)
+
+
+#: The predictor's budget (milliseconds of each kernel's launch on an H200,
+#: a WGSE training pass at 4x129x256x512; docs/wgse_speed.md, "A
+#: predictor"): what the kernels as compiled by triton 3.6 are predicted to
+#: take, rounded up. A change that the predictor says costs more shows here
+#: first.
+PREDICTED_BUDGET_MS = {('tf32', 'band_forward'): 5.2,
+                       ('tf32', 'band_backward'): 24.5,
+                       ('bf16', 'band_forward'): 4.3,
+                       ('bf16', 'band_backward'): 15.5}
+
+
+def test_kernels_within_predicted_budget(hopper, predictions):
+    assert {(p, k) for p in predictions for k in predictions[p]
+            if k.startswith('band_') and not k.endswith(('cycles', 'sm'))
+            } == set(PREDICTED_BUDGET_MS)
+    over = {key: predictions[key[0]][key[1]] for key, budget in
+            PREDICTED_BUDGET_MS.items()
+            if not 0 < predictions[key[0]][key[1]] <= budget}
+    assert not over, (over, PREDICTED_BUDGET_MS)
+    for found in predictions.values():
+        assert found['gpu'] == 'NVIDIA H200' and found['error'] == \
+            triton_resources.PREDICTION_ERROR
+        assert found['band_forward_programs_per_sm'] >= 2
+
+
+def test_prediction_arguments_are_checked():
+    for bad in (dict(precision='ieee'), dict(precision='tf64'),
+                dict(hidden=64), dict(batch=0), dict(width=2.5),
+                dict(clock_ghz=0), dict(sms=True)):
+        with pytest.raises(ValueError, match='predict_band_kernels'):
+            triton_resources.predict_band_kernels(**bad)
+
+
+def test_makespan_by_hand():
+    assert triton_resources.makespan([3, 3, 3], 2) == 6
+    assert triton_resources.makespan([5, 1, 1, 1], 2) == 5
+    assert triton_resources.makespan([2, 2], 8) == 2
+
+
+_FORMER = '3123fe6'
+
+
+def _at_former_commit(path):
+    """``path`` as the repository held it at the former kernels' commit,
+    or a skip where this checkout's history lacks it."""
+    proc = subprocess.run(['git', 'show', f'{_FORMER}:{path}'],
+                          cwd=os.path.dirname(os.path.dirname(
+                              os.path.dirname(os.path.abspath(__file__)))),
+                          capture_output=True, text=True)
+    if proc.returncode:
+        pytest.skip(f'this checkout\'s history lacks {_FORMER} ({path}): '
+                    f'{proc.stderr.strip()}')
+    return proc.stdout
+
+
+def test_the_predictor_explains_the_former_kernels_measurement(hopper,
+                                                               tmp_path):
+    """The one measurement of these kernels' kind on a GPU: the former
+    pixel-major kernels' launches on an H200 (their autotuner's times of
+    its chosen entries, per band, at 4x256x512 pixels, in the report of
+    that commit). The predictor, from their compiled code alone, is within
+    :data:`~wgse_bench.triton_resources.PREDICTION_ERROR` of each kernel's
+    sum over the bands."""
+    source = tmp_path / 'former_kernels.py'
+    source.write_text(_at_former_commit(
+        'wgse_mmseg/core/wgse/_triton_band_kernels.py'))
+    report = json.loads(_at_former_commit('docs/gpu.json'))
+    assert report['environment']['gpu'] == 'NVIDIA H200'
+    measured = {}
+    for key, choice in report['sections']['autotune']['chosen'].items():
+        _, kernel, variant, pixels = (part.strip() for part in
+                                      key.split('|'))
+        if pixels == '<=524288 px' and 'H=32 tf32' in variant:
+            length = int(variant.split()[0][2:])
+            measured.setdefault(kernel, {})[length] = \
+                choice['entry_ms'][choice['entry']]
+    predicted = triton_resources.predict_former_kernels(str(source))
+    for kernel in ('band_forward', 'band_backward'):
+        want = sum(measured[kernel][n] for n in triton_resources.PAPER_BANDS)
+        got = sum(predicted[kernel][str(n)]
+                  for n in triton_resources.PAPER_BANDS)
+        assert abs(got / want - 1) <= triton_resources.PREDICTION_ERROR, (
+            kernel, got, want)
+
+
+def test_ptxas_serialises_no_wgmma_product(hopper):
+    """ptxas' report of each training variant for sm_90a names no
+    serialised ``wgmma`` products (its notice C7514: each waited for before
+    the next, because other instructions read their accumulators)."""
+    reports = {p: triton_resources.ptxas_reports(p)
+               for p in ('tf32', 'bf16')}
+    assert all(set(r) == {'band_forward', 'band_backward'} and
+               all("for 'sm_90a'" in text for text in r.values())
+               for r in reports.values())
+    serialised = {(p, k): text for p, r in reports.items()
+                  for k, text in r.items() if 'C7514' in text}
+    assert not serialised, serialised

@@ -36,7 +36,7 @@ Outputs, beside ``video`` (:func:`walk_outputs`)
     ``<video stem>_frames/<window>.png``. Each appears complete or not at all.
 Resuming
     Until the walk ends, its state lies in ``<video>.partial/``, a folder
-    the walk owns (:func:`~wgse_mmseg.core.output_folder.own_folder`: one
+    the walk owns (:func:`~wgse_mmseg.fileio.locks.own_folder`: one
     walk of a video at a time, a second refused naming the first, or
     waiting with ``wait``; no link in it followed): the settings it was
     started with, a PNG per window done, and ``progress.csv``, a row

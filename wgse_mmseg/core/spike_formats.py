@@ -17,7 +17,7 @@ Formats, chosen by the file extension, each one entry of
 ``.npy`` / ``.npz``
     A 3-D array of 0/1 (``.npz``: key ``spikes``, Spike-Zoo's ``spk``, or
     its only array) stored in either *layout*
-    (:data:`~wgse_mmseg.core.arguments.LAYOUT`): ``'THW'``, frames first,
+    (:data:`~wgse_mmseg.argument_checks.LAYOUTS`): ``'THW'``, frames first,
     ``(T, H, W)``; or ``'HWT'``, frames last, ``(H, W, T)``, as some
     simulators and viewers store them.
 

@@ -105,6 +105,25 @@ def _transposed_wide_offsets(HIDDEN: tl.constexpr):
 
 
 @triton.jit
+def _two_taps(ptr, HIDDEN: tl.constexpr):
+    """``(H_in, 2 H_out)``: taps 0 and 1 of the ``(H_out, H_in, 3)`` weight
+    at ``ptr`` side by side (tap 0 in columns ``0`` to ``H``): one product
+    with it is both taps' products."""
+    i = tl.arange(0, HIDDEN)[:, None]
+    column = tl.arange(0, 2 * HIDDEN)[None, :]
+    return tl.load(ptr + (column % HIDDEN) * (3 * HIDDEN) + i * 3 +
+                   column // HIDDEN)
+
+
+@triton.jit
+def _halves(product, BLOCK: tl.constexpr, HIDDEN: tl.constexpr):
+    """The two ``(BLOCK, H)`` column halves of ``product`` ``(BLOCK, 2
+    H)``, the first first."""
+    return tl.split(tl.permute(tl.reshape(product, (BLOCK, 2, HIDDEN)),
+                               (0, 2, 1)))
+
+
+@triton.jit
 def _band_weights(band, w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
                   HIDDEN: tl.constexpr):
     """Band ``band``'s weights as a step uses them: conv1's taps ``(1, H)``
@@ -198,7 +217,8 @@ def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
                  lengths_ptr, offsets_ptr,
                  w1_ptr, b1_ptr, w2_ptr, b2_ptr, w3_ptr, b3_ptr,
                  HIDDEN: tl.constexpr, BLOCK: tl.constexpr,
-                 PRECISION: tl.constexpr, CONV1_DOT: tl.constexpr):
+                 PRECISION: tl.constexpr, CONV1_DOT: tl.constexpr,
+                 TAPS_01_AS_ONE: tl.constexpr):
     """The network on ``x`` ``(B, C, P)``: program ``(tile, band)`` runs
     band ``band`` on the ``BLOCK`` pixels of tile ``tile`` (tiles numbered
     sample by sample, ``tiles_per_sample`` each). Writes ``y`` into
@@ -207,7 +227,14 @@ def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
     pre-activation is ``y``'s gradient there and zero elsewhere.
     ``CONV1_DOT``: conv1 as a product on tensor cores
     (:func:`_step_window`, the operands rounded as ``PRECISION`` says),
-    else float32 multiply-adds (:func:`_h1`)."""
+    else float32 multiply-adds (:func:`_h1`). ``TAPS_01_AS_ONE``: conv2's
+    taps 0 and 1 as one product (:func:`_two_taps`), whose results only
+    element-wise sums read; where each tap is its own product, the results
+    carried to the next step as the next products' accumulators make
+    ptxas wait for each of sm_90's ``wgmma`` before issuing the next.
+    Elsewhere the wider product costs registers (it spills on sm_80, sm_89,
+    sm_100 and sm_120, and in full float32) and there is nothing to
+    gain."""
     tile = tl.program_id(0)
     band = tl.program_id(1)
     length = tl.load(lengths_ptr + band)
@@ -227,6 +254,8 @@ def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
         # window x[s - 1], x[s], x[s + 1] (columns 0-2) is conv1 at s
         c = tl.arange(0, 16)[None, :]
         taps = _conv1_taps(tl.arange(0, 16)[:, None], 0, w1_0, w1_1, w1_2)
+    if TAPS_01_AS_ONE:
+        w2_01 = _two_taps(w2_ptr + band * (3 * HIDDEN * HIDDEN), HIDDEN)
     x_1 = tl.zeros((BLOCK, ), tl.float32)  # x[s - 1]
     x_0 = tl.load(x_ptr + first + cols, mask=valid, other=0.0)  # x[s]
     # conv2's pre-activation of h2[s - 1] and h2[s] without the taps of the
@@ -246,9 +275,14 @@ def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
         else:
             h1_0 = _h1(s, x_1, x_0, x_n, w1_0, w1_1, w1_2, b1, length)
         h2_1 = tl.maximum(p_1 + _dot(h1_0, w2_2, PRECISION), 0.0)
-        p_1 = p_0 + _dot(h1_0, w2_1, PRECISION)
-        p_0 = (_bias_at(s + 1, length, b2) + x_n[:, None] +
-               _dot(h1_0, w2_0, PRECISION))
+        if TAPS_01_AS_ONE:
+            t_0, t_1 = _halves(_dot(h1_0, w2_01, PRECISION), BLOCK, HIDDEN)
+            p_1 = p_0 + t_1
+            p_0 = _bias_at(s + 1, length, b2) + x_n[:, None] + t_0
+        else:
+            p_1 = p_0 + _dot(h1_0, w2_1, PRECISION)
+            p_0 = (_bias_at(s + 1, length, b2) + x_n[:, None] +
+                   _dot(h1_0, w2_0, PRECISION))
         # h2[s - 1] through conv3's: y[s - 2] before its ReLU
         a3 = q_1 + tl.sum(h2_1 * w3_2, axis=1)
         q_1 = q_0 + tl.sum(h2_1 * w3_1, axis=1)

@@ -126,6 +126,16 @@ def conv1_on_tensor_cores(precision: str, major: int) -> bool:
                                              major == 10)
 
 
+def taps_as_one_product(precision: str, major: int) -> bool:
+    """Whether the forward kernel runs conv2's taps 0 and 1 as one product
+    (``TAPS_01_AS_ONE``) with products of ``precision`` on a GPU of compute
+    capability ``major`` (0: the interpreter): on sm_90's tensor cores,
+    whose ``wgmma`` products ptxas otherwise serialises, and in the
+    interpreter at those precisions, so that its tests reach it. Full
+    float32 (``'ieee'``, the FMA units) spills with it."""
+    return precision != 'ieee' and major in (0, 9)
+
+
 def backward_configs(input_grad: Optional[bool] = None,
                      precision: Optional[str] = None
                      ) -> Tuple[LaunchConfig, ...]:
@@ -287,6 +297,7 @@ def launch_forward(config: LaunchConfig, coeffs: Tensor,
                 HIDDEN=inputs.hidden, BLOCK=config.block,
                 PRECISION=precision,
                 CONV1_DOT=conv1_on_tensor_cores(precision, major),
+                TAPS_01_AS_ONE=taps_as_one_product(precision, major),
                 num_warps=config.num_warps, maxnreg=config.maxnreg)
     return out, positive
 
