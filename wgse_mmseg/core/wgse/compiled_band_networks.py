@@ -156,11 +156,19 @@ class _Bands:
             self.chunks += [(band, first, min(step, pixels - first))
                             for first in range(0, pixels, step)]
 
+    def grad_range(self, chunks: range) -> slice:
+        """The elements of the whole gradient (every band's, side by side)
+        that ``chunks`` (consecutive) add to: their bands'."""
+        first, last = (self.chunks[c][0] for c in (chunks[0], chunks[-1]))
+        return slice(self.grad_slices[first].start,
+                     self.grad_slices[last].stop)
+
     def run(self, chunk: int, out: Optional[Tensor] = None,
             grad_out: Optional[Tensor] = None,
-            grads: Optional[Tensor] = None) -> None:
+            grads: Optional[Tensor] = None, grads_start: int = 0) -> None:
         """Forward into ``out``, or backward of ``grad_out`` into the
-        double ``grads`` (every band's, side by side)."""
+        double ``grads``: the bands' gradients side by side from element
+        ``grads_start`` of the whole (:meth:`grad_range`)."""
         band, first, pixels = self.chunks[chunk]
         stride = self.coeffs.stride(0)
         element = self.coeffs.element_size()
@@ -173,8 +181,8 @@ class _Bands:
 
         grad_address = 0
         if grads is not None:
-            grad_address = grads.data_ptr() + grads.element_size() * \
-                self.grad_slices[band].start
+            grad_address = grads.data_ptr() + grads.element_size() * (
+                self.grad_slices[band].start - grads_start)
         _band_networks.run(
             address(self.coeffs), stride, address(grad_out), stride,
             address(out), stride, pixels, self.lengths[band], self.layers,
@@ -234,18 +242,25 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     bands = _Bands(coeffs, lengths, weights, residual_plan(residuals))
     grad_out = grad_out.contiguous()
     groups = chunk_groups(len(bands.chunks))
+    # each group's sums over its own bands only (a group is a few chunks,
+    # most often of one band): whole-gradient buffers for up to
+    # MAX_GROUPS groups would be many megabytes held at once
+    ranges = [bands.grad_range(group) for group in groups]
     sums = [None] * len(groups)
 
     def backward_group(group: int, _) -> None:
-        sums[group] = torch.zeros(bands.grad_total, dtype=torch.float64)
+        where = ranges[group]
+        sums[group] = torch.zeros(where.stop - where.start,
+                                  dtype=torch.float64)
         for chunk in groups[group]:
-            bands.run(chunk, grad_out=grad_out, grads=sums[group])
+            bands.run(chunk, grad_out=grad_out, grads=sums[group],
+                      grads_start=where.start)
 
     for_each_on_threads(backward_group, len(groups), lambda: None)
-    flat = sums[0] if sums else torch.zeros(bands.grad_total,
-                                            dtype=torch.float64)
-    for more in sums[1:]:  # in group order, whatever the threads
-        flat = flat + more
+    flat = torch.zeros(bands.grad_total, dtype=torch.float64)
+    # in group order, whatever the threads
+    for where, part in zip(ranges, sums):
+        flat[where] += part
     grads = []
     for band, where in zip(weights, bands.grad_slices):
         grads += _unpack_grads(flat[where], band)

@@ -402,14 +402,19 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     per_band = 2 * len(plan)
     chunks = list(_chunks(coeffs, tuple(lengths), plan, pad, params))
     groups = chunk_groups(len(chunks))
-    sums: List[List[Tensor]] = [[] for _ in groups]
+    # each group's sums for its own bands only (``None`` for the others): a
+    # group is a few chunks, most often of one band
+    sums: List[List[Optional[Tensor]]] = [[] for _ in groups]
 
     def backward_group(group: int, scratch: _Workspace) -> None:
-        sums[group] = param_grads = _zero_grads(params)
+        sums[group] = param_grads = [None] * len(params)
         for chunk in groups[group]:
             band, columns, rows, layers = chunks[chunk]
-            acts = _chunk_forward(columns[rows], layers, pad, scratch)
             first = band.index * per_band
+            if param_grads[first] is None:
+                param_grads[first:first + per_band] = _zero_grads(
+                    params[first:first + per_band])
+            acts = _chunk_forward(columns[rows], layers, pad, scratch)
             grad_in = _chunk_backward(
                 acts, grad_out[rows, band.offset], layers,
                 param_grads[first:first + per_band], pad, input_grad,
@@ -419,10 +424,11 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
 
     for_each_on_threads(backward_group, len(groups),
                         lambda: _Workspace(coeffs))
-    param_grads = sums[0] if sums else _zero_grads(params)
-    for more in sums[1:]:  # in group order
-        param_grads = [total.add_(part)
-                       for total, part in zip(param_grads, more)]
+    param_grads = _zero_grads(params)
+    for part in sums:  # in group order
+        for total, grad in zip(param_grads, part):
+            if grad is not None:
+                total += grad
     param_grads = [g.permute(2, 1, 0).contiguous() if g.dim() == 3 else g
                    for g in param_grads]
     return ([grad_coeffs] if input_grad else []) + param_grads
