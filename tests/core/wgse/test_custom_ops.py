@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from wgse_mmseg.core.wgse import (WGSE, compiled_band_networks,
-                                 triton_band_networks, wgse)
+                                  triton_band_networks, wgse)
 
 needs_compiled = pytest.mark.skipif(
     compiled_band_networks.unavailable() is not None,
