@@ -32,8 +32,9 @@ import torch
 from torch import Tensor
 
 from ..parallel import for_each_on_threads
-from .torch_band_networks import (chunk_groups, differentiable_backward,
-                                  op_residuals, residual_plan)
+from .torch_band_networks import (InOrder, chunk_groups,
+                                  differentiable_backward, op_residuals,
+                                  residual_plan)
 
 try:
     from . import _band_networks
@@ -242,25 +243,25 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     bands = _Bands(coeffs, lengths, weights, residual_plan(residuals))
     grad_out = grad_out.contiguous()
     groups = chunk_groups(len(bands.chunks))
+    flat = torch.zeros(bands.grad_total, dtype=torch.float64)
+
+    def add(part) -> None:
+        where, sums = part
+        flat[where] += sums
+
     # each group's sums over its own bands only (a group is a few chunks,
-    # most often of one band): whole-gradient buffers for up to
-    # MAX_GROUPS groups would be many megabytes held at once
-    ranges = [bands.grad_range(group) for group in groups]
-    sums = [None] * len(groups)
+    # most often of one band), added in group order
+    add_in_order = InOrder(add)
 
     def backward_group(group: int, _) -> None:
-        where = ranges[group]
-        sums[group] = torch.zeros(where.stop - where.start,
-                                  dtype=torch.float64)
+        where = bands.grad_range(groups[group])
+        sums = torch.zeros(where.stop - where.start, dtype=torch.float64)
         for chunk in groups[group]:
-            bands.run(chunk, grad_out=grad_out, grads=sums[group],
+            bands.run(chunk, grad_out=grad_out, grads=sums,
                       grads_start=where.start)
+        add_in_order(group, (where, sums))
 
     for_each_on_threads(backward_group, len(groups), lambda: None)
-    flat = torch.zeros(bands.grad_total, dtype=torch.float64)
-    # in group order, whatever the threads
-    for where, part in zip(ranges, sums):
-        flat[where] += part
     grads = []
     for band, where in zip(weights, bands.grad_slices):
         grads += _unpack_grads(flat[where], band)
