@@ -1,28 +1,36 @@
 """Peak memory and time of a WGSE training pass on the CPU backends, beside
-another checkout's (an older commit's) in the same run.
+another checkout's (an older commit's), interleaved in one run.
 
 Each measurement runs in a fresh process with glibc returning large
 allocations to the system at once (:data:`ENVIRONMENT`), which makes the
-peak repeat within about 1%: one small forward+backward first (imports,
-thread pools, the transform's matrices: fixed costs, not per pixel),
-then one at ``shape``
-whose growth of peak RSS (``resource.getrusage``'s ``ru_maxrss``) is
-divided by its pixels, then ``repeat`` more, timed.
+peak repeat within about 1%: one small forward+backward first, given an
+output gradient as the measured pass is (imports, thread pools, the
+transform's matrices and what autograd's first call with a given gradient
+imports: fixed costs, not per pixel), then one at ``shape`` whose peak
+resident set over the resident set before it (Linux: the high-water mark
+reset to the current size just before, so that the warm-up's own peak
+cannot hide it) is divided by its pixels, then ``repeat`` more, timed.
+
+The run takes ``rounds`` rounds; each runs every backend in every checkout,
+the checkouts' order alternating from round to round, so that a change in
+the machine's load reaches both alike. A row's figures are medians over the
+rounds (a round's time: the median of its ``repeat`` passes); its ratios to
+the baseline are the medians of the rounds' ratios.
 
 ``python -m wgse_bench.wgse_memory [--baseline CHECKOUT]`` prints one row
-per backend and checkout; ``CHECKOUT`` is a work tree of another commit
-(``git worktree add /tmp/old COMMIT``, with the C extensions copied or
-built there), imported in place of this one.
+per backend and checkout, with the machine and its load average before
+and after; ``CHECKOUT`` is a work tree of another commit (``git worktree
+add DIR COMMIT``, with the C extensions built there: ``python setup.py
+build_ext --inplace``), imported in place of this one.
 """
 import argparse
 import json
 import os
-import resource
 import statistics
 import subprocess
 import sys
 import time
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Sequence
 
 __all__ = []
 
@@ -34,23 +42,40 @@ BACKENDS = ('compiled', 'torch')
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+def _status_kib(field: str) -> int:
+    """``field`` (``'VmRSS'``, ``'VmHWM'``) of ``/proc/self/status``, KiB."""
+    with open('/proc/self/status') as f:
+        for line in f:
+            if line.startswith(field + ':'):
+                return int(line.split()[1])
+    raise RuntimeError(f'/proc/self/status has no {field} line')
+
+
+def _reset_peak() -> None:
+    """Set the resident set's high-water mark to its current size
+    (``/proc/self/clear_refs``, Linux 4.0 on)."""
+    with open('/proc/self/clear_refs', 'w') as f:
+        f.write('5')
+
+
 def worker(backend: str, shape: List[int], repeat: int) -> Dict:
-    """One backend's figures, in this (fresh) process."""
+    """One backend's figures, in this (fresh) process: ``kb_per_pixel``
+    (KB = 1000 bytes), ``median_s`` of the ``repeat`` timed passes."""
     import torch
 
     from wgse_mmseg.core.wgse import WGSE
     torch.manual_seed(0)
     model = WGSE(backend=backend)
     small = (torch.rand(1, shape[1], 4, 4) < 0.3).float()
-    model(small).sum().backward()
+    model(small).backward(torch.randn_like(small))
     model.zero_grad(set_to_none=True)
     generator = torch.Generator().manual_seed(1)
     spikes = (torch.rand(shape, generator=generator) < 0.3).float()
     grad = torch.randn(shape, generator=generator)
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    before = _status_kib('VmRSS')
+    _reset_peak()
     model(spikes).backward(grad)
-    growth = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss -
-              before) * 1024  # bytes
+    growth = (_status_kib('VmHWM') - before) * 1024  # bytes
     times = []
     for _ in range(repeat):
         model.zero_grad(set_to_none=True)
@@ -76,6 +101,39 @@ def measure(backend: str, shape: List[int], repeat: int,
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+def summarize(rounds: Sequence[Dict[str, Dict]], baseline: Optional[str]
+              ) -> Dict[str, Dict]:
+    """Per checkout, the medians over ``rounds`` (each ``{checkout:
+    measure's dict}``, one backend) of ``kb_per_pixel`` and ``median_s``,
+    and, beside a ``baseline`` checkout, the medians of the rounds' ratios
+    to it (``memory``, ``time``; ``None`` for the baseline itself)."""
+    summary = {}
+    for name in rounds[0]:
+        row = {key: statistics.median(r[name][key] for r in rounds)
+               for key in ('kb_per_pixel', 'median_s')}
+        row['backend'] = rounds[0][name]['backend']
+        for ratio, key in (('memory', 'kb_per_pixel'), ('time', 'median_s')):
+            row[ratio] = None if baseline in (None, name) else \
+                statistics.median(r[name][key] / r[baseline][key]
+                                  for r in rounds)
+        summary[name] = row
+    return summary
+
+
+def _commit(checkout: str) -> str:
+    """``checkout``'s commit (short; ``+`` where its work tree differs),
+    or its path where git cannot say."""
+    git = ['git', '-C', checkout]
+    head = subprocess.run(git + ['rev-parse', '--short', 'HEAD'],
+                          capture_output=True, text=True)
+    if head.returncode != 0:
+        return checkout
+    changes = subprocess.run(git + ['status', '--porcelain',
+                                    '--untracked-files=no'],
+                             capture_output=True, text=True)
+    return head.stdout.strip() + ('+' if changes.stdout.strip() else '')
+
+
 def build_parser() -> argparse.ArgumentParser:
     from wgse_mmseg.command_line import Integer, Path, Text
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -85,8 +143,15 @@ def build_parser() -> argparse.ArgumentParser:
                         default='x'.join(map(str, SHAPE)),
                         help='BxTxHxW of the training pass')
     parser.add_argument('--repeat', type=Integer(1, 1000), default=3,
-                        help='timed passes per backend')
+                        help='timed passes per backend and process')
+    parser.add_argument('--rounds', type=Integer(1, 100), default=3,
+                        help='fresh processes per backend and checkout, '
+                        'the checkouts interleaved')
     return parser
+
+
+def _load() -> str:
+    return '/'.join(f'{value:.2f}' for value in os.getloadavg())
 
 
 def main(argv: Optional[List[str]] = None) -> int:
@@ -98,18 +163,40 @@ def main(argv: Optional[List[str]] = None) -> int:
                                 int(repeat))))
         return 0
     args = build_parser().parse_args(argv)
+    from wgse_bench.machine import machine_record
     shape = [int(s) for s in args.shape.split('x')]
-    checkouts = [('this checkout', ROOT)]
+    checkouts = {f'this checkout ({_commit(ROOT)})': ROOT}
+    baseline = None
     if args.baseline:
-        checkouts.append((args.baseline, os.path.abspath(args.baseline)))
-    print(f'WGSE forward+backward at {args.shape}, {ENVIRONMENT}')
-    print(f'{"checkout":<24} {"backend":<9} {"KB/pixel":>9} '
-          f'{"median s":>9}')
+        path = os.path.abspath(args.baseline)
+        baseline = _commit(path)
+        checkouts[baseline] = path
+    machine = machine_record()
+    print(f'WGSE forward+backward at {args.shape}, {ENVIRONMENT}; '
+          f'{machine["cpu"]}, {machine["cpu_count"]} CPUs, '
+          f'{machine["torch_threads"]} torch threads, torch '
+          f'{machine["torch"]}; load average {_load()} (1/5/15 min) '
+          f'before')
+    print(f'{args.rounds} rounds, the checkouts interleaved; medians over '
+          f'the rounds, ratios to {baseline or "no baseline"} per round')
+    print(f'{"checkout":<26} {"backend":<9} {"KB/pixel":>9} '
+          f'{"memory":>7} {"median s":>9} {"time":>6}')
+    names = list(checkouts)
     for backend in BACKENDS:
-        for name, path in checkouts:
-            res = measure(backend, shape, args.repeat, path)
-            print(f'{name:<24} {res["backend"]:<9} '
-                  f'{res["kb_per_pixel"]:>9.2f} {res["median_s"]:>9.3f}')
+        rounds = []
+        for index in range(args.rounds):
+            order = names if index % 2 == 0 else names[::-1]
+            rounds.append({name: measure(backend, shape, args.repeat,
+                                         checkouts[name])
+                           for name in order})
+        for name, row in summarize(rounds, baseline).items():
+            memory, speed = (
+                '' if row[key] is None else f'{row[key]:.2f}x'
+                for key in ('memory', 'time'))
+            print(f'{name:<26} {row["backend"]:<9} '
+                  f'{row["kb_per_pixel"]:>9.2f} {memory:>7} '
+                  f'{row["median_s"]:>9.3f} {speed:>6}')
+    print(f'load average {_load()} after')
     return 0
 
 

@@ -3,9 +3,17 @@
 A backend takes the band networks
 (:class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`, one per wavelet band) and
 every pixel's wavelet coefficients ``(B, C, P)`` (``P = H*W`` pixels; the bands
-one after another along ``C``, so that one coefficient of every pixel is a
-contiguous row) and returns the networks' outputs in the same layout. All
-compute the same function; they differ in where they run and how fast:
+one after another along ``C``) and returns the networks' outputs, ``(B, C,
+P)`` too. Each backend declares the memory layout it reads without a copy
+(:meth:`BandNetworkBackend.pixel_major`, :func:`pixel_major`): band-major,
+``(B, C, P)`` contiguous, one coefficient of every pixel a contiguous row
+(the Triton kernel's), or pixel-major, the ``(B, C, P)`` view of ``(B, P,
+C)`` rows, one pixel's coefficients a row (the CPU kernels'); WGSE computes
+the coefficients in it, and a pixel-major backend returns its output
+pixel-major, so that nothing is copied between the layouts and the
+gradient of the output reaches the kernel in its own layout. Given the
+other layout, a backend copies. All compute the same function; they differ
+in where they run and how fast:
 
 * ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
   every variant. ``dim=1`` runs the chunked kernel of
@@ -102,6 +110,14 @@ class BandNetworkBackend:
         gradients), or ``None``."""
         return None
 
+    def pixel_major(self, networks: Sequence[nn.Module],
+                    device_type: str) -> bool:
+        """Whether :meth:`run` on ``device_type`` tensors reads pixel-major
+        coefficients (the ``(B, C, P)`` view of ``(B, P, C)`` rows) without
+        a copy, and returns its output so; else band-major ``(B, C, P)``
+        contiguous."""
+        return False
+
     def cannot_run(self, networks: Sequence[nn.Module],
                    coeffs: Optional[Tensor] = None) -> Optional[str]:
         """The first reason of the three checks, or ``None``."""
@@ -156,6 +172,11 @@ class TorchBackend(BandNetworkBackend):
 
     name = 'torch'
 
+    def pixel_major(self, networks, device_type):
+        # the CPU kernel; nn.Conv modules elsewhere and under tracing
+        return (networks[0].dim == 1 and device_type == 'cpu' and
+                not torch.jit.is_tracing())
+
     def run(self, networks, coeffs, lengths, spatial,
             output_grad_is_scratch=False):
         if networks[0].dim == 1 and not torch.jit.is_tracing():
@@ -166,7 +187,7 @@ class TorchBackend(BandNetworkBackend):
                 weights, residuals = _weights(networks)
                 out = torch_band_networks(_pixel_rows(coeffs), lengths,
                                           weights, residuals)
-            return _band_major(out, coeffs.shape)
+            return _as_coefficients(out, coeffs.shape)
         # nn.Conv modules: dim 2 and 3, and under tracing (FLOP counters,
         # jit.trace see the convolutions). They follow autocast.
         return _module_bands(networks, coeffs, lengths, spatial,
@@ -252,14 +273,16 @@ def _module_bands(networks: Sequence[nn.Module], coeffs: Tensor,
 
 def _pixel_rows(coeffs: Tensor) -> Tensor:
     """``(B, C, P)`` coefficients as ``(B*P, C)`` rows, one pixel a row:
-    the CPU kernels' layout."""
+    the CPU kernels' layout; a view of pixel-major coefficients, a copy of
+    others."""
     return coeffs.transpose(1, 2).reshape(-1, coeffs.shape[1])
 
 
-def _band_major(rows: Tensor, shape: torch.Size) -> Tensor:
-    """:func:`_pixel_rows`' ``(B*P, C)`` back to ``shape`` ``(B, C, P)``."""
+def _as_coefficients(rows: Tensor, shape: torch.Size) -> Tensor:
+    """:func:`_pixel_rows`' ``(B*P, C)`` as ``shape`` ``(B, C, P)``: the
+    pixel-major view, nothing copied."""
     batch, columns, pixels = shape
-    return rows.view(batch, pixels, columns).transpose(1, 2).contiguous()
+    return rows.view(batch, pixels, columns).transpose(1, 2)
 
 
 class CompiledBackend(BandNetworkBackend):
@@ -280,13 +303,16 @@ class CompiledBackend(BandNetworkBackend):
         return compiled_band_networks.unsupported(_pixel_rows(coeffs),
                                                   weights, residuals)
 
+    def pixel_major(self, networks, device_type):
+        return True
+
     def run(self, networks, coeffs, lengths, spatial,
             output_grad_is_scratch=False):
         weights, residuals = _weights(networks)
         with torch.autocast(coeffs.device.type, enabled=False):
             out = compiled_band_networks.compiled_band_networks(
                 _pixel_rows(coeffs), lengths, weights, residuals)
-        return _band_major(out, coeffs.shape)
+        return _as_coefficients(out, coeffs.shape)
 
 
 class TritonBackend(BandNetworkBackend):
@@ -408,6 +434,20 @@ def get_backend(entry: str, name: str, networks: Sequence[nn.Module]
             entry, 'backend', f'a backend that can run these band networks '
             f'({name!r}: {reason}); choices: {_choices()}', name)
     return BACKENDS[name]
+
+
+def pixel_major(name: str, networks: Sequence[nn.Module],
+                device_type: str) -> bool:
+    """Whether coefficients on ``device_type`` for the configured backend
+    ``name`` are best made pixel-major
+    (:meth:`BandNetworkBackend.pixel_major`): for ``'auto'``, where both
+    backends it may pick there (its first choice and ``'torch'``) read
+    them so."""
+    if name != 'auto':
+        return BACKENDS[name].pixel_major(networks, device_type)
+    preferred = BACKENDS.get(_AUTO.get(device_type, 'torch'))
+    return all(backend.pixel_major(networks, device_type)
+               for backend in (preferred, BACKENDS['torch']))
 
 
 def resolve_backend(name: str, networks: Sequence[nn.Module],

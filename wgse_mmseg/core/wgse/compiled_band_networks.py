@@ -32,8 +32,9 @@ import torch
 from torch import Tensor
 
 from ..parallel import for_each_on_threads
-from .torch_band_networks import (chunk_groups, differentiable_backward,
-                                  op_residuals, residual_plan)
+from .torch_band_networks import (InOrder, chunk_groups,
+                                  differentiable_backward, op_residuals,
+                                  residual_plan)
 
 try:
     from . import _band_networks
@@ -156,11 +157,19 @@ class _Bands:
             self.chunks += [(band, first, min(step, pixels - first))
                             for first in range(0, pixels, step)]
 
+    def grad_range(self, chunks: range) -> slice:
+        """The elements of the whole gradient (every band's, side by side)
+        that ``chunks`` (consecutive) add to: their bands'."""
+        first, last = (self.chunks[c][0] for c in (chunks[0], chunks[-1]))
+        return slice(self.grad_slices[first].start,
+                     self.grad_slices[last].stop)
+
     def run(self, chunk: int, out: Optional[Tensor] = None,
             grad_out: Optional[Tensor] = None,
-            grads: Optional[Tensor] = None) -> None:
+            grads: Optional[Tensor] = None, grads_start: int = 0) -> None:
         """Forward into ``out``, or backward of ``grad_out`` into the
-        double ``grads`` (every band's, side by side)."""
+        double ``grads``: the bands' gradients side by side from element
+        ``grads_start`` of the whole (:meth:`grad_range`)."""
         band, first, pixels = self.chunks[chunk]
         stride = self.coeffs.stride(0)
         element = self.coeffs.element_size()
@@ -173,8 +182,8 @@ class _Bands:
 
         grad_address = 0
         if grads is not None:
-            grad_address = grads.data_ptr() + grads.element_size() * \
-                self.grad_slices[band].start
+            grad_address = grads.data_ptr() + grads.element_size() * (
+                self.grad_slices[band].start - grads_start)
         _band_networks.run(
             address(self.coeffs), stride, address(grad_out), stride,
             address(out), stride, pixels, self.lengths[band], self.layers,
@@ -234,18 +243,25 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     bands = _Bands(coeffs, lengths, weights, residual_plan(residuals))
     grad_out = grad_out.contiguous()
     groups = chunk_groups(len(bands.chunks))
-    sums = [None] * len(groups)
+    flat = torch.zeros(bands.grad_total, dtype=torch.float64)
+
+    def add(part) -> None:
+        where, sums = part
+        flat[where] += sums
+
+    # each group's sums over its own bands only (a group is a few chunks,
+    # most often of one band), added in group order
+    add_in_order = InOrder(add)
 
     def backward_group(group: int, _) -> None:
-        sums[group] = torch.zeros(bands.grad_total, dtype=torch.float64)
+        where = bands.grad_range(groups[group])
+        sums = torch.zeros(where.stop - where.start, dtype=torch.float64)
         for chunk in groups[group]:
-            bands.run(chunk, grad_out=grad_out, grads=sums[group])
+            bands.run(chunk, grad_out=grad_out, grads=sums,
+                      grads_start=where.start)
+        add_in_order(group, (where, sums))
 
     for_each_on_threads(backward_group, len(groups), lambda: None)
-    flat = sums[0] if sums else torch.zeros(bands.grad_total,
-                                            dtype=torch.float64)
-    for more in sums[1:]:  # in group order, whatever the threads
-        flat = flat + more
     grads = []
     for band, where in zip(weights, bands.grad_slices):
         grads += _unpack_grads(flat[where], band)

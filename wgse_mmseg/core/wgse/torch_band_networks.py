@@ -42,7 +42,9 @@ it runs :func:`differentiable_backward` instead, torch's own convolutions
 on the whole input, whose gradients are differentiable again (memory as the
 ``'reference'`` backend's).
 """
-from typing import Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
+import threading
+from typing import (Any, Callable, Dict, Iterator, List, NamedTuple, Optional,
+                    Sequence, Tuple)
 
 import torch
 import torch.nn.functional as F
@@ -294,6 +296,27 @@ def chunk_groups(count: int) -> List[range]:
             for first in range(0, count, size)]
 
 
+class InOrder:
+    """Parts numbered ``0, 1, ...``, handed in by any thread in any order,
+    passed to ``add(part)`` in their numbers' order, each as soon as all
+    before it are in: the groups' gradient sums added in group order (the
+    same bits whatever the threads) with only the parts that came early
+    held, not every group's."""
+
+    def __init__(self, add: Callable[[Any], None]):
+        self._add = add
+        self._waiting: Dict[int, Any] = {}
+        self._next = 0
+        self._lock = threading.Lock()
+
+    def __call__(self, index: int, part: Any) -> None:
+        with self._lock:
+            self._waiting[index] = part
+            while self._next in self._waiting:
+                self._add(self._waiting.pop(self._next))
+                self._next += 1
+
+
 def _modules_forward(coeffs: Tensor, lengths: Sequence[int],
                      residuals: Sequence[Optional[int]], pad: int,
                      params: Sequence[Tensor]) -> Tensor:
@@ -402,27 +425,35 @@ def _backward_op(grad_out: Tensor, coeffs: Tensor, lengths: List[int],
     per_band = 2 * len(plan)
     chunks = list(_chunks(coeffs, tuple(lengths), plan, pad, params))
     groups = chunk_groups(len(chunks))
-    sums: List[List[Tensor]] = [[] for _ in groups]
+    param_grads = _zero_grads(params)
+
+    def add(part: List[Optional[Tensor]]) -> None:
+        for total, grad in zip(param_grads, part):
+            if grad is not None:
+                total += grad
+
+    # each group's sums for its own bands only (``None`` for the others: a
+    # group is a few chunks, most often of one band), added in group order
+    add_in_order = InOrder(add)
 
     def backward_group(group: int, scratch: _Workspace) -> None:
-        sums[group] = param_grads = _zero_grads(params)
+        part: List[Optional[Tensor]] = [None] * len(params)
         for chunk in groups[group]:
             band, columns, rows, layers = chunks[chunk]
-            acts = _chunk_forward(columns[rows], layers, pad, scratch)
             first = band.index * per_band
+            if part[first] is None:
+                part[first:first + per_band] = _zero_grads(
+                    params[first:first + per_band])
+            acts = _chunk_forward(columns[rows], layers, pad, scratch)
             grad_in = _chunk_backward(
                 acts, grad_out[rows, band.offset], layers,
-                param_grads[first:first + per_band], pad, input_grad,
-                scratch)
+                part[first:first + per_band], pad, input_grad, scratch)
             if input_grad:
                 grad_coeffs[rows, band.offset] = grad_in
+        add_in_order(group, part)
 
     for_each_on_threads(backward_group, len(groups),
                         lambda: _Workspace(coeffs))
-    param_grads = sums[0] if sums else _zero_grads(params)
-    for more in sums[1:]:  # in group order
-        param_grads = [total.add_(part)
-                       for total, part in zip(param_grads, more)]
     param_grads = [g.permute(2, 1, 0).contiguous() if g.dim() == 3 else g
                    for g in param_grads]
     return ([grad_coeffs] if input_grad else []) + param_grads

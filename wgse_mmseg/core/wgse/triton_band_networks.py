@@ -30,9 +30,22 @@ current (:func:`on_device_of`), so that a model on ``cuda:1`` while
 ``cuda:0`` is current runs there, ordered with the stream its inputs were
 made on.
 
+The two passes are torch custom ops made with ``torch.library.triton_op``
+(:data:`FORWARD_OP`, :data:`BACKWARD_OP`; each launch through
+``torch.library.wrap_triton``), with fake kernels and the forward's
+autograd registration, so that ``torch.compile`` of a model holding WGSE
+keeps them in its graph (no graph break) and Inductor sees the kernels.
+They are defined at the first call (:func:`define_ops`): ``triton_op``
+reads its function's source with Inductor's helpers, seconds of imports
+that a process which never runs the kernel does not pay.
+
 Triton's interpreter (``TRITON_INTERPRET=1`` in the environment before
 triton is first imported) runs the same kernels on CPU tensors; the tests
-use it, since CI has no GPU.
+use it, since CI has no GPU. There ``wrap_triton`` hands back the
+interpreted kernel itself, so the ops run eagerly and under
+``torch.compile``'s graph capture (``backend='eager'``), but not where
+AOTAutograd traces the ops' bodies with fake tensors (which the
+interpreter cannot read).
 """
 import contextlib
 import os
@@ -277,6 +290,16 @@ def on_device_of(tensor: Tensor) -> contextlib.AbstractContextManager:
         contextlib.nullcontext()
 
 
+def _launch_options(config: LaunchConfig) -> dict:
+    """A launch's options: ``num_warps``, and ``maxnreg`` where the entry
+    sets it (torch.compile's kernel wrapper passes on the options it knows
+    and would take a ``maxnreg=None`` for a kernel argument)."""
+    options = dict(num_warps=config.num_warps)
+    if config.maxnreg is not None:
+        options['maxnreg'] = config.maxnreg
+    return options
+
+
 def launch_forward(config: LaunchConfig, coeffs: Tensor,
                    inputs: BandKernelInputs, precision: str
                    ) -> Tuple[Tensor, Tensor]:
@@ -290,15 +313,16 @@ def launch_forward(config: LaunchConfig, coeffs: Tensor,
         tiles = triton.cdiv(pixels, config.block)
         major = 0 if interpreting() else \
             torch.cuda.get_device_capability(coeffs.device)[0]
+        kernel = torch.library.wrap_triton(kernels.band_forward)
         with on_device_of(coeffs):
-            kernels.band_forward[(batch * tiles, len(inputs.lengths))](
+            kernel[(batch * tiles, len(inputs.lengths))](
                 coeffs, out, positive, pixels, columns, tiles,
                 inputs.lengths, inputs.offsets, *inputs.params,
                 HIDDEN=inputs.hidden, BLOCK=config.block,
                 PRECISION=precision,
                 CONV1_DOT=conv1_on_tensor_cores(precision, major),
                 TAPS_01_AS_ONE=taps_as_one_product(precision, major),
-                num_warps=config.num_warps, maxnreg=config.maxnreg)
+                **_launch_options(config))
     return out, positive
 
 
@@ -350,15 +374,15 @@ def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
     work = torch.tensor(division, dtype=torch.int32, device=coeffs.device)
     partial = coeffs.new_empty(len(division),
                                sum(p[0].numel() for p in inputs.params[:5]))
+    kernel = torch.library.wrap_triton(kernels.band_backward)
     with on_device_of(coeffs):
-        kernels.band_backward[(len(division), )](
+        kernel[(len(division), )](
             coeffs, d3, coeffs if grad_coeffs is None else grad_coeffs,
             partial, work, pixels, columns,
             triton.cdiv(pixels, config.block), tiles, inputs.lengths,
             inputs.offsets, *inputs.params, HIDDEN=inputs.hidden,
             BLOCK=config.block, PRECISION=precision,
-            INPUT_GRAD=grad_coeffs is not None, num_warps=config.num_warps,
-            maxnreg=config.maxnreg)
+            INPUT_GRAD=grad_coeffs is not None, **_launch_options(config))
     counts = [step for _, first, step in division if first == 0]
     bias3 = d3.sum(dim=(0, 2)).split(list(inputs.band_lengths))
     return [torch.cat([rows.sum(0), rows3.sum().view(1)])
@@ -375,64 +399,146 @@ def backward_slots(device: torch.device, bands: int) -> int:
         device).multi_processor_count * PROGRAMS_PER_SM
 
 
-class _TritonBandNetworks(torch.autograd.Function):
-    """Autograd wrapper; see :func:`triton_band_networks`."""
+FORWARD_OP = 'wgse_mmseg::triton_band_networks'
+BACKWARD_OP = 'wgse_mmseg::triton_band_networks_backward'
+#: a call's launch entries as the ops take them: forward ``block,
+#: num_warps, maxnreg``, then the backward's; ``0`` for a ``maxnreg`` not
+#: set, and ``0, 0, 0`` for the default entry
+NO_LAUNCH = (0, 0, 0)
 
-    @staticmethod
-    def forward(ctx, coeffs: Tensor, lengths: Tuple[int, ...],
-                precision: str, configs: Tuple[Optional[LaunchConfig], ...],
-                output_grad_is_scratch: bool, *params: Tensor) -> Tensor:
-        inputs = band_kernel_inputs(lengths, params)
-        out, positive = launch_forward(configs[0] or FORWARD_CONFIGS[0],
-                                       coeffs, inputs, precision)
-        ctx.lengths, ctx.precision = lengths, precision
-        ctx.configs, ctx.inputs = configs, inputs
-        ctx.output_grad_is_scratch = output_grad_is_scratch
-        # kept outside the saved tensors so that the backward pass can drop
-        # it before the coefficients are made again (WGSE's hooks): the two
-        # are never alive together
-        ctx.positive = positive
-        ctx.save_for_backward(coeffs, *params)
-        return out
 
-    @staticmethod
-    def backward(ctx, grad_out: Tensor):
-        if torch.is_grad_enabled():
-            raise RuntimeError(
-                "WGSE's 'triton' band-network backend has no second-order "
-                "gradients (create_graph=True); the 'torch' backend has "
-                "them: WGSE(backend='torch')")
-        positive, ctx.positive = ctx.positive, None
-        scratch = ctx.output_grad_is_scratch
-        d3 = None if positive is None else relu_gradient(grad_out, positive,
-                                                         scratch)
+def _launch_ints(config: Optional[LaunchConfig]) -> List[int]:
+    if config is None:
+        return list(NO_LAUNCH)
+    return [config.block, config.num_warps, config.maxnreg or 0]
+
+
+def _launch_config(ints: Sequence[int]) -> Optional[LaunchConfig]:
+    """:func:`_launch_ints` read back (``None``: the default entry)."""
+    block, num_warps, maxnreg = ints
+    if (block, num_warps, maxnreg) == NO_LAUNCH:
+        return None
+    return LaunchConfig(block, num_warps, maxnreg or None)
+
+
+def _forward_op(coeffs: Tensor, lengths: List[int], params: List[Tensor],
+                precision: str, launch: List[int],
+                output_grad_is_scratch: bool) -> Tuple[Tensor, Tensor]:
+    """The forward kernel as a torch op: :func:`launch_forward`'s output
+    and mask ``(B, C, P)`` for ``coeffs`` ``(B, C, P)`` contiguous,
+    ``params`` six a band, ``launch`` (:func:`_launch_ints`, both passes';
+    the forward's three first) and ``output_grad_is_scratch`` (read by the
+    backward pass, :func:`triton_band_networks`)."""
+    return launch_forward(_launch_config(launch[:3]) or FORWARD_CONFIGS[0],
+                          coeffs, band_kernel_inputs(lengths, params),
+                          precision)
+
+
+def _forward_fake(coeffs, lengths, params, precision, launch,
+                  output_grad_is_scratch):
+    return (torch.empty_like(coeffs),
+            torch.empty_like(coeffs, dtype=torch.uint8))
+
+
+def _backward_op(coeffs: Tensor, d3: Tensor, params: List[Tensor],
+                 lengths: List[int], precision: str, input_grad: bool,
+                 launch: List[int], slots: int) -> List[Tensor]:
+    """The backward kernel as a torch op: ``[d coeffs (B, C, P)]`` where
+    ``input_grad``, then each band's parameter gradient flattened
+    ``(P_band,)`` (:func:`launch_backward`), from ``d3``
+    (:func:`relu_gradient`), with the entry ``launch`` (three ints,
+    :func:`_launch_ints`) and ``slots`` programs."""
+    grad_coeffs = torch.empty_like(coeffs) if input_grad else None
+    config = _launch_config(launch) or backward_configs(input_grad,
+                                                        precision)[0]
+    totals = launch_backward(config, coeffs, d3, grad_coeffs,
+                             band_kernel_inputs(lengths, params), precision,
+                             slots)
+    return ([grad_coeffs] if input_grad else []) + totals
+
+
+def _backward_fake(coeffs, d3, params, lengths, precision, input_grad,
+                   launch, slots):
+    per_band = [sum(p.numel() for p in params[first:first + 6])
+                for first in range(0, len(params), 6)]
+    return ([torch.empty_like(coeffs)] if input_grad else []) + [
+        coeffs.new_empty(size) for size in per_band]
+
+
+def _setup_context(ctx, inputs, output) -> None:
+    coeffs, lengths, params, precision, launch, scratch = inputs
+    ctx.lengths, ctx.precision, ctx.launch = lengths, precision, launch
+    ctx.output_grad_is_scratch = scratch
+    # kept outside the saved tensors so that the backward pass can drop
+    # it before the coefficients are made again (WGSE's hooks): the two
+    # are never alive together
+    ctx.positive = output[1]
+    ctx.save_for_backward(coeffs, *params)
+    # no zeros made for the mask's gradient (it has none) while the
+    # backward pass's largest tensors are alive; the output, the one
+    # differentiable, always has one when the backward pass runs
+    ctx.set_materialize_grads(False)
+
+
+def _backward(ctx, grad_out: Tensor, _grad_positive):
+    if torch.is_grad_enabled():
+        raise RuntimeError(
+            "WGSE's 'triton' band-network backend has no second-order "
+            "gradients (create_graph=True); the 'torch' backend has "
+            "them: WGSE(backend='torch')")
+    positive, ctx.positive = ctx.positive, None
+    scratch = ctx.output_grad_is_scratch
+    d3 = None if positive is None else relu_gradient(grad_out, positive,
+                                                     scratch)
+    del positive
+    coeffs, *params = ctx.saved_tensors
+    input_grad = ctx.needs_input_grad[0]
+    if not coeffs.numel():
+        return (torch.zeros_like(coeffs) if input_grad else None, None,
+                [torch.zeros_like(p) for p in params], None, None, None)
+    if d3 is None:
+        # a second backward pass of the graph (retain_graph=True): the
+        # first dropped the mask; the forward makes it again
+        _, positive = torch.ops.wgse_mmseg.triton_band_networks(
+            coeffs, ctx.lengths, params, ctx.precision, ctx.launch, False)
+        d3 = relu_gradient(grad_out, positive, scratch)
         del positive
-        coeffs, *params = ctx.saved_tensors
-        input_grad = ctx.needs_input_grad[0]
-        sizes = [p.numel() for p in params[:6]]
-        if not coeffs.numel():
-            return (torch.zeros_like(coeffs) if input_grad else None, None,
-                    None, None, None, *[torch.zeros_like(p) for p in params])
-        inputs = ctx.inputs  # the forward's stacked parameters
-        forward_config, backward_config = ctx.configs
-        if d3 is None:
-            # a second backward pass of the graph (retain_graph=True): the
-            # first dropped the mask; the forward makes it again
-            _, positive = launch_forward(
-                forward_config or FORWARD_CONFIGS[0], coeffs, inputs,
-                ctx.precision)
-            d3 = relu_gradient(grad_out, positive, scratch)
-            del positive
-        grad_coeffs = torch.empty_like(coeffs) if input_grad else None
-        totals = launch_backward(
-            backward_config or backward_configs(input_grad, ctx.precision)[0],
-            coeffs, d3, grad_coeffs, inputs, ctx.precision,
-            backward_slots(coeffs.device, len(ctx.lengths)))
-        grads = []
-        for total, band_params in zip(totals, zip(*[iter(params)] * 6)):
-            grads += [g.view_as(p) for g, p in
-                      zip(total.split(sizes), band_params)]
-        return (grad_coeffs, None, None, None, None, *grads)
+    found = torch.ops.wgse_mmseg.triton_band_networks_backward(
+        coeffs, d3, params, ctx.lengths, ctx.precision, input_grad,
+        ctx.launch[3:], backward_slots(coeffs.device, len(ctx.lengths)))
+    grad_coeffs = found.pop(0) if input_grad else None
+    sizes = [p.numel() for p in params[:6]]
+    grads = []
+    for total, band_params in zip(found, zip(*[iter(params)] * 6)):
+        grads += [g.view_as(p) for g, p in
+                  zip(total.split(sizes), band_params)]
+    return grad_coeffs, None, grads, None, None, None
+
+
+#: the ops, once :func:`define_ops` made them
+_OPS: List[object] = []
+
+
+def define_ops() -> None:
+    """Define :data:`FORWARD_OP` and :data:`BACKWARD_OP` (``triton_op``,
+    each with its fake kernel; the forward with its autograd), once a
+    process. ``torch.compile`` calls it as it is and takes its result as a
+    constant (it marks no graph break)."""
+    if _OPS:
+        return
+    forward = torch.library.triton_op(FORWARD_OP, _forward_op,
+                                      mutates_args=())
+    forward.register_fake(_forward_fake)
+    forward.register_autograd(_backward, setup_context=_setup_context)
+    backward = torch.library.triton_op(BACKWARD_OP, _backward_op,
+                                       mutates_args=())
+    backward.register_fake(_backward_fake)
+    _OPS.extend((forward, backward))
+
+
+# What ``torch.compiler.assume_constant_result(define_ops)`` sets, without
+# importing torch._dynamo with the module (as WGSE's transform does)
+define_ops._dynamo_marked_constant = True
 
 
 def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
@@ -502,7 +608,9 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
         if config is not None and config not in allowed:
             raise ValueError(f'{name} must be one of {list(allowed)} (the '
                              f'entries compiled and tested), got {config!r}')
-    return _TritonBandNetworks.apply(coeffs.contiguous(), tuple(lengths),
-                                     precision,
-                                     (forward_config, backward_config),
-                                     output_grad_is_scratch, *params)
+    define_ops()
+    out, _ = torch.ops.wgse_mmseg.triton_band_networks(
+        coeffs.contiguous(), list(lengths), params, precision,
+        _launch_ints(forward_config) + _launch_ints(backward_config),
+        output_grad_is_scratch)
+    return out

@@ -29,7 +29,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from .band_network_backends import get_backend, resolve_backend
+from .band_network_backends import get_backend, pixel_major, resolve_backend
 from .first_use_check import CheckResult
 from ...argument_checks import (ArgumentError, check_choice, check_flag,
                                 check_integer, check_parameter_count)
@@ -42,26 +42,29 @@ __all__ = ['WGSE']
 
 def _saved_as_recomputation(tensor: torch.Tensor, source: torch.Tensor,
                             recompute: Callable[[torch.Tensor], torch.Tensor]):
-    """Autograd hooks under which a saved ``tensor`` (the same storage,
-    offset, shape and strides) is kept as ``source`` and made again by
-    ``recompute(source)`` when the backward pass needs it; every other saved
-    tensor is kept as usual. WGSE's wavelet coefficients ``(B, C, P)`` are
-    1.57 times the float32 spikes at T = 129 (C = 202); a band-network
-    backend that saves them for its backward pass would hold them from the
-    forward pass until WGSE's backward, through the whole segmentor's.
-    ``source`` (the spikes) is held anyway; changed in place before the
-    backward pass, it is refused as autograd refuses a changed saved
-    tensor. No hooks where no autograd graph of real tensors is built
-    (:func:`_records_autograd`)."""
+    """Autograd hooks under which a saved tensor that views all of
+    ``tensor``'s elements (the same storage, offset and number of elements:
+    ``tensor`` itself, or a transpose or reshape of it, as a kernel's rows)
+    is kept as ``source`` and made again in the backward pass, as the same
+    view of ``recompute(source)``; every other saved tensor is kept as
+    usual. WGSE's wavelet coefficients ``(B, C, P)`` are 1.57 times the
+    float32 spikes at T = 129 (C = 202); a band-network backend that saves
+    them for its backward pass would hold them from the forward pass until
+    WGSE's backward, through the whole segmentor's. ``source`` (the spikes)
+    is held anyway; changed in place before the backward pass, it is
+    refused as autograd refuses a changed saved tensor. No hooks where no
+    autograd graph of real tensors is built (:func:`_records_autograd`)."""
     if not _records_autograd():
         return contextlib.nullcontext()
     version = source._version
-    # what identifies the tensor, not the tensor: torch keeps the hooks as
-    # long as what they saved, which must not keep ``tensor`` alive
-    identity = _identity(tensor)
+    # what identifies the elements, not the tensor: torch keeps the hooks
+    # as long as what they saved, which must not keep ``tensor`` alive
+    elements = _elements(tensor)
 
     def pack(saved):
-        return _Recomputed(source) if _identity(saved) == identity else saved
+        if _elements(saved) != elements:
+            return saved
+        return _Recomputed(source, saved.shape, saved.stride())
 
     def unpack(packed):
         if not isinstance(packed, _Recomputed):
@@ -72,7 +75,11 @@ def _saved_as_recomputation(tensor: torch.Tensor, source: torch.Tensor,
                 'pass; its backward pass computes the wavelet coefficients '
                 'from them again. Pass a copy, or modify them after '
                 'backward()')
-        return recompute(packed.source)
+        # the same function of the same input: the same strides as
+        # ``tensor``, so the saved view's strides select the same elements
+        made = recompute(packed.source)
+        return made.as_strided(packed.shape, packed.stride,
+                               made.storage_offset())
 
     return torch.autograd.graph.saved_tensors_hooks(pack, unpack)
 
@@ -80,24 +87,40 @@ def _saved_as_recomputation(tensor: torch.Tensor, source: torch.Tensor,
 def _records_autograd() -> bool:
     """Whether this call builds an autograd graph of real tensors: not under
     ``no_grad``, nor traced or exported (``torch.export``'s fake tensors
-    have no data pointer for :func:`_identity`)."""
+    have no data pointer for :func:`_elements`)."""
     return torch.is_grad_enabled() and not (
         torch.jit.is_tracing() or torch.compiler.is_compiling())
 
 
-def _identity(tensor: torch.Tensor) -> tuple:
-    """Where ``tensor``'s elements are: two tensors with the same identity
-    are views of the same elements in the same order."""
-    return (tensor.data_ptr(), tuple(tensor.shape), tensor.stride(),
-            tensor.dtype, tensor.device)
+def _elements(tensor: torch.Tensor) -> tuple:
+    """Which elements ``tensor`` views: two tensors alike here view the
+    same elements (in orders their strides say)."""
+    return (tensor.untyped_storage().data_ptr(), tensor.storage_offset(),
+            tensor.numel(), tensor.dtype, tensor.device)
 
 
 class _Recomputed:
     """What a saved tensor under :func:`_saved_as_recomputation` is kept
-    as: its source."""
+    as: its source, and the view of the recomputed tensor it was."""
 
-    def __init__(self, source: torch.Tensor):
+    def __init__(self, source: torch.Tensor, shape: torch.Size,
+                 stride: Tuple[int, ...]):
         self.source = source
+        self.shape = shape
+        self.stride = stride
+
+
+def _product(matrix: torch.Tensor, x: torch.Tensor,
+             pixel_major: bool) -> torch.Tensor:
+    """``matrix @ x`` ``(B, M, P)`` for ``matrix`` ``(M, K)`` and ``x``
+    ``(B, K, P)`` of any strides; with ``pixel_major``, computed as the
+    transposed product, so that its memory is ``(B, P, M)`` rows and the
+    gradient that reaches ``x`` in the backward pass is ``(B, P, K)`` rows:
+    the CPU kernels' layout on both sides, no copy between layouts
+    (:mod:`.band_network_backends`)."""
+    if pixel_major:
+        return torch.matmul(x.mT, matrix.mT).mT
+    return torch.matmul(matrix, x)
 
 
 @functools.lru_cache(maxsize=32)
@@ -515,14 +538,19 @@ class WGSE(nn.Module):
             analysis, synthesis, lengths = self._matrices(
                 int(num_steps), spikes.device, dtype)
 
+        # the layout the backend reads (:mod:`.band_network_backends`)
+        rows = pixel_major(self.backend, self.band_networks, device_type)
+
         def coefficients(spikes):
-            """``(B, C, P)``, ``P = H*W``: a row of pixels per coefficient
-            (per time step without wavelets)."""
+            """``(B, C, P)``, ``P = H*W`` (the time steps without wavelets),
+            pixel-major where ``rows``, else band-major."""
             with torch.autocast(device_type, enabled=False):
                 signal = spikes.to(dtype).reshape(batch, num_steps,
                                                   height * width)
-                coeffs = signal if analysis is None else \
-                    torch.matmul(analysis, signal)
+                if analysis is not None:
+                    coeffs = _product(analysis, signal, rows)
+                else:
+                    coeffs = signal.mT.contiguous().mT if rows else signal
                 return coeffs.to(module_dtype)
 
         self._check_range(spikes, analysis, synthesis)
@@ -540,7 +568,7 @@ class WGSE(nn.Module):
         del coeffs
         with torch.autocast(device_type, enabled=False):
             if self.wavelet is not None:
-                enhanced = torch.matmul(synthesis, enhanced.to(dtype))
+                enhanced = _product(synthesis, enhanced.to(dtype), rows)
             out = enhanced.reshape(batch, num_steps, height, width).to(
                 module_dtype)
         if self.output_norm is not None:
