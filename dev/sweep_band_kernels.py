@@ -33,11 +33,12 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 from wgse_bench.markdown import markdown_table
 from wgse_bench.timing import time_calls
-from wgse_bench.wgse_choices import HIDDEN_CHANNELS, PRECISIONS
+from wgse_bench.wgse_choices import PRECISIONS
 from wgse_mmseg.command_line import Choice, Integer, Path, Text, excerpt
-from wgse_mmseg.limits import MAX_REPEAT
-from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.core.kernel_choices import HIDDEN_CHANNELS
 from wgse_mmseg.fileio.input_guard import keeps_inputs
+from wgse_mmseg.fileio.output_folder import check_tool_outputs
+from wgse_mmseg.limits import MAX_REPEAT
 
 #: the longest band of WGSE's default (db8, 5 levels) at T = 129
 BAND_LENGTH = 72
@@ -206,8 +207,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     import torch
 
     from wgse_bench.machine import machine_record
-    from wgse_mmseg.fileio.atomic import atomic_output
     from wgse_mmseg.core.wgse import triton_band_networks as tbn
+    from wgse_mmseg.fileio.atomic import atomic_output
     entries = {option: [tbn.LaunchConfig(*e) for e in listed]
                for option, listed in entries.items()}
     reason = tbn.unavailable()

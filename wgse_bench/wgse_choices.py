@@ -1,9 +1,10 @@
 """The choices of WGSE's benchmarks: the rows and batch shapes of
-:mod:`.wgse`, the precisions and hidden widths of the band kernels that
+:mod:`.wgse`, the precisions of the band kernels that
 :mod:`.gpu_report` and ``dev/sweep_band_kernels.py`` run, importable without
 torch, so that their command lines answer ``--help`` and argument errors at
-once (tests/bench/test_wgse_choices.py holds them equal to the kernels')."""
+once. The kernels' own choices are :mod:`wgse_mmseg.core.kernel_choices`'."""
 from wgse_mmseg.command_line import NUM_STEPS, SIDE, Integer, SequenceOf
+from wgse_mmseg.core.kernel_choices import TOLERANCES
 from wgse_mmseg.limits import MAX_BATCH_SIZE
 
 __all__ = []
@@ -21,6 +22,4 @@ SHAPE = SequenceOf((Integer(1, MAX_BATCH_SIZE), NUM_STEPS, SIDE, SIDE),
                    names=('B', 'T', 'H', 'W'), separator='x')
 #: the band kernels' precisions (TF32 off, TF32, bf16 autocast, fp16
 #: autocast), each with its tolerance in the first-use check
-PRECISIONS = ('ieee', 'tf32', 'bf16', 'fp16')
-#: the hidden widths the band kernels are built for
-HIDDEN_CHANNELS = (16, 32)
+PRECISIONS = tuple(TOLERANCES)

@@ -94,8 +94,8 @@ def test_load_window_at_center(stream_file, center, start):
 @pytest.mark.parametrize('center', [0, 19, 109, 128])
 def test_a_window_past_the_stream_is_an_error_not_moved(stream_file, center):
     """One window policy (spike_formats.centered_window): a window that
-    does not fit is refused with the centre frames that fit, never shifted away from
-    the annotated frame."""
+    does not fit is refused with the centre frames that fit, never shifted
+    away from the annotated frame."""
     path, _ = stream_file
     with pytest.raises(SpikeFileError, match=r'centre frames 20\.\.108 fit'):
         LoadSpikeFromFile(num_steps=41, center=center)(dict(img_path=path))

@@ -54,6 +54,8 @@ from typing import List, NamedTuple, Optional, Sequence, Tuple
 import torch
 from torch import Tensor
 
+from ..kernel_choices import HIDDEN_CHANNELS, TOLERANCES
+
 try:
     import triton
 
@@ -107,16 +109,6 @@ BACKWARD_CONFIGS = dict(default=(LaunchConfig(32, 4), ),
 #: Programs of the backward kernel per SM the work is divided for: what
 #: every entry above fits at once.
 PROGRAMS_PER_SM = 2
-#: Hidden widths the kernels take (``tl.dot`` needs powers of two >= 16).
-#: Not 64: its TF32 backward needs more shared memory a program than sm_89
-#: (L40, RTX 4090) gives one, and spills; the 'torch' backend runs it.
-HIDDEN_CHANNELS = (16, 32)
-#: Largest error against float64, relative to the largest magnitude of the
-#: output or of each gradient, that the tests allow per
-#: :func:`dot_precision` (measured over six seeds at 1x41x5x7: fp16 up to
-#: 1.8e-2, bf16 up to 1.7e-1, on the gradients; fp32 about 1e-6). TF32
-#: keeps fp16's 10 mantissa bits, bf16 7.
-TOLERANCES = {'ieee': 1e-4, 'tf32': 3e-2, 'fp16': 3e-2, 'bf16': 2.5e-1}
 
 
 def conv1_on_tensor_cores(precision: str, major: int) -> bool:
