@@ -1,31 +1,34 @@
 """The Cityscapes -> Spike-Cityscapes converter on a tiny Cityscapes tree."""
 import json
+import multiprocessing
 import os
 import os.path as osp
-import multiprocessing
 import subprocess
 import sys
 
 import cv2
+import killed_converter_run  # beside this file
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
 import wgse_mmseg.data_generation.cityscapes_conversion as conversion
-from wgse_mmseg.datasets import SpikeCityscapesDataset
+from wgse_mmseg.core import simulation  # the converter calls it there
+from wgse_mmseg.core.seeding import derive_seed
+from wgse_mmseg.core.simulation import simulate_spikes
 from wgse_mmseg.data_generation.cityscapes_conversion import (
-    CITYSCAPES_LABELS, LABEL_ID_TO_TRAIN_ID, ConversionSettings,
-    convert_cityscapes, find_samples, labelids_to_trainids, load_scene,
-    resize_nearest, sample_effects)
-from wgse_mmseg.fileio.spike_files import load_spikes
+    ConversionSettings, convert_cityscapes, load_scene, sample_effects)
+from wgse_mmseg.data_generation.cityscapes_layout import (CITYSCAPES_LABELS,
+                                                          LABEL_ID_TO_TRAIN_ID,
+                                                          find_samples,
+                                                          labelids_to_trainids,
+                                                          resize_nearest)
+from wgse_mmseg.data_generation.shards import WHOLE, Shard
+from wgse_mmseg.datasets import SpikeCityscapesDataset
 from wgse_mmseg.fileio.locks import own_folder
 from wgse_mmseg.fileio.output_folder import MANIFEST_NAME
-from wgse_mmseg.core.seeding import derive_seed
-from wgse_mmseg.data_generation.shards import WHOLE, Shard
-from wgse_mmseg.core import simulation  # the converter calls it there
-from wgse_mmseg.core.simulation import simulate_spikes
-
-import killed_converter_run  # beside this file
+from wgse_mmseg.fileio.spike_files import load_spikes
 
 REPO_ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 SIZE = (64, 128)  # source frames, H x W

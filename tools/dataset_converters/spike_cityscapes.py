@@ -14,14 +14,16 @@ import time
 
 from wgse_mmseg.command_line import (NUM_STEPS, SEED, SIDE, Choice, Integer,
                                      Number, Path, Text)
-from wgse_mmseg.limits import MAX_SAMPLES, MAX_WORKERS
+from wgse_mmseg.data_generation.cityscapes_conversion import (
+    ConversionSettings, convert_cityscapes, load_scene)
+from wgse_mmseg.data_generation.cityscapes_layout import (ANNOTATED_INDEX,
+                                                          CITYSCAPES_SPLITS,
+                                                          SNIPPET_LENGTH)
+from wgse_mmseg.data_generation.shards import SHARD, WHOLE
+from wgse_mmseg.fileio.input_guard import keeps_inputs
 from wgse_mmseg.fileio.locks import add_wait_option
 from wgse_mmseg.fileio.output_folder import check_tool_outputs
-from wgse_mmseg.fileio.input_guard import keeps_inputs
-from wgse_mmseg.data_generation.cityscapes_conversion import (
-    ANNOTATED_INDEX, CITYSCAPES_SPLITS, SNIPPET_LENGTH, ConversionSettings,
-    convert_cityscapes, load_scene)
-from wgse_mmseg.data_generation.shards import SHARD, WHOLE
+from wgse_mmseg.limits import MAX_SAMPLES, MAX_WORKERS
 
 
 def build_parser() -> argparse.ArgumentParser:
