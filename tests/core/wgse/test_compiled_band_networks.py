@@ -10,7 +10,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from wgse_mmseg.core.wgse import WGSE, compiled_band_networks
-from wgse_mmseg.core.wgse.wgse import BandNetwork
+from wgse_mmseg.core.wgse.band_network import BandNetwork
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 needs_kernel = pytest.mark.skipif(

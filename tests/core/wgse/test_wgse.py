@@ -20,8 +20,10 @@ from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
     torch_band_networks, triton_band_networks
 from wgse_mmseg.core.representations import TFP
 from wgse_mmseg.core.wavelets import band_lengths
+from wgse_mmseg.core.wgse import recomputation
 from wgse_mmseg.core.wgse import wgse as wgse_module
-from wgse_mmseg.core.wgse.wgse import LOWPASS_DETAIL_BIAS, BandNetwork
+from wgse_mmseg.core.wgse.band_network import BandNetwork
+from wgse_mmseg.core.wgse.wgse import LOWPASS_DETAIL_BIAS
 
 
 wgse_mmseg.register_all_modules()  # MODELS.build(dict(type='WGSE'))
@@ -579,9 +581,9 @@ def test_the_coefficients_are_computed_again_not_kept(monkeypatch,
     spikes = (torch.rand(2, 41, 2, 5, generator=torch.Generator().manual_seed(
         3)) < 0.4).to(spike_dtype)
     freed, grads = [], []
-    for hooks in (wgse_module._saved_as_recomputation,
+    for hooks in (recomputation.saved_as_recomputation,
                   lambda *args: contextlib.nullcontext()):
-        monkeypatch.setattr(wgse_module, '_saved_as_recomputation', hooks)
+        monkeypatch.setattr(wgse_module, 'saved_as_recomputation', hooks)
         model = _seeded(backend='triton')
         out = model(spikes)
         freed.append(passed[-1]() is None)  # after the forward pass
@@ -606,7 +608,7 @@ def test_the_relu_mask_is_dropped_before_the_coefficients_are_made_again(
         masks.append(weakref.ref(positive))
         return out, positive
 
-    hooks = wgse_module._saved_as_recomputation
+    hooks = recomputation.saved_as_recomputation
 
     def recording(tensor, source, recompute):
         def again(spikes):
@@ -615,7 +617,7 @@ def test_the_relu_mask_is_dropped_before_the_coefficients_are_made_again(
         return hooks(tensor, source, again)
 
     monkeypatch.setattr(triton_band_networks, 'launch_forward', spy)
-    monkeypatch.setattr(wgse_module, '_saved_as_recomputation', recording)
+    monkeypatch.setattr(wgse_module, 'saved_as_recomputation', recording)
     out = _seeded(backend='triton')((torch.rand(1, 41, 2, 3) < 0.4).float())
     assert masks[0]() is not None  # kept from the forward pass
     out.square().sum().backward()

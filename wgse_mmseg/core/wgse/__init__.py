@@ -12,6 +12,7 @@
   :mod:`.triton_band_networks` (CUDA; kernels in :mod:`.triton_band_kernels`).
 """
 from .band_network_backends import BACKENDS, CHOICES, BandNetworkBackend
-from .wgse import WGSE, BandNetwork
+from .band_network import BandNetwork
+from .wgse import WGSE
 
 __all__ = ['WGSE']

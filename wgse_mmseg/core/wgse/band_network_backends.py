@@ -1,19 +1,18 @@
 """The backends that run WGSE's band networks, behind one interface.
 
 A backend takes the band networks
-(:class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`, one per wavelet band) and
-every pixel's wavelet coefficients ``(B, C, P)`` (``P = H*W`` pixels; the bands
-one after another along ``C``) and returns the networks' outputs, ``(B, C,
-P)`` too. Each backend declares the memory layout it reads without a copy
+(:class:`~wgse_mmseg.core.wgse.band_network.BandNetwork`, one per wavelet band)
+and every pixel's wavelet coefficients ``(B, C, P)`` (``P = H*W`` pixels; the
+bands one after another along ``C``) and returns the networks' outputs, ``(B,
+C, P)`` too. Each backend declares the memory layout it reads without a copy
 (:meth:`BandNetworkBackend.pixel_major`, :func:`pixel_major`): band-major,
-``(B, C, P)`` contiguous, one coefficient of every pixel a contiguous row
-(the Triton kernel's), or pixel-major, the ``(B, C, P)`` view of ``(B, P,
-C)`` rows, one pixel's coefficients a row (the CPU kernels'); WGSE computes
-the coefficients in it, and a pixel-major backend returns its output
-pixel-major, so that nothing is copied between the layouts and the
-gradient of the output reaches the kernel in its own layout. Given the
-other layout, a backend copies. All compute the same function; they differ
-in where they run and how fast:
+``(B, C, P)`` contiguous, one coefficient of every pixel a contiguous row (the
+Triton kernel's), or pixel-major, the ``(B, C, P)`` view of ``(B, P, C)`` rows,
+one pixel's coefficients a row (the CPU kernels'); WGSE computes the
+coefficients in it, and a pixel-major backend returns its output pixel-major,
+so that nothing is copied between the layouts and the gradient of the output
+reaches the kernel in its own layout. Given the other layout, a backend copies.
+All compute the same function; they differ in where they run and how fast:
 
 * ``'torch'``: torch operations, on any device (CPU, CUDA, MPS) and dtype,
   every variant. ``dim=1`` runs the chunked kernel of

@@ -12,8 +12,8 @@ coefficients: WGSE's input is spike data.
 backend (:mod:`~wgse_mmseg.core.wgse.band_network_backends`) then runs
 :func:`~wgse_mmseg.core.wgse.torch_band_networks.torch_band_networks` (torch
 operations, any width, kernel, dtype, device, and the input gradient).
-Both compute the function of :class:`~wgse_mmseg.core.wgse.wgse.BandNetwork`;
-tests compare them.
+Both compute the function of
+:class:`~wgse_mmseg.core.wgse.band_network.BandNetwork`; tests compare them.
 
 Calls are split into chunks of about :data:`ROWS_PER_CALL` rows of one
 band, which run side by side on torch's threads

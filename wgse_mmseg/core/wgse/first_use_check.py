@@ -168,7 +168,7 @@ class Grid(NamedTuple):
 
 #: The grids of the check's problem: the coefficients and the weights of
 #: the loss ``sum(out * weights)``, and per convolution of
-#: :meth:`~wgse_mmseg.core.wgse.wgse.BandNetwork.layers` (first, hidden,
+#: :meth:`~.band_network.BandNetwork.layers` (first, hidden,
 #: last; a deeper network's middle ones take the hidden grids) its weights
 #: and its biases, which are odd multiples of half ``step`` within ``bound``
 #: steps. Each layer's products with its input are multiples of the bias

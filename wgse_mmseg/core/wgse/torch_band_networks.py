@@ -1,9 +1,9 @@
 """The 1-D band networks of WGSE as one fused, chunked torch kernel: the
 ``'torch'`` backend of WGSE on the CPU.
 
-:class:`~wgse_mmseg.core.wgse.wgse.BandNetwork` with ``dim=1`` runs a few tiny
-temporal convolutions (1 -> 32 -> 32 -> 1 channels, kernel 3) over every
-pixel's wavelet coefficients. As ``nn.Conv1d`` over ``B*H*W`` signals of
+:class:`~wgse_mmseg.core.wgse.band_network.BandNetwork` with ``dim=1`` runs a
+few tiny temporal convolutions (1 -> 32 -> 32 -> 1 channels, kernel 3) over
+every pixel's wavelet coefficients. As ``nn.Conv1d`` over ``B*H*W`` signals of
 15-72 samples this spends its time moving data, not multiplying. Here each
 convolution is a few matrix products on a "padded rows" layout instead:
 

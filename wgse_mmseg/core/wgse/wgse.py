@@ -20,94 +20,24 @@ Options of the training recipe (``docs/wgse_vs_tfp.md`` ablates them):
 the stream, a long window average like TFP's, instead of at random;
 ``output_norm=True`` standardises the output.
 """
-import contextlib
 import functools
-from typing import Callable, List, Optional, Tuple
+from typing import List, Optional, Tuple
 
 import pywt
 import torch
 import torch.nn as nn
-import torch.nn.functional as F
 
-from .band_network_backends import get_backend, pixel_major, resolve_backend
-from .first_use_check import CheckResult
 from ...argument_checks import (ArgumentError, check_choice, check_flag,
                                 check_integer, check_parameter_count)
 from ..checks import check_finite, check_finite_parameters
 from ..wavelets import (SUPPORTED_MODES, analysis_matrix, band_lengths,
                         synthesis_matrix)
+from .band_network import BandNetwork
+from .band_network_backends import get_backend, pixel_major, resolve_backend
+from .first_use_check import CheckResult
+from .recomputation import saved_as_recomputation
 
 __all__ = ['WGSE']
-
-
-def _saved_as_recomputation(tensor: torch.Tensor, source: torch.Tensor,
-                            recompute: Callable[[torch.Tensor], torch.Tensor]):
-    """Autograd hooks under which a saved tensor that views all of
-    ``tensor``'s elements (the same storage, offset and number of elements:
-    ``tensor`` itself, or a transpose or reshape of it, as a kernel's rows)
-    is kept as ``source`` and made again in the backward pass, as the same
-    view of ``recompute(source)``; every other saved tensor is kept as
-    usual. WGSE's wavelet coefficients ``(B, C, P)`` are 1.57 times the
-    float32 spikes at T = 129 (C = 202); a band-network backend that saves
-    them for its backward pass would hold them from the forward pass until
-    WGSE's backward, through the whole segmentor's. ``source`` (the spikes)
-    is held anyway; changed in place before the backward pass, it is
-    refused as autograd refuses a changed saved tensor. No hooks where no
-    autograd graph of real tensors is built (:func:`_records_autograd`)."""
-    if not _records_autograd():
-        return contextlib.nullcontext()
-    version = source._version
-    # what identifies the elements, not the tensor: torch keeps the hooks
-    # as long as what they saved, which must not keep ``tensor`` alive
-    elements = _elements(tensor)
-
-    def pack(saved):
-        if _elements(saved) != elements:
-            return saved
-        return _Recomputed(source, saved.shape, saved.stride())
-
-    def unpack(packed):
-        if not isinstance(packed, _Recomputed):
-            return packed
-        if packed.source._version != version:
-            raise RuntimeError(
-                'WGSE: the spikes were modified in place after the forward '
-                'pass; its backward pass computes the wavelet coefficients '
-                'from them again. Pass a copy, or modify them after '
-                'backward()')
-        # the same function of the same input: the same strides as
-        # ``tensor``, so the saved view's strides select the same elements
-        made = recompute(packed.source)
-        return made.as_strided(packed.shape, packed.stride,
-                               made.storage_offset())
-
-    return torch.autograd.graph.saved_tensors_hooks(pack, unpack)
-
-
-def _records_autograd() -> bool:
-    """Whether this call builds an autograd graph of real tensors: not under
-    ``no_grad``, nor traced or exported (``torch.export``'s fake tensors
-    have no data pointer for :func:`_elements`)."""
-    return torch.is_grad_enabled() and not (
-        torch.jit.is_tracing() or torch.compiler.is_compiling())
-
-
-def _elements(tensor: torch.Tensor) -> tuple:
-    """Which elements ``tensor`` views: two tensors alike here view the
-    same elements (in orders their strides say)."""
-    return (tensor.untyped_storage().data_ptr(), tensor.storage_offset(),
-            tensor.numel(), tensor.dtype, tensor.device)
-
-
-class _Recomputed:
-    """What a saved tensor under :func:`_saved_as_recomputation` is kept
-    as: its source, and the view of the recomputed tensor it was."""
-
-    def __init__(self, source: torch.Tensor, shape: torch.Size,
-                 stride: Tuple[int, ...]):
-        self.source = source
-        self.shape = shape
-        self.stride = stride
 
 
 def _product(matrix: torch.Tensor, x: torch.Tensor,
@@ -146,51 +76,17 @@ def _transform(num_steps: int, wavelet: str, level: int, mode: str,
     return _cached_transform(num_steps, wavelet, level, mode, device, dtype)
 
 
-# What ``torch.compiler.assume_constant_result(_transform)`` sets, without
-# importing torch._dynamo (seconds) with the module; a test holds the two
-# equal.
-_transform._dynamo_marked_constant = True
-
-
 #: ``WGSE(init=...)``: ``'default'`` (PyTorch's initialisation of every
 #: convolution) or ``'lowpass'`` (see :meth:`WGSE.init_lowpass`)
 INITS = ('default', 'lowpass')
+
+
 #: the constant a detail band's network outputs after ``init='lowpass'``:
 #: small, and far enough above zero that its final ReLU passes gradients
 #: and Adam's first steps (about the learning rate each) do not push it
 #: below zero, where the band would stay dead (at 1e-3, two of the five
 #: detail bands died within 30 steps of lr 1e-3 in a trial)
 LOWPASS_DETAIL_BIAS = 0.02
-
-
-def _conv(dim: int, in_channels: int, out_channels: int,
-          kernel_size: int) -> nn.Module:
-    """The convolution of one variant, 'same' padded.
-
-    Band tensors are ``(N, C, L)`` for ``dim=1`` and ``(B, C, L, H, W)`` for
-    ``dim`` 2 and 3 (``L``: coefficients of the band).
-    """
-    pad = kernel_size // 2
-    if dim == 1:
-        return nn.Conv1d(in_channels, out_channels, kernel_size, padding=pad)
-    if dim == 2:
-        return nn.Conv3d(in_channels, out_channels, (1, kernel_size,
-                                                     kernel_size),
-                         padding=(0, pad, pad))
-    return nn.Conv3d(in_channels, out_channels, kernel_size, padding=pad)
-
-
-class _ResidualLayer(nn.Module):
-    """``relu(conv_b(relu(conv_a(x))) + x)``; a 1-channel ``x`` broadcasts."""
-
-    def __init__(self, dim: int, in_channels: int, channels: int,
-                 kernel_size: int):
-        super().__init__()
-        self.conv_a = _conv(dim, in_channels, channels, kernel_size)
-        self.conv_b = _conv(dim, channels, channels, kernel_size)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return F.relu(self.conv_b(F.relu(self.conv_a(x))) + x)
 
 
 def _activation_bound(networks: nn.ModuleList,
@@ -241,92 +137,6 @@ def _largest_weight(module: nn.Module) -> Tuple[str, float]:
     return max(((name, float(parameter.detach().abs().max()))
                 for name, parameter in module.named_parameters()
                 if parameter.numel()), key=lambda item: item[1])
-
-
-class BandNetwork(nn.Module):
-    """The per-band network: residual layers, then output convolutions.
-
-    ``num_blocks`` residual layers (the first maps 1 to ``hidden_channels``
-    channels), then ``num_blocks - 1`` ``hidden -> hidden`` convolutions and a
-    final ``hidden -> 1`` convolution, each followed by ReLU. With
-    ``num_blocks=1`` this is the paper's ``Conv 1->32, ReLU, Conv 32->32,
-    + input, ReLU, Conv 32->1, ReLU``.
-
-    Input and output: ``(N, 1, L)`` for ``dim=1``, ``(B, 1, L, H, W)`` else.
-    A part of :class:`WGSE`, which checks the arguments.
-    """
-
-    def __init__(self, dim: int = 1, kernel_size: int = 3,
-                 hidden_channels: int = 32, num_blocks: int = 1):
-        super().__init__()
-        self.dim = dim
-        self.kernel_size = kernel_size
-        self.hidden_channels = hidden_channels
-        self.num_blocks = num_blocks
-        self.residual_layers = nn.Sequential(*[
-            _ResidualLayer(dim, 1 if i == 0 else hidden_channels,
-                           hidden_channels, kernel_size)
-            for i in range(num_blocks)
-        ])
-        self.output_convs = nn.ModuleList([
-            _conv(dim, hidden_channels,
-                  1 if i == num_blocks - 1 else hidden_channels, kernel_size)
-            for i in range(num_blocks)
-        ])
-
-    @staticmethod
-    def parameter_count(dim: int, kernel_size: int, hidden_channels: int,
-                        num_blocks: int) -> int:
-        """Parameters of a network of these arguments, without building
-        it."""
-        taps = kernel_size ** (1 if dim == 1 else 2 if dim == 2 else 3)
-        hidden = hidden_channels * hidden_channels * taps + hidden_channels
-        first = hidden_channels * taps + hidden_channels
-        return (first + hidden  # the first residual layer
-                + (num_blocks - 1) * 3 * hidden  # further layers, outputs
-                + hidden_channels * taps + 1)  # the last output convolution
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        x = self.residual_layers(x)
-        for conv in self.output_convs:
-            x = F.relu(conv(x))
-        return x
-
-    @torch.no_grad()
-    def init_pass_through(self, gain: float, bias: float = 0.0) -> None:
-        """Set the weights so that the network computes
-        ``relu(gain * relu(x) + bias)`` for input ``x`` (``(N, 1, L)`` or
-        ``(B, 1, L, H, W)``): every residual branch is zero (its second
-        convolution's weights and bias; the first keeps its weights and
-        learns once the second moves), the hidden output convolutions pass
-        each channel through, and the last one averages the channels
-        times ``gain`` and adds ``bias``."""
-        for block in self.residual_layers:
-            block.conv_b.weight.zero_()
-            block.conv_b.bias.zero_()
-        for index, conv in enumerate(self.output_convs):
-            centre = tuple(size // 2 for size in conv.weight.shape[2:])
-            conv.weight.zero_()
-            conv.bias.zero_()
-            if index < len(self.output_convs) - 1:
-                for channel in range(self.hidden_channels):
-                    conv.weight[(channel, channel) + centre] = 1.0
-            else:
-                conv.weight[(0, slice(None)) + centre] = (
-                    gain / self.hidden_channels)
-                conv.bias.fill_(bias)
-
-    def layers(self) -> List[Tuple[nn.Module, Optional[int]]]:
-        """The convolutions in order, each with the index of the activation
-        added before its ReLU (0: the input, ``i``: the output of the
-        ``i``-th convolution) or ``None``: the description
-        :func:`~wgse_mmseg.core.wgse.torch_band_networks.torch_band_networks`
-        runs."""
-        plan = []
-        for block in self.residual_layers:
-            block_input = len(plan)
-            plan += [(block.conv_a, None), (block.conv_b, block_input)]
-        return plan + [(conv, None) for conv in self.output_convs]
 
 
 class WGSE(nn.Module):
@@ -558,7 +368,7 @@ class WGSE(nn.Module):
         backend, self.backend_check = resolve_backend(
             self.backend, self.band_networks, coeffs, lengths)
         self.backend_in_use = backend.name
-        with _saved_as_recomputation(coeffs, spikes, coefficients):
+        with saved_as_recomputation(coeffs, spikes, coefficients):
             # the synthesis product below gives the band networks' output
             # a gradient of its own, which the backend may overwrite
             enhanced = backend.run(
