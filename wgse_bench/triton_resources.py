@@ -571,7 +571,8 @@ def predict_former_kernels(source: str, batch: int = 4, height: int = 256,
                            width: int = 512) -> Dict[str, Dict[str, float]]:
     """The predictor applied to the kernels this repository's Triton
     backend ran before its band-major rewrite (``source``: their module's
-    path, ``git show 3123fe6:wgse_mmseg/core/wgse/_triton_band_kernels.py``)
+    path: ``_triton_band_kernels.py`` of ``wgse_mmseg/core/wgse`` at commit
+    3123fe6, ``git show``)
     at TF32 and 32 channels on an H200: per kernel, each band length of
     :data:`PAPER_BANDS` (as a string: JSON's keys) mapped to the predicted
     milliseconds of its launch (a launch a band, pixel-major coefficients

@@ -358,7 +358,8 @@ def read_report(path: str) -> Dict[str, Any]:
 
 def write_report(report: Dict[str, Any], out_dir: str, command: str) -> None:
     """``out_dir/gpu.json`` and ``out_dir/gpu.md`` of ``report`` (what
-    :func:`run_report` returns), each whole or not at all; ``command`` is
+    :func:`~wgse_bench.gpu_report.run_report` returns), each whole or not at
+    all; ``command`` is
     the command line the page says wrote it."""
     with atomic_output(os.path.join(out_dir, 'gpu.json')) as f:
         f.write(json.dumps(report, indent=1).encode())

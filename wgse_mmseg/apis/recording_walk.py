@@ -7,7 +7,7 @@ frame of a video. The one mechanism of ``tools/demo.py --stride`` (a
 segmentation overlay per window) and ``tools/misc/reconstruct.py --stride``
 (a reconstructed image per window); it needs no OpenMMLab.
 
-The plan (:func:`plan_walk`)
+The plan (:func:`~wgse_mmseg.apis.walk_plan.plan_walk`)
     Windows are centred on readouts ``0, stride, 2 * stride, ...`` of the
     recording; the first walked centre is the first of those whose
     ``length``-readout window (frames ``[centre - length // 2, centre -

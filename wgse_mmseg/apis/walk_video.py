@@ -17,7 +17,8 @@ __all__ = []
 
 
 def png_image(frame: np.ndarray) -> np.ndarray:
-    """An 8-bit grey or RGB frame as :func:`write_png` takes it (grey, or
+    """An 8-bit grey or RGB frame as
+    :func:`~wgse_mmseg.fileio.images.write_png` takes it (grey, or
     OpenCV's BGR)."""
     frame = np.asarray(frame)
     if frame.dtype != np.uint8 or frame.ndim not in (2, 3) or (

@@ -1,8 +1,8 @@
 """Seeds: the one range, the one check and the one derivation rule.
 
-A seed is an integer in ``0 ..`` :data:`~.limits.MAX_SEED` (63 bits, which
-NumPy and torch both accept); :func:`check_seed` checks it, for the public
-entry points and everywhere else.
+A seed is an integer in ``0 ..`` :data:`~wgse_mmseg.limits.MAX_SEED` (63 bits,
+which NumPy and torch both accept); :func:`check_seed` checks it, for the
+public entry points and everywhere else.
 
 Every seed the package makes from another is :func:`derive_seed`'s: the
 parent seed and a tuple of keys (a sample's name or index, a random

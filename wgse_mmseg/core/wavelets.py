@@ -56,7 +56,8 @@ def _checked(entry: str, length: int, wavelet, level: Optional[int],
     """The wavelet and the number of levels (``None``:
     ``pywt.dwt_max_level``) of a transform of a signal of ``length``
     samples, checked for ``entry``; the matrices are dense, so their size
-    is held to the allocation limit (:func:`~.limits.check_allocation`)."""
+    is held to the allocation limit
+    (:func:`~wgse_mmseg.limits.check_allocation`)."""
     check_integer(entry, length_name, length, 1)
     check_integer(entry, 'level', level, 0, optional=True)
     check_choice(entry, 'mode', mode, SUPPORTED_MODES)

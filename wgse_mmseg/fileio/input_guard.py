@@ -5,7 +5,8 @@ Outputs are files, or streamed to
     (``/dev/null``, a shell's ``>(cat)``) is written through, never
     replaced by a regular file (:func:`~wgse_mmseg.fileio.atomic.atomic_path`);
     a socket, a block device or a folder where a file goes is refused
-    naming it, by the tools before any work (:func:`check_tool_outputs`,
+    naming it, by the tools before any work
+    (:func:`~wgse_mmseg.fileio.output_folder.check_tool_outputs`,
     :func:`check_output_kind`).No input replaced
     While a tool runs (its ``main`` is wrapped by :func:`keeps_inputs`),
     every file the package reads as input (a spike file, an image, a
@@ -13,15 +14,16 @@ Outputs are files, or streamed to
     its device and inode, so hard links and symbolic links are the same
     file; every output the package writes
     (:func:`~wgse_mmseg.fileio.atomic.atomic_path`) and every path it removes
-    (:func:`discard`) is checked
+    (:func:`~wgse_mmseg.fileio.output_folder.discard`) is checked
     against them (:func:`check_output`): an output over an input is an
     :class:`OutputFolderError` naming both, and nothing is written. Tools
     also check their output arguments against their other arguments
-    before any work (:func:`check_tool_outputs`). (A library caller may
-    read a file and save it back; only a tool's run is guarded.) A lock or
-    state file the package writes in place is one it made: a file with other
-    names (a hard link) or content that is not its record is refused, never
-    truncated.
+    before any work
+    (:func:`~wgse_mmseg.fileio.output_folder.check_tool_outputs`). (A library
+    caller may read a file and save it back; only a tool's run is guarded.) A
+    lock or state file the package writes in place is one it made: a file with
+    other names (a hard link) or content that is not its record is refused,
+    never truncated.
 """
 import functools
 import os

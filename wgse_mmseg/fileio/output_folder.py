@@ -14,20 +14,21 @@ No link followed out of the folder
     names. A folder the package names itself (``<video>.partial``) is
     owned with ``named=True``: a link or file at its path is refused,
     never followed or removed.Only what the package wrote
-    A folder a tool writes as its output is claimed (:func:`own_folder`):
-    the package makes it, or takes an empty one, and keeps in it the
-    manifest :data:`MANIFEST_NAME`, the record of every file written there
-    by rename while it is held (:func:`note_written`). An existing folder
-    with other files and no manifest is refused before any work, naming
-    some of them, and so is one that holds an input of the run at any
-    depth (:func:`check_output_folder`: compared by device and inode,
-    walking up each input's real parents, links resolved). Removal
-    (:meth:`OwnedFolder.clear`, :meth:`OwnedFolder.remove`) takes only the
-    files the manifest lists, and a folder only once it is empty: a file
-    the user added is kept, and nothing is removed as a tree. A lock taken
-    in a folder the package does not own (beside an ONNX file, in a
-    training's work dir, which holds the checkpoint it resumes from)
-    claims nothing (``claim=False``).State verified before use
+    A folder a tool writes as its output is claimed
+    (:func:`~wgse_mmseg.fileio.locks.own_folder`): the package makes it, or
+    takes an empty one, and keeps in it the manifest :data:`MANIFEST_NAME`, the
+    record of every file written there by rename while it is held
+    (:func:`note_written`). An existing folder with other files and no manifest
+    is refused before any work, naming some of them, and so is one that holds
+    an input of the run at any depth (:func:`check_output_folder`: compared by
+    device and inode, walking up each input's real parents, links resolved).
+    Removal (:meth:`OwnedFolder.clear`, :meth:`OwnedFolder.remove`) takes only
+    the files the manifest lists, and a folder only once it is empty: a file
+    the user added is kept, and nothing is removed as a tree. A lock taken in a
+    folder the package does not own (beside an ONNX file, in a training's work
+    dir, which holds the checkpoint it resumes from) claims nothing
+    (``claim=False``).
+State verified before use
     What a tool finds in its folder is checked before it is trusted (a
     frame against the size and SHA-256 its writer recorded, a sample
     against its marker, an image against what it is made from), and what
@@ -75,8 +76,9 @@ def check_output_folder(folder, inputs: Iterable = ()) -> None:
     not one the package may write: anything but a folder at its path, a
     folder with files and no manifest (:data:`MANIFEST_NAME`: not made by
     the package), or one holding, at any depth, an input (one of
-    ``inputs`` or a file the running tool read: :func:`note_input`),
-    compared by device and inode. A missing ``folder`` passes.
+    ``inputs`` or a file the running tool read:
+    :func:`~wgse_mmseg.fileio.input_guard.note_input`), compared by device and
+    inode. A missing ``folder`` passes.
 
     Raises:
         OutputFolderError: naming the folder and what is wrong.
@@ -176,8 +178,8 @@ def discard(path: str) -> None:
         os.unlink(path)
 
 
-#: the claimed folders this process holds (:func:`own_folder`), the
-#: innermost last
+#: the claimed folders this process holds
+#: (:func:`~wgse_mmseg.fileio.locks.own_folder`), the innermost last
 HELD_FOLDERS: List['OwnedFolder'] = []
 
 
@@ -225,9 +227,10 @@ def open_manifest(path: str, flags: int) -> int:
 
 class OwnedFolder:
     """Paths inside a folder the package writes (its writer holds the
-    lock: :func:`own_folder`). ``lock``: its writer's lock file;
-    ``claimed``: the folder is the package's, with a manifest of what it
-    wrote (:data:`MANIFEST_NAME`), which :meth:`clear` and :meth:`remove`
+    lock: :func:`~wgse_mmseg.fileio.locks.own_folder`). ``lock``: its writer's
+    lock file; ``claimed``: the folder is the package's, with a manifest of
+    what it wrote (:data:`MANIFEST_NAME`), which :meth:`clear` and
+    :meth:`remove`
     go by."""
 
     def __init__(self, root: str, lock: Optional[str] = None,

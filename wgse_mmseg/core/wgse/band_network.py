@@ -51,7 +51,8 @@ class BandNetwork(nn.Module):
     + input, ReLU, Conv 32->1, ReLU``.
 
     Input and output: ``(N, 1, L)`` for ``dim=1``, ``(B, 1, L, H, W)`` else.
-    A part of :class:`WGSE`, which checks the arguments.
+    A part of :class:`~wgse_mmseg.core.wgse.wgse.WGSE`, which checks the
+    arguments.
     """
 
     def __init__(self, dim: int = 1, kernel_size: int = 3,
