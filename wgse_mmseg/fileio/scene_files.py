@@ -32,9 +32,8 @@ def read_scene_file(path: Union[str, os.PathLike]) -> dict:
     """The effect mapping a ``.json``, ``.yaml`` or ``.yml`` file holds,
     checked as the simulator checks its effects.
 
-    The file may hold at most
-    :data:`~wgse_mmseg.limits.TEXT_FILE_LIMIT_BYTES`; YAML aliases are
-    refused.
+    The file may hold at most 1 MiB (the limit of every side, marker and
+    scene file, docs/security.md); YAML aliases are refused.
     """
     path = os.fspath(check_path('read_scene_file', 'path', path))
     ext = osp.splitext(path)[1].lower()
