@@ -41,12 +41,8 @@ gradient is taken; one launch of each kernel each time, all bands at
 once), plus one float64 forward+backward of the ``torch`` backend. Its
 arithmetic is negligible on a GPU (259 pixels against the 524288 of a
 4x129x256x512 batch); the time is the compiles of the kernels the call
-runs, which its first step would pay anyway (measured with the former
-kernels, which compiled one variant per band length, on an H100 or H200:
-30-60 s per precision in the first process on a machine, 0.2-0.9 s in later
-ones, which find triton's cache; the present kernels compile, for any T,
-two a precision for training, the forward and one backward entry, and one
-for inference).
+runs, which its first step would pay anyway (docs/wgse_speed.md has the
+compile times measured).
 """
 import copy
 import logging

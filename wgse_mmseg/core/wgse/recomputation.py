@@ -19,8 +19,8 @@ def saved_as_recomputation(tensor: torch.Tensor, source: torch.Tensor,
     ``tensor`` itself, or a transpose or reshape of it, as a kernel's rows)
     is kept as ``source`` and made again in the backward pass, as the same
     view of ``recompute(source)``; every other saved tensor is kept as
-    usual. WGSE's wavelet coefficients ``(B, C, P)`` are 1.57 times the
-    float32 spikes at T = 129 (C = 202); a band-network backend that saves
+    usual. WGSE's wavelet coefficients ``(B, C, P)`` are larger than the
+    float32 spikes (``C`` exceeds ``T``); a band-network backend that saves
     them for its backward pass would hold them from the forward pass until
     WGSE's backward, through the whole segmentor's. ``source`` (the spikes)
     is held anyway; changed in place before the backward pass, it is

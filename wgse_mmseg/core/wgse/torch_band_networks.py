@@ -57,8 +57,7 @@ __all__ = []
 #: Rows (pixel-coefficients) per chunk: 16384 rows x 32 channels x 4 bytes
 #: is 2 MiB per activation, so a chunk's layers stay in the L2/L3 caches
 #: while each product is still long enough to hide the per-call overhead
-#: (measured: 8192-32768 rows within 10% of each other on an AMD EPYC,
-#: 4096 and 65536 clearly slower).
+#: (docs/wgse_speed.md has the chunk sizes measured).
 ROWS_PER_CHUNK = 16384
 
 
@@ -82,8 +81,8 @@ class _Workspace:
     """Buffers reused from chunk to chunk, one per role.
 
     A fresh ``(rows, 32)`` activation per chunk and layer is 2 MiB that the
-    kernel faults in on first touch, which measured about as costly as the
-    arithmetic that fills it; so each role (``('act', i)``, ``('grad', i)``,
+    kernel faults in on first touch, a cost of the order of the arithmetic
+    that fills it; so each role (``('act', i)``, ``('grad', i)``,
     ``'im2col'``, ...) gets one buffer, grown to the largest chunk.
     """
 

@@ -89,8 +89,8 @@ class LaunchConfig(NamedTuple):
 #: warp group: warp-group tensor-core instructions on sm_90), 127-255
 #: registers without spilling on sm_80, sm_89, sm_90, sm_100 and sm_120 at
 #: TF32, fp16 and bf16, two programs an SM (at 32 channels; 16 take
-#: fewer). 256 pixels spill; 64 cost 26-33 warp instructions a coefficient
-#: position, 128 pixels 14-20 (the resources tool's table).
+#: fewer). 256 pixels spill, and 64 cost more instructions a coefficient
+#: position than 128 (the resources tool's table, docs/wgse_speed.md).
 FORWARD_CONFIGS = (LaunchConfig(128, 4), )
 #: The backward kernel's entries (:func:`backward_configs`), the first of a
 #: list running unless a caller names another. Each compiles without
@@ -117,14 +117,11 @@ def conv1_on_tensor_cores(precision: str, major: int) -> bool:
     ``precision`` on a GPU of compute capability ``major`` (0: the
     interpreter): with fp16 or bf16 operands on every target, and at TF32
     where the products are tcgen05 ones (10: B200). Otherwise float32
-    multiply-adds. By the resources tool's counts (warp instructions a
-    coefficient position at 32 channels, triton 3.6): in bf16 16.2-16.6
-    against 18.3-18.7 on sm_80, sm_89, sm_90 and sm_120, and on sm_100
-    14.2 against 15.8 with 72 bytes a thread spilled; at TF32 the product
-    costs more on those four (19.6-22.1 against 18.1-19.8) and spills 40
-    bytes on sm_89, where on sm_100 the multiply-adds spill 112 (their
-    ``(1, H)`` taps and biases take a register per channel in the rows
-    tcgen05 results come in). Under fp16 and bf16 the forward's conv1 then
+    multiply-adds: by the resources tool's counts (docs/wgse_speed.md,
+    "Compiled for GPUs") the product takes fewer instructions in fp16 and
+    bf16 on every target, and at TF32 only on sm_100, where the
+    multiply-adds spill; elsewhere at TF32 it costs more and spills on
+    sm_89. Under fp16 and bf16 the forward's conv1 then
     rounds its operands as the backward's (and as cuDNN's under autocast)
     does."""
     return precision in ('fp16', 'bf16') or (precision == 'tf32' and
