@@ -232,12 +232,9 @@ REVIEWED = {
     ('wgse_mmseg/__init__.py', 'register_all_modules',
      'importlib.import_module'):
         'a fixed list of the package\'s modules',
-    ('wgse_mmseg/__init__.py', '__getattr__', 'importlib.import_module'):
-        'the package\'s own submodule names (attribute access in code)',
     ('wgse_mmseg/core/__init__.py', '__getattr__',
      'importlib.import_module'):
-        'the fixed _NAMES table, else a submodule of wgse_mmseg.core '
-        '(attribute access in code)',
+        'the fixed _NAMES table of wgse_mmseg.core\'s own modules',
     ('wgse_mmseg/compat/checkpoint_safety.py', '_resolve',
      'importlib.import_module'):
         'the fixed MMENGINE_CHECKPOINT_GLOBALS',
