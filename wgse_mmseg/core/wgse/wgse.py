@@ -76,6 +76,11 @@ def _transform(num_steps: int, wavelet: str, level: int, mode: str,
     return _cached_transform(num_steps, wavelet, level, mode, device, dtype)
 
 
+# What ``torch.compiler.assume_constant_result(_transform)`` sets, without
+# importing torch._dynamo (seconds) with the module; a test holds the two
+# equal.
+_transform._dynamo_marked_constant = True
+
 #: ``WGSE(init=...)``: ``'default'`` (PyTorch's initialisation of every
 #: convolution) or ``'lowpass'`` (see :meth:`WGSE.init_lowpass`)
 INITS = ('default', 'lowpass')
