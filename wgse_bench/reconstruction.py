@@ -48,13 +48,13 @@ from wgse_mmseg import register_all_modules
 # as the tools make it, before the layer's packages are imported
 register_all_modules()
 from wgse_mmseg.argument_checks import (ArgumentError, check_integer,
-                                        check_layout, check_path, check_text,
-                                        is_choice, is_integer)
+                                        check_path, check_read_options,
+                                        check_text, is_choice, is_integer)
 from wgse_mmseg.command_line import (EXPOSURE, LAYOUT, LAYOUT_HELP, NUM_STEPS,
                                      Choice, Integer, Path, SequenceOf, Text,
                                      add_frame_size_options, check_frame_size)
 from wgse_mmseg.core.exposure import apply_exposure
-from wgse_mmseg.limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from wgse_mmseg.limits import MAX_NUM_STEPS
 from wgse_mmseg.core.spike_formats import SpikeFileError, centered_window
 from wgse_mmseg.fileio.spike_files import load_spikes, spike_shape
 from wgse_mmseg.fileio.images import to_uint8
@@ -273,10 +273,8 @@ def score_recording(path: str, methods: Sequence[str] = METHODS,
         raise ArgumentError(entry, 'frames', 'a non-empty sequence of '
                             'integers (frame indices), or None', frames)
     EXPOSURE.check(exposure, entry, 'exposure')
-    check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE, optional=True)
-    check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE, optional=True)
+    check_read_options(entry, height, width, layout)
     check_text(entry, 'device', device, empty=False)
-    check_layout(entry, layout)
     total, _, _ = spike_shape(path, height, width, layout)
     frames = list(frames) if frames else [total // 2]
     results = {}

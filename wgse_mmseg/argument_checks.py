@@ -242,6 +242,17 @@ def check_layout(entry: str, layout: Any) -> Optional[str]:
     return check_choice(entry, 'layout', layout, LAYOUTS, optional=True)
 
 
+def check_read_options(entry: str, height: Any, width: Any,
+                       layout: Any) -> None:
+    """The options every reader of a recording takes: the frame ``height``
+    and ``width`` (a ``.dat`` file's; each at most
+    :data:`~wgse_mmseg.limits.MAX_IMAGE_SIDE`) and the ``layout``
+    (:func:`check_layout`), each ``None`` for what the file records."""
+    for name, side in (('height', height), ('width', width)):
+        check_integer(entry, name, side, 1, MAX_IMAGE_SIDE, optional=True)
+    check_layout(entry, layout)
+
+
 def check_parameter_count(entry: str, count: int, fields: str) -> None:
     """Refuse a learned module of more than
     :data:`~wgse_mmseg.limits.MAX_PARAMETERS` parameters before

@@ -68,13 +68,13 @@ from typing import (TYPE_CHECKING, Any, Callable, Dict, NamedTuple, Optional,
 import numpy as np
 from tqdm import tqdm
 
-from ..argument_checks import (check_flag, check_integer, check_layout,
-                               check_number, check_path)
+from ..argument_checks import (check_flag, check_integer, check_number,
+                               check_path, check_read_options)
 from ..command_line import Integer, Number
 from ..fileio.images import write_png
 from ..fileio.locks import add_wait_option, own_folder
 from ..fileio.output_folder import open_append
-from ..limits import MAX_BATCH_SIZE, MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from ..limits import MAX_BATCH_SIZE, MAX_NUM_STEPS
 from .walk_plan import (STRIDE, WalkError, WalkOutputs, WalkPlan,
                         plan_recording_walk, read_windows, walk_outputs)
 from .walk_state import PROGRESS_NAME, csv_line, frame_name, open_state
@@ -177,9 +177,7 @@ def walk_recording(path: str, video: str,
     check_integer(entry, 'stride', stride, 1)
     check_integer(entry, 'batch_size', batch_size, 1, MAX_BATCH_SIZE)
     check_number(entry, 'fps', fps, 0, 1000, strict_minimum=True)
-    for name, side in (('height', height), ('width', width)):
-        check_integer(entry, name, side, 1, MAX_IMAGE_SIDE, optional=True)
-    check_layout(entry, layout)
+    check_read_options(entry, height, width, layout)
     for name, value in (('save_frames', save_frames),
                         ('progress', progress), ('wait', wait)):
         check_flag(entry, name, value)

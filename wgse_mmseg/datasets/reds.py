@@ -31,7 +31,7 @@ from mmengine.structures import BaseDataElement, PixelData
 
 from mmseg.registry import DATASETS, TRANSFORMS
 from ..argument_checks import (ArgumentError, check_frame_size, check_integer,
-                               check_layout, check_number, check_path,
+                               check_number, check_path, check_read_options,
                                check_text, is_number)
 from ..fileio.folder_walk import files_under
 from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS, MAX_SAMPLES
@@ -70,11 +70,7 @@ class LoadSpikeImagePair(BaseTransform):
         super().__init__()
         entry = 'LoadSpikeImagePair'
         check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS)
-        check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE,
-                      optional=True)
-        check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE,
-                      optional=True)
-        check_layout(entry, layout)
+        check_read_options(entry, height, width, layout)
         if (height is None) != (width is None):
             raise ValueError('LoadSpikeImagePair: height and width go '
                              'together')

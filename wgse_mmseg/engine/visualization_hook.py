@@ -11,10 +11,10 @@ from mmengine.runner import Runner
 from mmseg.engine.hooks import SegVisualizationHook
 from mmseg.registry import HOOKS
 from mmseg.structures import SegDataSample
-from ..argument_checks import check_integer, check_layout
+from ..argument_checks import check_integer, check_read_options
 from ..core.exposure import apply_exposure
 from ..fileio.images import to_uint8
-from ..limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from ..limits import MAX_NUM_STEPS
 from ..core.reconstruction_baselines import tfp
 from ..datasets.transforms import LoadSpikeFromFile
 
@@ -65,11 +65,7 @@ class SpikeVisualizationHook(SegVisualizationHook):
         entry = 'SpikeVisualizationHook'
         check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS,
                       optional=True)
-        check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE,
-                      optional=True)
-        check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE,
-                      optional=True)
-        check_layout(entry, layout)
+        check_read_options(entry, height, width, layout)
         with warnings.catch_warnings():
             # MMSeg's hook warns whenever draw is False, its default: not
             # news in every run

@@ -41,7 +41,7 @@ from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from ..argument_checks import (check_integer, check_layout, check_path,
+from ..argument_checks import (check_integer, check_path, check_read_options,
                                integer_expected, is_integer)
 from ..core.spike_formats import (SPK_HEADER, SPK_MAGIC, SPK_VERSION,
                                   SpikeFileError, check_binary,
@@ -235,9 +235,7 @@ def _check_reader_arguments(entry: str, path, height, width,
                             layout) -> None:
     """The arguments every reader of a spike file takes, checked."""
     check_path(entry, 'path', path)
-    for name, side in (('height', height), ('width', width)):
-        check_integer(entry, name, side, 1, MAX_IMAGE_SIDE, optional=True)
-    check_layout(entry, layout)
+    check_read_options(entry, height, width, layout)
 
 
 def spike_shape(path: str, height: Optional[int] = None,

@@ -12,8 +12,8 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 
 from mmseg.registry import TRANSFORMS
-from ...argument_checks import check_integer, check_layout
-from ...limits import MAX_IMAGE_SIDE, MAX_NUM_STEPS
+from ...argument_checks import check_integer, check_read_options
+from ...limits import MAX_NUM_STEPS
 from ...core.spike_formats import centered_window
 from ...fileio.spike_files import load_spikes, spike_shape
 
@@ -57,12 +57,8 @@ class LoadSpikeFromFile(BaseTransform):
         entry = 'LoadSpikeFromFile'
         check_integer(entry, 'num_steps', num_steps, 1, MAX_NUM_STEPS,
                       optional=True)
-        check_integer(entry, 'height', height, 1, MAX_IMAGE_SIDE,
-                      optional=True)
-        check_integer(entry, 'width', width, 1, MAX_IMAGE_SIDE,
-                      optional=True)
+        check_read_options(entry, height, width, layout)
         check_integer(entry, 'center', center, 0, optional=True)
-        check_layout(entry, layout)
         self.num_steps = num_steps
         self.height = height
         self.width = width
