@@ -43,7 +43,7 @@ import re
 import subprocess
 import sys
 import tempfile
-from typing import Dict, List, NamedTuple, Optional, Sequence
+from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 from wgse_mmseg.command_line import Choice, Integer, Number, Path
 from wgse_mmseg.limits import MAX_WORKERS
@@ -345,6 +345,13 @@ def _compiled(variant: Variant, arch: str):
     compiled = triton.compile(
         source, target=GPUTarget('cuda', ARCHITECTURES[arch][0], 32),
         options=dict(num_warps=variant.num_warps, maxnreg=variant.maxnreg))
+    dump, sass = _disassembled(compiled)
+    return compiled, sass, dump
+
+
+def _disassembled(compiled) -> Tuple[str, str]:
+    """cuobjdump's resource usage and SASS of a Triton compilation's
+    cubin."""
     with tempfile.NamedTemporaryFile(suffix='.cubin') as cubin:
         cubin.write(compiled.asm['cubin'])
         cubin.flush()
@@ -352,7 +359,7 @@ def _compiled(variant: Variant, arch: str):
             [_cuobjdump(), option, cubin.name], capture_output=True,
             text=True, check=True).stdout
             for option in ('--dump-resource-usage', '--dump-sass'))
-    return compiled, sass, dump
+    return dump, sass
 
 
 def compile_variant(variant: Variant, arch: str) -> Resources:
@@ -611,13 +618,7 @@ def _predict_former_here(source: str, batch: int, pixels: int,
                           constexprs=constants),
                 target=GPUTarget('cuda', 90, 32),
                 options=dict(num_warps=warps))
-            with tempfile.NamedTemporaryFile(suffix='.cubin') as cubin:
-                cubin.write(compiled.asm['cubin'])
-                cubin.flush()
-                dump, sass = (subprocess.run(
-                    [_cuobjdump(), option, cubin.name], capture_output=True,
-                    text=True, check=True).stdout
-                    for option in ('--dump-resource-usage', '--dump-sass'))
+            dump, sass = _disassembled(compiled)
             registers, shared = (int(x) for x in re.search(
                 r'REG:(\d+) .*?SHARED:(\d+)', dump).groups())
             programs = programs_per_sm(
