@@ -89,10 +89,11 @@ def _runner(kernel: str, band: Dict, precision: str, input_grad: bool):
     import torch
 
     from wgse_mmseg.core.wgse import triton_band_networks as tbn
+    from wgse_mmseg.core.wgse.triton_launch_choices import FORWARD_CONFIGS
     coeffs, length = band['coeffs'], band['coeffs'].shape[1]
     inputs = tbn.band_kernel_inputs([length], band['params'])
     if kernel == 'band_backward':  # the backward kernel's input
-        _, positive = tbn.launch_forward(tbn.FORWARD_CONFIGS[0], coeffs,
+        _, positive = tbn.launch_forward(FORWARD_CONFIGS[0], coeffs,
                                          inputs, precision)
         d3 = tbn.relu_gradient(band['grad_out'], positive)
     slots = tbn.backward_slots(coeffs.device, 1)
@@ -131,10 +132,11 @@ def sweep(kernel: str, entries: Sequence, band: Dict, precision: str,
     results)."""
     import torch
 
-    from wgse_mmseg.core.wgse import triton_band_networks as tbn
+    from wgse_mmseg.core.wgse.triton_launch_choices import (FORWARD_CONFIGS,
+                                                            backward_configs)
     run = _runner(kernel, band, precision, input_grad)
-    listed = (tbn.FORWARD_CONFIGS if kernel == 'band_forward' else
-              tbn.backward_configs())
+    listed = (FORWARD_CONFIGS if kernel == 'band_forward' else
+              backward_configs())
     rows, first = [], None
     for entry in entries:
         start = time.perf_counter()
@@ -208,8 +210,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     from wgse_bench.machine import machine_record
     from wgse_mmseg.core.wgse import triton_band_networks as tbn
+    from wgse_mmseg.core.wgse.triton_launch_choices import LaunchConfig
     from wgse_mmseg.fileio.atomic import atomic_output
-    entries = {option: [tbn.LaunchConfig(*e) for e in listed]
+    entries = {option: [LaunchConfig(*e) for e in listed]
                for option, listed in entries.items()}
     reason = tbn.unavailable()
     if reason:

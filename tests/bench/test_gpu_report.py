@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from wgse_bench.gpu_report import kernels, measure, render, sections, targets
-from wgse_mmseg.core.wgse import first_use_check, triton_band_networks
+from wgse_mmseg.core.wgse import first_use_check, triton_launch_choices
 
 pytest.importorskip('pytorch_wavelets')
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -80,9 +80,9 @@ def _check_dry_run(report, goals):
     cores = {(r['kernel'], r['precision']): r
              for r in found['tensor_cores']['rows']}
     assert {(k, r['block']) for (k, _), r in cores.items()} == {
-        ('band_forward', triton_band_networks.FORWARD_CONFIGS[0].block),
+        ('band_forward', triton_launch_choices.FORWARD_CONFIGS[0].block),
         ('band_backward',
-         triton_band_networks.backward_configs(False, 'tf32')[0].block)}
+         triton_launch_choices.backward_configs(False, 'tf32')[0].block)}
     for (kernel, precision), row in cores.items():
         assert row['instruction'] == 'interpreted'
         assert row['of_matmul'] == pytest.approx(
@@ -474,14 +474,14 @@ def test_nsight_computes_rows_are_read():
 ])
 def test_the_prediction_is_read_through_one_adapter(monkeypatch, answer,
                                                     expected):
-    from wgse_bench import triton_resources
+    from wgse_bench import kernel_prediction
     calls = []
 
     def predict(**call):
         calls.append(call)
         return answer
 
-    monkeypatch.setattr(triton_resources, 'predict_band_kernels', predict,
+    monkeypatch.setattr(kernel_prediction, 'predict_band_kernels', predict,
                         raising=False)
     found = kernels.predictions(dict(gpu='H200'), [4, 129, 8, 8], 'tf32')
     assert found['kernels'] == expected
@@ -491,17 +491,17 @@ def test_the_prediction_is_read_through_one_adapter(monkeypatch, answer,
 
 
 def test_no_predictor_is_no_prediction(monkeypatch):
-    from wgse_bench import triton_resources
-    monkeypatch.delattr(triton_resources, 'predict_band_kernels',
+    from wgse_bench import kernel_prediction
+    monkeypatch.delattr(kernel_prediction, 'predict_band_kernels',
                         raising=False)
     assert kernels.predictions({}, [1, 12, 3, 4], 'tf32') == dict(
-        kernels={}, note='no prediction: wgse_bench.triton_resources has '
+        kernels={}, note='no prediction: wgse_bench.kernel_prediction has '
         'no predict_band_kernels')
 
     def broken(**call):
         raise KeyError('sms')
 
-    monkeypatch.setattr(triton_resources, 'predict_band_kernels', broken,
+    monkeypatch.setattr(kernel_prediction, 'predict_band_kernels', broken,
                         raising=False)
     note = kernels.predictions({}, [1, 12, 3, 4], 'tf32')['note']
     assert note.startswith('no prediction') and "KeyError: 'sms'" in note
@@ -515,11 +515,11 @@ import triton
 from triton.backends.compiler import GPUTarget
 from triton.compiler import ASTSource
 from wgse_bench.gpu_report import ceilings
-from wgse_mmseg.core.wgse import triton_band_networks as tbn
+from wgse_mmseg.core.wgse import triton_launch_choices as choices
 found = {}
-for kernel, entry in (('band_forward', tbn.FORWARD_CONFIGS[0]),
-                      ('band_backward', tbn.backward_configs(False,
-                                                             'tf32')[0])):
+for kernel, entry in (('band_forward', choices.FORWARD_CONFIGS[0]),
+                      ('band_backward', choices.backward_configs(False,
+                                                                 'tf32')[0])):
     constants = dict(ITERATIONS=64, M=entry.block, N=32, K=32,
                      PRECISION='tf32')
     signature = dict(a_ptr='*fp32', b_ptr='*fp32', out_ptr='*fp32',
@@ -551,14 +551,14 @@ def test_the_tensor_core_loops_run_the_instructions_they_measure(
 def test_the_predictor_is_asked_once_a_run_and_precision(monkeypatch):
     """The band kernels' and the pass's rows read one answer (a predictor
     may compile the kernels to answer)."""
-    from wgse_bench import triton_resources
+    from wgse_bench import kernel_prediction
     calls = []
 
     def predict(**call):
         calls.append(call['precision'])
         return dict(band_forward=1.0)
 
-    monkeypatch.setattr(triton_resources, 'predict_band_kernels', predict,
+    monkeypatch.setattr(kernel_prediction, 'predict_band_kernels', predict,
                         raising=False)
     run = _run()
     assert [run.prediction(p)['kernels'] for p in ('tf32', 'tf32', 'bf16')

@@ -11,7 +11,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import torch
 
-from wgse_mmseg.core.wgse import triton_band_networks
+from wgse_mmseg.core.wgse import triton_launch_choices
 
 from ..timing import time_calls
 from .measure import error_message
@@ -170,11 +170,12 @@ def tensor_core_rates(hidden: int, programs_per_sm: int, iterations: int,
     CPU)."""
     if triton is None:
         return dict(rows=[], note='not run: triton does not import')
-    tbn = triton_band_networks
     sms = torch.cuda.get_device_properties(device).multi_processor_count \
         if device.startswith('cuda') else 1
-    entries = dict(band_forward=tbn.FORWARD_CONFIGS[0],
-                   band_backward=tbn.backward_configs(False, 'tf32')[0])
+    entries = dict(
+        band_forward=triton_launch_choices.FORWARD_CONFIGS[0],
+        band_backward=triton_launch_choices.backward_configs(False,
+                                                             'tf32')[0])
     rows: List[Dict[str, Any]] = []
     for kernel, entry in entries.items():
         for precision in ('tf32', 'bf16'):

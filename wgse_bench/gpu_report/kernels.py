@@ -16,7 +16,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 import torch
 
 from wgse_mmseg.core.wavelets import band_lengths
-from wgse_mmseg.core.wgse import WGSE, triton_band_networks
+from wgse_mmseg.core.wgse import (WGSE, triton_band_networks,
+                                  triton_launch_choices)
 
 from ..timing import time_calls
 from .measure import error_message, precision_of, spikes_like
@@ -26,7 +27,7 @@ __all__ = []
 #: the band kernels, as their launches are named
 KERNELS = ('band_forward', 'band_backward')
 #: the predictor this report sets its timings beside: module, function
-PREDICTOR = ('wgse_bench.triton_resources', 'predict_band_kernels')
+PREDICTOR = ('wgse_bench.kernel_prediction', 'predict_band_kernels')
 #: Nsight Compute's sections one profiled launch collects: the share of
 #: the peaks reached, why warps stalled, how often the schedulers issued
 NCU_SECTIONS = ('SpeedOfLight', 'WarpStateStats', 'SchedulerStats')
@@ -68,11 +69,11 @@ def kernel_launches(problem: Dict[str, Any], precision: str
     gradient)."""
     tbn = triton_band_networks
     coeffs, inputs = problem['coeffs'], problem['inputs']
-    forward = tbn.FORWARD_CONFIGS[0]
+    forward = triton_launch_choices.FORWARD_CONFIGS[0]
     _, positive = tbn.launch_forward(forward, coeffs, inputs, precision)
     d3 = tbn.relu_gradient(problem['grad_out'], positive)
     slots = tbn.backward_slots(coeffs.device, len(problem['lengths']))
-    backward = tbn.backward_configs(False, precision)[0]
+    backward = triton_launch_choices.backward_configs(False, precision)[0]
     return dict(
         band_forward=lambda: tbn.launch_forward(forward, coeffs, inputs,
                                                 precision),
@@ -126,9 +127,10 @@ def time_kernels(shape: Sequence[int], device: str, precision: str,
     untimed ones on a GPU (the first compiles; the interpreter has nothing
     to warm up)."""
     problem = band_problem(shape, device)
-    tbn = triton_band_networks
-    configs = dict(band_forward=tbn.FORWARD_CONFIGS[0],
-                   band_backward=tbn.backward_configs(False, precision)[0])
+    configs = dict(
+        band_forward=triton_launch_choices.FORWARD_CONFIGS[0],
+        band_backward=triton_launch_choices.backward_configs(False,
+                                                             precision)[0])
     rows, warmup = [], 2 if problem['coeffs'].is_cuda else 0
     for kernel, launch in kernel_launches(problem, precision).items():
         wall = [1e3 * s for s in time_calls(launch, device, repeat,

@@ -15,7 +15,7 @@ from mmseg.registry import MODELS
 
 import wgse_mmseg
 from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
-    compiled_band_networks, triton_band_networks
+    compiled_band_networks, triton_band_networks, triton_launch_choices
 
 wgse_mmseg.register_all_modules()  # MODELS.build(dict(type='WGSE'))
 pytestmark = pytest.mark.usefixtures('single_thread')
@@ -209,7 +209,7 @@ def test_both_forward_step_forms_compute_the_same(monkeypatch, hidden,
     on tensor cores) and as three products (every other target's, and
     full float32's), over three tiles of pixels, the last partial, match
     float64."""
-    monkeypatch.setattr(triton_band_networks, 'taps_as_one_product',
+    monkeypatch.setattr(triton_launch_choices, 'taps_as_one_product',
                         lambda *args: together)
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
     model = _model(backend='triton', hidden_channels=hidden)
@@ -236,7 +236,7 @@ def test_triton_on_bands_shorter_than_its_kernel(steps):
 
 
 @pytest.mark.needs_triton
-@pytest.mark.parametrize('entry', triton_band_networks.backward_configs(),
+@pytest.mark.parametrize('entry', triton_launch_choices.backward_configs(),
                          ids=lambda c: c.name)
 def test_every_triton_backward_entry_computes_the_same(monkeypatch, entry):
     """Each backward entry a GPU may run (every target's, with and without
@@ -244,7 +244,7 @@ def test_every_triton_backward_entry_computes_the_same(monkeypatch, entry):
     two tiles and a partial third each, so that its programs (two a band
     here) run several tiles, matches float64 (full float32 products; the
     fp16/bf16 paths run in the autocast test below)."""
-    monkeypatch.setattr(triton_band_networks, 'backward_configs',
+    monkeypatch.setattr(triton_launch_choices, 'backward_configs',
                         lambda *args: (entry, ))
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
     model = _model(backend='triton')
@@ -324,16 +324,16 @@ def test_the_work_division_shares_programs_by_band_length():
     """About the slots, in proportion to a band's steps, one at least and
     no more than half its tiles; each band's programs start at tiles 0 ..
     n-1 and step by n, so together they run every tile once."""
-    division = triton_band_networks.work_division([18, 18, 72], 100, 40)
+    division = triton_launch_choices.work_division([18, 18, 72], 100, 40)
     counts = {band: step for band, first, step in division if first == 0}
     assert counts == {0: 7, 1: 7, 2: 26}
     for band, count in counts.items():
         tiles = sorted(t for b, first, step in division if b == band
                        for t in range(first, 100, step))
         assert tiles == list(range(100))
-    assert triton_band_networks.work_division([5, 500], 7, 8) == [
+    assert triton_launch_choices.work_division([5, 500], 7, 8) == [
         (0, 0, 1), (1, 0, 3), (1, 1, 3), (1, 2, 3)]
-    assert triton_band_networks.work_division([5, 500], 3, 8) == [
+    assert triton_launch_choices.work_division([5, 500], 3, 8) == [
         (0, 0, 1), (1, 0, 1)]
 
 
@@ -346,9 +346,9 @@ def test_the_first_use_check_runs_every_program_over_several_tiles(programs):
     training relies on them."""
     pixels = band_network_backends.TritonBackend.check_pixels
     for lengths in ([18, 18, 22, 29, 43, 72], [129]):
-        for config in triton_band_networks.backward_configs():
+        for config in triton_launch_choices.backward_configs():
             tiles = -(-pixels // config.block)
-            for band, first, step in triton_band_networks.work_division(
+            for band, first, step in triton_launch_choices.work_division(
                     lengths, tiles, programs):
                 assert len(range(first, tiles, step)) >= 2
 
@@ -373,12 +373,12 @@ def test_full_float32_trains_on_the_sixteen_pixel_backward(
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', allow_tf32)
     model = _model(backend='triton', wavelet='haar', level=1)
     _run(model, _spikes(1, 4, 1, 3), False)
-    assert launched == [triton_band_networks.LaunchConfig(
+    assert launched == [triton_launch_choices.LaunchConfig(
         *(32, 4) if allow_tf32 else (16, 4, 255))]
-    assert launched == list(triton_band_networks.backward_configs(
+    assert launched == list(triton_launch_choices.backward_configs(
         False, precision))
     with pytest.raises(ValueError, match="precision must be one of.*'fp32'"):
-        triton_band_networks.backward_configs(False, 'fp32')
+        triton_launch_choices.backward_configs(False, 'fp32')
 
 
 @pytest.mark.needs_triton
@@ -390,7 +390,7 @@ def test_triton_rejects_a_launch_config_not_in_its_lists():
     with pytest.raises(ValueError, match='forward_config must be one of'):
         triton_band_networks.triton_band_networks(
             coeffs, [5], weights, forward_config=(
-                triton_band_networks.LaunchConfig(128, 2)))
+                triton_launch_choices.LaunchConfig(128, 2)))
 
 
 @pytest.mark.needs_triton
@@ -405,7 +405,7 @@ def test_triton_under_autocast_within_its_stated_tolerance(dtype):
     spikes = _spikes(1, 16, 3, 5)
     precision = {torch.float16: 'fp16', torch.bfloat16: 'bf16'}[dtype]
     with torch.autocast('cpu', dtype=dtype):
-        assert triton_band_networks.dot_precision('cpu') == precision
+        assert triton_launch_choices.dot_precision('cpu') == precision
         got = _run(model, spikes, True)
     assert got[0].dtype == torch.float32
     _assert_close(got, _reference(model, spikes, True),
@@ -414,9 +414,9 @@ def test_triton_under_autocast_within_its_stated_tolerance(dtype):
 
 def test_dot_precision_follows_torch_flags(monkeypatch):
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', True)
-    assert triton_band_networks.dot_precision('cpu') == 'tf32'
+    assert triton_launch_choices.dot_precision('cpu') == 'tf32'
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
-    assert triton_band_networks.dot_precision('cpu') == 'ieee'
+    assert triton_launch_choices.dot_precision('cpu') == 'ieee'
 
 
 @pytest.mark.needs_triton

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from wgse_mmseg.core.wgse import WGSE, band_network_backends, \
-    first_use_check, triton_band_networks
+    first_use_check, triton_launch_choices
 
 pytestmark = pytest.mark.usefixtures('single_thread')
 
@@ -151,10 +151,10 @@ def test_the_triton_check_runs_what_the_call_launches(passes, input_grad,
         passes, precision)
     assert {grad for _, grad in launches} == {input_grad}
     assert {launch['forward_config'] for launch, _ in launches} == set(
-        triton_band_networks.FORWARD_CONFIGS)
+        triton_launch_choices.FORWARD_CONFIGS)
     assert {launch.get('backward_config') for launch, _ in launches} == (
         {None} if input_grad is None else
-        set(triton_band_networks.backward_configs(input_grad, precision)))
+        set(triton_launch_choices.backward_configs(input_grad, precision)))
     assert len(launches) == len(set(
         tuple(launch.items()) for launch, _ in launches))
 
@@ -272,14 +272,14 @@ def test_the_real_triton_kernel_passes_in_the_interpreter(monkeypatch, log,
 
     assert not band_network_backends.TritonBackend().first_use_check
     _install(monkeypatch, CheckedTriton())
-    choice = triton_band_networks.conv1_on_tensor_cores
+    choice = triton_launch_choices.conv1_on_tensor_cores
     chosen = []
 
     def on_this_gpu(precision, interpreter_major):
         chosen.append(choice(precision, major))
         return chosen[-1]
 
-    monkeypatch.setattr(triton_band_networks, 'conv1_on_tensor_cores',
+    monkeypatch.setattr(triton_launch_choices, 'conv1_on_tensor_cores',
                         on_this_gpu)
     model = WGSE(wavelet='haar', level=1)
     spikes = _spikes(steps=6)[:1, :, :1]

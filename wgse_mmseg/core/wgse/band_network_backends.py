@@ -59,7 +59,8 @@ import torch
 from torch import Tensor, nn
 from torch.utils.checkpoint import checkpoint
 
-from . import compiled_band_networks, triton_band_networks
+from . import (compiled_band_networks, triton_band_networks,
+               triton_launch_choices)
 from .first_use_check import (PASSES, CheckResult, FirstUseCheckFailed,
                               check_on_first_use, passes_of)
 from .torch_band_networks import torch_band_networks
@@ -348,24 +349,24 @@ class TritonBackend(BandNetworkBackend):
 
     #: two tiles of the largest launch entry and a partial third
     check_pixels = 2 * max(config.block for config in (
-        triton_band_networks.FORWARD_CONFIGS +
-        triton_band_networks.backward_configs())) + 3
+        triton_launch_choices.FORWARD_CONFIGS +
+        triton_launch_choices.backward_configs())) + 3
 
     def precision(self, coeffs):
-        return triton_band_networks.dot_precision(coeffs.device.type)
+        return triton_launch_choices.dot_precision(coeffs.device.type)
 
     def check_launches(self, passes, precision):
         # every entry the call's passes may launch, each at least once: the
         # forward entries, and the backward entries chosen for its input
         # gradient and precision (no compile of a kernel the call does not
         # run)
-        forward = triton_band_networks.FORWARD_CONFIGS
+        forward = triton_launch_choices.FORWARD_CONFIGS
         input_grad = _input_grad(passes)
         if input_grad is None:
             return [(dict(forward_config=config), None)
                     for config in forward]
-        backward = triton_band_networks.backward_configs(input_grad,
-                                                         precision)
+        backward = triton_launch_choices.backward_configs(input_grad,
+                                                          precision)
         return [(dict(forward_config=forward[min(i, len(forward) - 1)],
                       backward_config=backward[min(i, len(backward) - 1)]),
                  input_grad)

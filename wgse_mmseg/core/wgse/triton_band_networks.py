@@ -2,27 +2,23 @@
 
 Runs the paper's band network (``num_blocks=1``: conv ``1 -> H``, conv
 ``H -> H`` plus the input, conv ``H -> 1``, each followed by ReLU; kernel 3)
-for every pixel, a tile of pixels per program (:data:`FORWARD_CONFIGS`,
-:data:`BACKWARD_CONFIGS`), the weights read once per program and the ``H x
-H`` layer on tensor cores (``tl.dot``). The backward pass recomputes each
-tile's activations while it streams the gradient, so nothing of size
-``pixels x H`` is ever kept: the only memory beyond the input, output and
-their gradients is the forward's mask of where the output is positive (a
-byte a coefficient) and one row of parameter-gradient sums per program.
+for every pixel, a tile of pixels per program (the launch entries of
+:mod:`~wgse_mmseg.core.wgse.triton_launch_choices`), the weights read once
+per program and the ``H x H`` layer on tensor cores (``tl.dot``). The
+backward pass recomputes each tile's activations while it streams the
+gradient, so nothing of size ``pixels x H`` is ever kept: the only memory
+beyond the input, output and their gradients is the forward's mask of
+where the output is positive (a byte a coefficient) and one row of
+parameter-gradient sums per program.
 Kernels: :mod:`.triton_band_kernels`.
 
-Precision of the tensor-core products (:func:`dot_precision`): under
+Precision of the tensor-core products
+(:func:`~.triton_launch_choices.dot_precision`): under
 autocast their operands are rounded to its dtype (fp16 or bf16); otherwise
 TF32 where ``torch.backends.cudnn.allow_tf32`` allows it (the flag torch
 applies to convolutions, on by default), else full float32. Every
 accumulation is float32. The tolerances against float64 that the tests
 hold are :data:`TOLERANCES`.
-
-Launch configurations: each kernel has a list of ``(block, num_warps)``
-entries, one a list today; a call runs the first unless its caller names
-another. Every entry is compiled ahead of time for sm_80, sm_89, sm_90,
-sm_100 and sm_120 by :mod:`~wgse_bench.triton_resources` and tested in the
-interpreter.
 
 Triton launches a kernel on torch's current device and stream, not on its
 tensors' device: every launch here is made with the coefficients' device
@@ -55,6 +51,8 @@ import torch
 from torch import Tensor
 
 from ..kernel_choices import HIDDEN_CHANNELS, TOLERANCES
+from . import triton_launch_choices as launch_choices
+from .triton_launch_choices import LaunchConfig
 
 try:
     import triton
@@ -66,96 +64,6 @@ except ImportError as error:  # triton is not installed (CPU-only torch)
     _IMPORT_ERROR = str(error)
 
 __all__ = []
-
-
-class LaunchConfig(NamedTuple):
-    """How a kernel is launched: ``block`` pixels per program (``tl.dot``
-    needs at least 16), ``num_warps`` warps per program and, where not
-    ``None``, ``maxnreg``: the most registers a thread may use (ptxas
-    spills the rest; without it ptxas chooses, and may spill to fit more
-    programs an SM)."""
-    block: int
-    num_warps: int
-    maxnreg: Optional[int] = None
-
-    @property
-    def name(self) -> str:
-        """``'64x4'`` (block x warps), ``'64x4r168'`` with ``maxnreg``."""
-        return f'{self.block}x{self.num_warps}' + (
-            '' if self.maxnreg is None else f'r{self.maxnreg}')
-
-
-#: The forward kernel's one launch entry: 128-pixel tiles, 4 warps (one
-#: warp group: warp-group tensor-core instructions on sm_90), 127-255
-#: registers without spilling on sm_80, sm_89, sm_90, sm_100 and sm_120 at
-#: TF32, fp16 and bf16, two programs an SM (at 32 channels; 16 take
-#: fewer). 256 pixels spill, and 64 cost more instructions a coefficient
-#: position than 128 (the resources tool's table, docs/wgse_speed.md).
-FORWARD_CONFIGS = (LaunchConfig(128, 4), )
-#: The backward kernel's entries (:func:`backward_configs`), the first of a
-#: list running unless a caller names another. Each compiles without
-#: spilling to at least two programs an SM at every precision on sm_80,
-#: sm_89, sm_90, sm_100 and sm_120 (the resources tool's table,
-#: docs/wgse_speed.md, "Compiled for GPUs"): 32 pixels (48 KB of shared
-#: memory at TF32: two programs share sm_89's and sm_120's 100 KB), 16
-#: wherever the input gradient is computed (WGSE's coefficients need none
-#: in training: they come from the data; it carries three more vectors, and
-#: 32 pixels spill) or the products are full float32, with 255 registers
-#: allowed: left to choose, ptxas gives its 32-channel fp16 and bf16
-#: variants 168 and spills 8-16 bytes a thread to fit three programs an
-#: SM. 64 pixels spill even on sm_90 at TF32.
-BACKWARD_CONFIGS = dict(default=(LaunchConfig(32, 4), ),
-                        input_grad=(LaunchConfig(16, 4, 255), ))
-#: Programs of the backward kernel per SM the work is divided for: what
-#: every entry above fits at once.
-PROGRAMS_PER_SM = 2
-
-
-def conv1_on_tensor_cores(precision: str, major: int) -> bool:
-    """Whether the forward kernel computes conv1 as a tensor-core product
-    (its window of three coefficients times the taps), for products of
-    ``precision`` on a GPU of compute capability ``major`` (0: the
-    interpreter): with fp16 or bf16 operands on every target, and at TF32
-    where the products are tcgen05 ones (10: B200). Otherwise float32
-    multiply-adds: by the resources tool's counts (docs/wgse_speed.md,
-    "Compiled for GPUs") the product takes fewer instructions in fp16 and
-    bf16 on every target, and at TF32 only on sm_100, where the
-    multiply-adds spill; elsewhere at TF32 it costs more and spills on
-    sm_89. Under fp16 and bf16 the forward's conv1 then
-    rounds its operands as the backward's (and as cuDNN's under autocast)
-    does."""
-    return precision in ('fp16', 'bf16') or (precision == 'tf32' and
-                                             major == 10)
-
-
-def taps_as_one_product(precision: str, major: int) -> bool:
-    """Whether the forward kernel runs conv2's taps 0 and 1 as one product
-    (``TAPS_01_AS_ONE``) with products of ``precision`` on a GPU of compute
-    capability ``major`` (0: the interpreter): on sm_90's tensor cores,
-    whose ``wgmma`` products ptxas otherwise serialises, and in the
-    interpreter at those precisions, so that its tests reach it. Full
-    float32 (``'ieee'``, the FMA units) spills with it."""
-    return precision != 'ieee' and major in (0, 9)
-
-
-def backward_configs(input_grad: Optional[bool] = None,
-                     precision: Optional[str] = None
-                     ) -> Tuple[LaunchConfig, ...]:
-    """The backward entries (:data:`BACKWARD_CONFIGS`) a call launches,
-    computing the input gradient or not, with products of ``precision``
-    (:func:`dot_precision`, needed with ``input_grad``); ``None``: every
-    entry. Full float32 (``'ieee'``: TF32 turned off) runs the input
-    gradient's entries either way: its products multiply on the FMA units,
-    whose operands take more registers, and at 32 pixels its backward
-    spills 8-40 bytes a thread on sm_80, sm_89 and sm_90 and 136-176 on
-    sm_100 and sm_120 (at 16 pixels, 255 registers, nothing)."""
-    if input_grad is None:
-        return BACKWARD_CONFIGS['default'] + BACKWARD_CONFIGS['input_grad']
-    if precision not in TOLERANCES:
-        raise ValueError(f'backward_configs: precision must be one of '
-                         f'{list(TOLERANCES)}, got {precision!r}')
-    return BACKWARD_CONFIGS['input_grad' if input_grad or
-                            precision == 'ieee' else 'default']
 
 
 def interpreting() -> bool:
@@ -220,17 +128,6 @@ def unsupported_tensor(coeffs: Tensor) -> Optional[str]:
     if coeffs.dtype != torch.float32:
         return f'it runs float32, not {coeffs.dtype}'
     return None
-
-
-def dot_precision(device_type: str) -> str:
-    """The precision of the ``H x H`` products for a call made now:
-    ``'fp16'`` or ``'bf16'`` under autocast, else ``'tf32'`` where
-    ``torch.backends.cudnn.allow_tf32``, else ``'ieee'``."""
-    if torch.is_autocast_enabled(device_type):
-        dtype = torch.get_autocast_dtype(device_type)
-        return {torch.float16: 'fp16', torch.bfloat16: 'bf16'}.get(
-            dtype, 'ieee')
-    return 'tf32' if torch.backends.cudnn.allow_tf32 else 'ieee'
 
 
 class BandKernelInputs(NamedTuple):
@@ -309,8 +206,10 @@ def launch_forward(config: LaunchConfig, coeffs: Tensor,
                 inputs.lengths, inputs.offsets, *inputs.params,
                 HIDDEN=inputs.hidden, BLOCK=config.block,
                 PRECISION=precision,
-                CONV1_DOT=conv1_on_tensor_cores(precision, major),
-                TAPS_01_AS_ONE=taps_as_one_product(precision, major),
+                CONV1_DOT=launch_choices.conv1_on_tensor_cores(precision,
+                                                               major),
+                TAPS_01_AS_ONE=launch_choices.taps_as_one_product(precision,
+                                                                  major),
                 **_launch_options(config))
     return out, positive
 
@@ -330,24 +229,6 @@ def relu_gradient(grad_out: Tensor, positive: Tensor,
     return torch.where(keep, grad_out, 0.0).contiguous()
 
 
-def work_division(lengths: Sequence[int], tiles: int, slots: int
-                  ) -> List[Tuple[int, int, int]]:
-    """The backward kernel's programs, ``(band, first tile, step)`` each:
-    about ``slots`` programs shared among the bands in proportion to their
-    work (a tile of a band of ``L`` coefficients takes ``L + 3`` steps), so
-    that programs of every band finish together; at least one a band, and
-    at most half its tiles, so that every program runs two tiles or more
-    (where the band has two). Training sizes give each program hundreds of
-    tiles; the cap binds on small problems, where it makes the first-use
-    check run the kernel's sums over several tiles as training does
-    (given every SM's programs, the check's would run one tile each)."""
-    work = [length + 3 for length in lengths]
-    counts = [min(max(1, tiles // 2), max(1, round(slots * w / sum(work))))
-              for w in work]
-    return [(band, first, count) for band, count in enumerate(counts)
-            for first in range(count)]
-
-
 def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
                     grad_coeffs: Optional[Tensor], inputs: BandKernelInputs,
                     precision: str, slots: int) -> List[Tensor]:
@@ -359,7 +240,8 @@ def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
     bias gradient, the sum of ``d3`` over the band's rows."""
     batch, columns, pixels = coeffs.shape
     tiles = batch * triton.cdiv(pixels, config.block)
-    division = work_division(inputs.band_lengths, tiles, slots)
+    division = launch_choices.work_division(inputs.band_lengths, tiles,
+                                            slots)
     work = torch.tensor(division, dtype=torch.int32, device=coeffs.device)
     partial = coeffs.new_empty(len(division),
                                sum(p[0].numel() for p in inputs.params[:5]))
@@ -380,12 +262,13 @@ def launch_backward(config: LaunchConfig, coeffs: Tensor, d3: Tensor,
 
 def backward_slots(device: torch.device, bands: int) -> int:
     """Programs the backward kernel's work is divided into: every SM's
-    :data:`PROGRAMS_PER_SM` on a GPU; two a band under the interpreter
-    (so that its tests see programs that run several tiles)."""
+    :data:`~.triton_launch_choices.PROGRAMS_PER_SM` on a GPU; two a band
+    under the interpreter (so that its tests see programs that run several
+    tiles)."""
     if interpreting():
         return 2 * bands
     return torch.cuda.get_device_properties(
-        device).multi_processor_count * PROGRAMS_PER_SM
+        device).multi_processor_count * launch_choices.PROGRAMS_PER_SM
 
 
 FORWARD_OP = 'wgse_mmseg::triton_band_networks'
@@ -418,8 +301,8 @@ def _forward_op(coeffs: Tensor, lengths: List[int], params: List[Tensor],
     ``params`` six a band, ``launch`` (:func:`_launch_ints`, both passes';
     the forward's three first) and ``output_grad_is_scratch`` (read by the
     backward pass, :func:`triton_band_networks`)."""
-    return launch_forward(_launch_config(launch[:3]) or FORWARD_CONFIGS[0],
-                          coeffs, band_kernel_inputs(lengths, params),
+    config = _launch_config(launch[:3]) or launch_choices.FORWARD_CONFIGS[0]
+    return launch_forward(config, coeffs, band_kernel_inputs(lengths, params),
                           precision)
 
 
@@ -438,8 +321,8 @@ def _backward_op(coeffs: Tensor, d3: Tensor, params: List[Tensor],
     (:func:`relu_gradient`), with the entry ``launch`` (three ints,
     :func:`_launch_ints`) and ``slots`` programs."""
     grad_coeffs = torch.empty_like(coeffs) if input_grad else None
-    config = _launch_config(launch) or backward_configs(input_grad,
-                                                        precision)[0]
+    config = _launch_config(launch) or launch_choices.backward_configs(
+        input_grad, precision)[0]
     totals = launch_backward(config, coeffs, d3, grad_coeffs,
                              band_kernel_inputs(lengths, params), precision,
                              slots)
@@ -546,11 +429,13 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
         weights: per band, the three convolutions' ``(weight, bias)``:
             ``(H, 1, 3)``, ``(H, H, 3)``, ``(1, H, 3)`` and ``(H,)``,
             ``(H,)``, ``(1,)``, float32.
-        precision: of the tensor-core products (:func:`dot_precision`).
+        precision: of the tensor-core products
+            (:func:`~.triton_launch_choices.dot_precision`).
         forward_config, backward_config: the launch of each kernel; by
-            default the first entry of :data:`FORWARD_CONFIGS` and of
-            :func:`backward_configs` for the input gradient's choice and
-            ``precision``.
+            default the first entry of
+            :data:`~.triton_launch_choices.FORWARD_CONFIGS` and of
+            :func:`~.triton_launch_choices.backward_configs` for the input
+            gradient's choice and ``precision``.
         output_grad_is_scratch: the gradient that will reach the output in
             the backward pass is a tensor nothing else reads (WGSE's
             synthesis product makes a new one): ``d3`` is then formed in
@@ -592,8 +477,10 @@ def triton_band_networks(coeffs: Tensor, lengths: Sequence[int],
         raise ValueError('the Triton kernel needs float32 parameters on '
                          f'{coeffs.device}')
     for name, config, allowed in (
-            ('forward_config', forward_config, FORWARD_CONFIGS),
-            ('backward_config', backward_config, backward_configs())):
+            ('forward_config', forward_config,
+             launch_choices.FORWARD_CONFIGS),
+            ('backward_config', backward_config,
+             launch_choices.backward_configs())):
         if config is not None and config not in allowed:
             raise ValueError(f'{name} must be one of {list(allowed)} (the '
                              f'entries compiled and tested), got {config!r}')
