@@ -19,6 +19,9 @@
 * :mod:`.triton_resources`: the Triton kernels compiled ahead of time for
   real GPUs, their registers, spills and occupancy (maintainers';
   ``python -m wgse_bench.triton_resources``);
+* :mod:`.kernel_prediction`: what that compiled code predicts of a GPU's
+  time, and the issue floor beside a GPU report's measurement
+  (maintainers'; ``python -m wgse_bench.kernel_prediction``);
 * :mod:`.segmentation`: what a spike segmentor costs: parameters, FLOPs,
   time, memory (``tools/analysis_tools/benchmark.py``, the experiment
   runner);

@@ -13,7 +13,7 @@ loop body changes its value, which the interpreter does not model.
 
 Every variant the dispatcher can launch is compiled: forward and backward
 (with and without the input gradient), each precision of
-:data:`~wgse_mmseg.core.wgse.triton_band_networks.TOLERANCES`, each width of
+:data:`~wgse_mmseg.core.kernel_choices.TOLERANCES`, each width of
 ``HIDDEN_CHANNELS`` and each launch entry of the target, for sm_80 (A100),
 sm_89 (L40, RTX 4090), sm_90 (H100, H200), sm_100 (B200) and sm_120 (RTX
 5090, RTX PRO 6000). Band lengths are run-time values of the kernels, so
@@ -23,12 +23,9 @@ The cost model (:func:`step_cost`) reads the compiled code: the
 instructions of the loop over a band's coefficients (the step every
 coefficient of a tile takes), all and tensor-core ones (``HMMA``,
 ``HGMMA``, sm_100's ``UTCHMMA``), as warp instructions per coefficient
-position (times the
-warps, over the pixels of a tile). An SM issues at most one warp
-instruction per scheduler and clock, so :func:`predicted_ms` turns those
-counts into a lower bound on a pass's time at a GPU's clock;
-:func:`measured_against_predicted` sets that bound beside what a GPU
-report's profile measured (``--against gpu.json``).
+position (times the warps, over the pixels of a tile); what that count
+leaves out, and what it predicts of a GPU's time, is
+:mod:`.kernel_prediction`'s.
 
 Triton's interpreter (``TRITON_INTERPRET=1``) replaces the kernels by
 Python functions that cannot be compiled, so the compiles run in a fresh
@@ -45,7 +42,7 @@ import sys
 import tempfile
 from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple
 
-from wgse_mmseg.command_line import Choice, Integer, Number, Path
+from wgse_mmseg.command_line import Choice, Integer
 from wgse_mmseg.limits import MAX_WORKERS
 
 from . import sass_timing
@@ -66,7 +63,8 @@ _REGISTER_UNIT = 256
 #: shared memory the CUDA runtime reserves per program (sm_80 and later)
 _RESERVED_SHARED = 1024
 
-_POINTERS = ['w1_ptr', 'b1_ptr', 'w2_ptr', 'b2_ptr', 'w3_ptr', 'b3_ptr']
+#: the six parameter pointers every band kernel takes, conv1 to conv3
+POINTERS = ['w1_ptr', 'b1_ptr', 'w2_ptr', 'b2_ptr', 'w3_ptr', 'b3_ptr']
 _SIGNATURES = {
     'band_forward': dict(x_ptr='*fp32', out_ptr='*fp32', mask_ptr='*u8',
                          pixels='i32', columns='i32',
@@ -116,10 +114,9 @@ class Resources(NamedTuple):
 def variants() -> List[Variant]:
     """Every kernel variant the dispatcher can launch (the same on every
     target)."""
-    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
-                                                           HIDDEN_CHANNELS,
-                                                           TOLERANCES,
-                                                           backward_configs)
+    from wgse_mmseg.core.kernel_choices import HIDDEN_CHANNELS, TOLERANCES
+    from wgse_mmseg.core.wgse.triton_launch_choices import (FORWARD_CONFIGS,
+                                                            backward_configs)
     found = []
     for hidden in HIDDEN_CHANNELS:
         for precision in TOLERANCES:
@@ -194,118 +191,6 @@ def per_position(step_instructions: int, num_warps: int, block: int
     return step_instructions * num_warps / block
 
 
-def predicted_ms(positions: float, instructions_per_position: float,
-                 sms: int, clock_ghz: float, schedulers: int = 4) -> float:
-    """The least time ``positions`` coefficient positions take at
-    ``instructions_per_position`` warp instructions each, on ``sms`` SMs
-    of ``schedulers`` issuing one warp instruction a clock each at
-    ``clock_ghz``: every cycle issuing, none waiting."""
-    return positions * instructions_per_position / (
-        sms * schedulers * clock_ghz * 1e6)
-
-
-def measured_against_predicted(report: Dict, rows: Sequence[Dict]
-                               ) -> List[Dict]:
-    """The band kernels a GPU report profiled, each beside the cost model's
-    floor on the report's GPU. ``report``: the report's JSON (gpu.json, by
-    :mod:`.gpu_report`; its ``profile`` section); ``rows``:
-    :func:`compile_all`'s rows for the report's target. Per profiled
-    precision and kernel: ``per_position`` (warp instructions a coefficient
-    position), ``predicted_ms`` (:func:`predicted_ms` at the report's SMs
-    and peak clock, times the kernel's launches), ``measured_ms`` and
-    ``of_issue`` (predicted over measured: the share of the SMs' issue
-    slots the kernel's instructions filled). The variants are the launch
-    entries a training pass runs (no input gradient).
-
-    Raises:
-        ValueError: the report lacks what this needs (a GPU of one of
-            :data:`ARCHITECTURES`, its SMs and clock, a profile), or
-            ``rows`` holds no variant a profiled kernel ran.
-    """
-    env = report.get('environment') if isinstance(report, dict) else None
-    if not isinstance(env, dict) or env.get('capability') not in \
-            ARCHITECTURES or not env.get('sms') or \
-            not env.get('sm_clock_mhz'):
-        raise ValueError(
-            f"the report names no GPU of {list(ARCHITECTURES)} with its SMs "
-            f"and clock (environment's capability, sms, sm_clock_mhz; a "
-            f"report from before they were recorded has no clock)")
-    sections = report.get('sections')
-    profile = sections.get('profile') if isinstance(sections, dict) else None
-    measured = [r for r in profile.get('rows', []) if isinstance(r, dict)
-                and r.get('status') == 'ok'] \
-        if isinstance(profile, dict) else []
-    if not measured:
-        raise ValueError('the report has no profile of a WGSE pass (its '
-                         "'profile' section did not run or failed)")
-    try:
-        return [row for run in measured
-                for row in _against_floor(run, env, rows)]
-    except (KeyError, TypeError) as err:
-        raise ValueError(f"the report's profile is not as "
-                         f'dev/gpu_report.py writes it ({err!r} missing or '
-                         f'odd)') from err
-
-
-def _against_floor(run: Dict, env: Dict, rows: Sequence[Dict]
-                   ) -> List[Dict]:
-    """:func:`measured_against_predicted`'s rows of one profiled pass."""
-    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
-                                                           TOLERANCES,
-                                                           backward_configs)
-    if run['precision'] not in TOLERANCES:
-        raise ValueError(f"the report's profile ran at precision "
-                         f"{run['precision']!r}, not one of "
-                         f'{list(TOLERANCES)}')
-    entries = dict(band_forward=FORWARD_CONFIGS[0],
-                   band_backward=backward_configs(False, run['precision'])[0])
-    found = []
-    for kernel_row in run.get('rows', []):
-        kernel = next((k for k in entries if k in kernel_row['kernel']),
-                      None)
-        if kernel is None:
-            continue
-        entry = entries[kernel]
-        compiled = [r for r in rows if r['arch'] == env['capability']
-                    and r['kernel'] == kernel
-                    and r['hidden'] == run['hidden']
-                    and r['precision'] == run['precision']
-                    and not r['input_grad']
-                    and r['block'] == entry.block
-                    and r['num_warps'] == entry.num_warps]
-        if not compiled:
-            raise ValueError(
-                f"no compiled {kernel} for {env['capability']} at "
-                f"{run['precision']}, {run['hidden']} channels, "
-                f'{entry.name}')
-        floor = kernel_row['launches'] * predicted_ms(
-            run['positions'], compiled[0]['per_position'], env['sms'],
-            env['sm_clock_mhz'] / 1e3)
-        found.append(dict(
-            precision=run['precision'], kernel=kernel,
-            per_position=compiled[0]['per_position'],
-            predicted_ms=floor, measured_ms=kernel_row['ms'],
-            of_issue=floor / kernel_row['ms']))
-    return found
-
-
-def format_comparison(found: Sequence[Dict], report: Dict) -> str:
-    """:func:`measured_against_predicted`'s rows as a Markdown table, the
-    GPU named."""
-    env = report['environment']
-    lines = [f"{env.get('gpu', env['capability'])} ({env['capability']}, "
-             f"{env['sms']} SMs at {env['sm_clock_mhz']:.0f} MHz, 4 "
-             f'schedulers each):', '',
-             '| precision | kernel | instr/position | issue floor ms '
-             '| measured ms | of issue |',
-             '|---|---|--:|--:|--:|--:|']
-    lines += [f"| {r['precision']} | {r['kernel']} | "
-              f"{r['per_position']:.1f} | {r['predicted_ms']:.2f} | "
-              f"{r['measured_ms']:.2f} | {r['of_issue']:.0%} |"
-              for r in found]
-    return '\n'.join(lines)
-
-
 def _cuobjdump() -> str:
     import triton
     path = os.path.join(os.path.dirname(triton.__file__), 'backends',
@@ -316,7 +201,7 @@ def _cuobjdump() -> str:
     return path
 
 
-def _compiled(variant: Variant, arch: str):
+def compile_and_disassemble(variant: Variant, arch: str):
     """``(compiled kernel, its SASS text, cuobjdump's resource report)`` of
     ``variant`` for ``arch``. Needs triton with ``TRITON_INTERPRET``
     unset."""
@@ -325,10 +210,10 @@ def _compiled(variant: Variant, arch: str):
     from triton.compiler import ASTSource
 
     from wgse_mmseg.core.wgse import triton_band_kernels as kernels
-    from wgse_mmseg.core.wgse.triton_band_networks import (
+    from wgse_mmseg.core.wgse.triton_launch_choices import (
         conv1_on_tensor_cores, taps_as_one_product)
     signature = dict(_SIGNATURES[variant.kernel])
-    signature.update({name: '*fp32' for name in _POINTERS})
+    signature.update({name: '*fp32' for name in POINTERS})
     constants = dict(HIDDEN=variant.hidden, BLOCK=variant.block,
                      PRECISION=variant.precision)
     if variant.kernel == 'band_backward':
@@ -345,11 +230,11 @@ def _compiled(variant: Variant, arch: str):
     compiled = triton.compile(
         source, target=GPUTarget('cuda', ARCHITECTURES[arch][0], 32),
         options=dict(num_warps=variant.num_warps, maxnreg=variant.maxnreg))
-    dump, sass = _disassembled(compiled)
+    dump, sass = disassemble(compiled)
     return compiled, sass, dump
 
 
-def _disassembled(compiled) -> Tuple[str, str]:
+def disassemble(compiled) -> Tuple[str, str]:
     """cuobjdump's resource usage and SASS of a Triton compilation's
     cubin."""
     with tempfile.NamedTemporaryFile(suffix='.cubin') as cubin:
@@ -365,12 +250,13 @@ def _disassembled(compiled) -> Tuple[str, str]:
 def compile_variant(variant: Variant, arch: str) -> Resources:
     """Compile ``variant`` for ``arch`` (``'sm_90'``, ...) and read its
     resource use. Needs triton with ``TRITON_INTERPRET`` unset."""
-    return _resources(variant, arch, *_compiled(variant, arch))
+    return resources_of(variant, arch,
+                        *compile_and_disassemble(variant, arch))
 
 
-def _resources(variant: Variant, arch: str, compiled, sass: str,
-               dump: str) -> Resources:
-    """:class:`Resources` of a :func:`_compiled` kernel."""
+def resources_of(variant: Variant, arch: str, compiled, sass: str,
+                 dump: str) -> Resources:
+    """:class:`Resources` of a :func:`compile_and_disassemble` kernel."""
     match = re.search(r'REG:(\d+) STACK:(\d+) SHARED:(\d+) LOCAL:(\d+)',
                       dump)
     if match is None:
@@ -398,11 +284,21 @@ def cannot_compile() -> Optional[str]:
         f'triton has no ptxas here ({ptxas!r})'
 
 
+def training_variants(precision: str, hidden: int) -> List[Variant]:
+    """The forward's and the backward's variants a training pass runs."""
+    from wgse_mmseg.core.wgse.triton_launch_choices import (FORWARD_CONFIGS,
+                                                            backward_configs)
+    return [Variant('band_forward', hidden, precision, False,
+                    *FORWARD_CONFIGS[0]),
+            Variant('band_backward', hidden, precision, False,
+                    *backward_configs(False, precision)[0])]
+
+
 def ptxas_reports(precision: str) -> Dict[str, str]:
     """:func:`ptxas_report` of each kernel's training variant at
     ``precision`` for sm_90, by kernel name. Runs in a fresh process with
     ``TRITON_INTERPRET`` unset."""
-    return _run_fresh(['--ptxas', precision])
+    return run_fresh(['--ptxas', precision])
 
 
 def ptxas_report(variant: Variant, arch: str) -> str:
@@ -411,7 +307,7 @@ def ptxas_report(variant: Variant, arch: str) -> str:
     for before the next; triton's own compile keeps none of it). Needs
     triton with ``TRITON_INTERPRET`` unset."""
     from triton import knobs
-    compiled, _, _ = _compiled(variant, arch)
+    compiled, _, _ = compile_and_disassemble(variant, arch)
     target = f"{arch}a" if arch in ('sm_90', 'sm_100') else arch
     tool = knobs.nvidia.ptxas_blackwell if ARCHITECTURES[arch][0] >= 100 \
         else knobs.nvidia.ptxas
@@ -425,222 +321,12 @@ def ptxas_report(variant: Variant, arch: str) -> str:
             text=True, check=True).stderr
 
 
-#: Coefficients of each band of WGSE's paper at T = 129 (db8, 5 levels):
-#: approximation, then details from the coarsest
-PAPER_BANDS = (18, 18, 22, 29, 43, 72)
-#: The predictor's largest relative error on the one measurement of these
-#: kernels' kind there is (the former kernels on an H200; docs/wgse_speed.md,
-#: "A predictor"), with a point of margin: what a prediction of
-#: :func:`predict_band_kernels` is stated with
-PREDICTION_ERROR = 0.21
-
-
-def makespan(durations: Sequence[float], slots: int) -> float:
-    """When the last of programs of ``durations`` (in launch order) ends on
-    ``slots`` resident places, each program taking the first place free:
-    how a GPU's block scheduler fills its SMs."""
-    import heapq
-    places = [0.0] * max(1, min(slots, len(durations)))
-    for duration in durations:
-        heapq.heappush(places, heapq.heappop(places) + duration)
-    return max(places)
-
-
-def _program_cycles(variant: Variant, arch: str, pixels: int,
-                    hardware: sass_timing.Hardware):
-    """:func:`.sass_timing.program_cycles` of ``variant`` compiled for
-    ``arch``, on band-major rows of ``pixels`` pixels, with the programs an
-    SM holds."""
-    compiled, sass, dump = _compiled(variant, arch)
-    resources = _resources(variant, arch, compiled, sass, dump)
-    layout = sass_timing.Layout(4, 4 * pixels, sass_timing.pixels_per_access(
-        compiled.asm['ttgir'], variant.block))
-    return sass_timing.program_cycles(sass, resources.programs_per_sm,
-                                      variant.num_warps, layout, hardware)
-
-
-def _training_variants(precision: str, hidden: int) -> List[Variant]:
-    """The forward's and the backward's variants a training pass runs."""
-    from wgse_mmseg.core.wgse.triton_band_networks import (FORWARD_CONFIGS,
-                                                           backward_configs)
-    return [Variant('band_forward', hidden, precision, False,
-                    *FORWARD_CONFIGS[0]),
-            Variant('band_backward', hidden, precision, False,
-                    *backward_configs(False, precision)[0])]
-
-
-def _predict_here(precision: str, batch: int, pixels: int,
-                  lengths: Sequence[int], hidden: int,
-                  hardware: sass_timing.Hardware) -> Dict:
-    """:func:`predict_band_kernels`, compiled in this process."""
-    from wgse_mmseg.core.wgse.triton_band_networks import work_division
-    forward, backward = _training_variants(precision, hidden)
-    found = dict(gpu=hardware.name, sms=hardware.sms,
-                 clock_ghz=hardware.clock_ghz, precision=precision,
-                 error=PREDICTION_ERROR)
-    for variant, extra in ((forward, 2), (backward, 3)):
-        cycles = _program_cycles(variant, 'sm_90', pixels, hardware)
-        tiles = batch * -(-pixels // variant.block)
-        if variant.kernel == 'band_forward':  # a program a tile and band
-            durations = [cycles(length + extra) for length in lengths
-                         for _ in range(tiles)]
-        else:  # persistent: each program every step-th tile of its band
-            durations = [
-                cycles.fixed + cycles.per_step * (lengths[band] + extra) *
-                len(range(first, tiles, step)) for band, first, step in
-                work_division(lengths, tiles,
-                              hardware.sms * cycles.programs)]
-        found[variant.kernel] = makespan(
-            durations, hardware.sms * cycles.programs) / (
-                hardware.clock_ghz * 1e6)
-        found[f'{variant.kernel}_per_step_cycles'] = cycles.per_step
-        found[f'{variant.kernel}_programs_per_sm'] = cycles.programs
-    return found
-
-
-def predict_band_kernels(precision: str = 'tf32', batch: int = 4,
-                         height: int = 256, width: int = 512,
-                         hidden: int = 32, sms: int = 132,
-                         clock_ghz: float = 1.98) -> Dict:
-    """The band kernels' predicted times on a Hopper GPU (sm_90: H100,
-    H200) for one WGSE training pass, compiled here (no GPU).
-
-    Each kernel's training variant at ``precision`` (``'tf32'``, ``'bf16'``,
-    ``'fp16'``) is compiled for sm_90, and its SASS run through
-    :mod:`.sass_timing`'s model of one SM (ptxas' control bits, published
-    latencies and rates, the programs an SM holds); the forward's programs
-    (one a tile and band) and the backward's persistent ones
-    (:func:`~wgse_mmseg.core.wgse.triton_band_networks.work_division`) are
-    then placed on the GPU's ``sms`` SMs (:func:`makespan`). Runs in a
-    fresh process with ``TRITON_INTERPRET`` unset.
-
-    Args:
-        precision: of the tensor-core products.
-        batch, height, width: the spikes' ``B``, ``H``, ``W`` (the bands:
-            :data:`PAPER_BANDS`, the paper's T = 129).
-        hidden: the band networks' channels (16 or 32).
-        sms, clock_ghz: the GPU's SMs and SM clock under load (default:
-            the H200's).
-
-    Returns:
-        ``band_forward`` and ``band_backward``: predicted milliseconds of
-        each kernel's launch (what ``torch.profiler`` reports per kernel);
-        ``error``: the relative error to state them with
-        (:data:`PREDICTION_ERROR`); the GPU's ``gpu``, ``sms``,
-        ``clock_ghz``, the ``precision``, and per kernel its
-        ``*_per_step_cycles`` (one SM, all its programs) and
-        ``*_programs_per_sm``. The rest of a pass (the wavelet products,
-        ``d3``, conv3's bias gradient) is not in it.
-
-    Raises:
-        ValueError: an argument out of range.
-        RuntimeError: the kernels do not compile here.
-    """
-    from wgse_mmseg.core.wgse.triton_band_networks import (HIDDEN_CHANNELS,
-                                                           TOLERANCES)
-    if precision not in TOLERANCES or precision == 'ieee':
-        raise ValueError(f'predict_band_kernels: precision must be one of '
-                         f'the tensor-core ones {list(TOLERANCES)[1:]}, '
-                         f'got {precision!r}')
-    if hidden not in HIDDEN_CHANNELS:
-        raise ValueError(f'predict_band_kernels: hidden must be one of '
-                         f'{HIDDEN_CHANNELS}, got {hidden!r}')
-    sizes = dict(batch=batch, height=height, width=width, sms=sms)
-    bad = [k for k, v in sizes.items() if isinstance(v, bool) or
-           not isinstance(v, int) or v < 1]
-    if bad or isinstance(clock_ghz, bool) or not (
-            isinstance(clock_ghz, (int, float)) and clock_ghz > 0):
-        raise ValueError(f'predict_band_kernels: batch, height, width and '
-                         f'sms must be positive integers and clock_ghz '
-                         f'positive, got {sizes}, clock_ghz {clock_ghz!r}')
-    return _run_fresh(['--predict', precision, '--shape', str(batch),
-                       str(height), str(width), '--hidden', str(hidden),
-                       '--sms', str(sms), '--clock-mhz',
-                       str(clock_ghz * 1e3)])
-
-
-#: the former kernels' arguments (pixel-major ``(N, C)`` coefficients, a
-#: launch a band, its length a constant)
-_FORMER_SIGNATURES = {
-    'band_forward': dict(x_ptr='*fp32', y_ptr='*fp32', stride='i32',
-                         offset='i32', pixels='i32'),
-    'band_backward': dict(x_ptr='*fp32', gy_ptr='*fp32', gx_ptr='*fp32',
-                          partial_ptr='*fp32', stride='i32', offset='i32',
-                          pixels='i32'),
-}
-#: the launch entries the former kernels ran on an H200 (its autotuner's
-#: choice at 4x256x512 pixels): ``(block, warps)``, and the steps a band's
-#: program takes beyond its length
-_FORMER_ENTRIES = dict(band_forward=(64, 4, 2), band_backward=(16, 4, 5))
-
-
-def predict_former_kernels(source: str, batch: int = 4, height: int = 256,
-                           width: int = 512) -> Dict[str, Dict[str, float]]:
-    """The predictor applied to the kernels this repository's Triton
-    backend ran before its band-major rewrite (``source``: their module's
-    path: ``_triton_band_kernels.py`` of ``wgse_mmseg/core/wgse`` at commit
-    3123fe6, ``git show``)
-    at TF32 and 32 channels on an H200: per kernel, each band length of
-    :data:`PAPER_BANDS` (as a string: JSON's keys) mapped to the predicted
-    milliseconds of its launch (a launch a band, pixel-major coefficients
-    of ``sum(PAPER_BANDS)`` columns), by the same model and hardware figures
-    as :func:`predict_band_kernels`. Runs in a fresh process with
-    ``TRITON_INTERPRET`` unset."""
-    return _run_fresh(['--former', os.fspath(source), '--shape', str(batch),
-                       str(height), str(width)])
-
-
-def _predict_former_here(source: str, batch: int, pixels: int,
-                         hidden: int, hardware: sass_timing.Hardware
-                         ) -> Dict[str, Dict[int, float]]:
-    """:func:`predict_former_kernels`, compiled in this process."""
-    import importlib.util
-
-    import triton
-    from triton.backends.compiler import GPUTarget
-    from triton.compiler import ASTSource
-    spec = importlib.util.spec_from_file_location('former_kernels', source)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    columns = sum(PAPER_BANDS)
-    found: Dict[str, Dict[int, float]] = {}
-    for kernel, (block, warps, extra) in _FORMER_ENTRIES.items():
-        for length in sorted(set(PAPER_BANDS)):
-            signature = dict(_FORMER_SIGNATURES[kernel])
-            signature.update({name: '*fp32' for name in _POINTERS})
-            constants = dict(LENGTH=length, HIDDEN=hidden, BLOCK=block,
-                             PRECISION='tf32')
-            if kernel == 'band_backward':
-                constants['INPUT_GRAD'] = False
-            signature.update({name: 'constexpr' for name in constants})
-            compiled = triton.compile(
-                ASTSource(fn=getattr(module, kernel), signature=signature,
-                          constexprs=constants),
-                target=GPUTarget('cuda', 90, 32),
-                options=dict(num_warps=warps))
-            dump, sass = _disassembled(compiled)
-            registers, shared = (int(x) for x in re.search(
-                r'REG:(\d+) .*?SHARED:(\d+)', dump).groups())
-            programs = programs_per_sm(
-                registers, warps, shared + compiled.metadata.shared,
-                'sm_90')
-            layout = sass_timing.Layout(
-                4 * columns, 4, sass_timing.pixels_per_access(
-                    compiled.asm['ttgir'], block))
-            cycles = sass_timing.program_cycles(sass, programs, warps,
-                                                layout, hardware)
-            tiles = batch * -(-pixels // block)
-            found.setdefault(kernel, {})[length] = makespan(
-                [cycles(length + extra)] * tiles, hardware.sms * programs
-            ) / (hardware.clock_ghz * 1e6)
-    return found
-
-
-def _run_fresh(arguments: Sequence[str]):
-    """This module's command line run in a fresh process with
-    ``TRITON_INTERPRET`` unset, its JSON output read."""
+def run_fresh(arguments: Sequence[str], module: str = __name__):
+    """``module``'s command line (this one's by default) run in a fresh
+    process with ``TRITON_INTERPRET`` unset, its JSON output read: the
+    interpreter's kernels cannot be compiled."""
     env = {k: v for k, v in os.environ.items() if k != 'TRITON_INTERPRET'}
-    proc = subprocess.run([sys.executable, '-m', __name__, '--json',
+    proc = subprocess.run([sys.executable, '-m', module, '--json',
                            *arguments], capture_output=True, text=True,
                           env=env)
     if proc.returncode != 0:
@@ -661,7 +347,9 @@ def _compile_row(job) -> Dict:
                     variant.block))
 
 
-def _compile_here(archs: Sequence[str], jobs: int) -> List[Dict]:
+def compile_rows(archs: Sequence[str], jobs: int) -> List[Dict]:
+    """:func:`compile_all`'s rows, compiled in this process's pool of
+    ``jobs``."""
     with concurrent.futures.ProcessPoolExecutor(jobs) as pool:
         return list(pool.map(_compile_row, jobs_for(archs)))
 
@@ -674,8 +362,8 @@ def compile_all(archs: Sequence[str] = tuple(ARCHITECTURES),
     (``per_position``) and tensor-core ones. Runs in a
     fresh process with ``TRITON_INTERPRET`` unset, ``jobs`` compiles side by
     side (default: the CPUs)."""
-    return _run_fresh(['--jobs', str(jobs or os.cpu_count() or 1),
-                       '--archs', *archs])
+    return run_fresh(['--jobs', str(jobs or os.cpu_count() or 1),
+                      '--archs', *archs])
 
 
 def format_table(rows: Sequence[Dict]) -> str:
@@ -712,55 +400,13 @@ def build_parser() -> argparse.ArgumentParser:
                         default=min(os.cpu_count() or 1, MAX_WORKERS))
     parser.add_argument('--json', action='store_true',
                         help='print the rows as JSON instead of a table')
-    parser.add_argument('--predict', metavar='PRECISION',
-                        type=Choice(['tf32', 'bf16', 'fp16']),
-                        help='print the band kernels\' predicted times on a '
-                        'Hopper GPU at this precision (predict_band_kernels)')
     parser.add_argument('--ptxas', metavar='PRECISION',
                         type=Choice(['tf32', 'bf16', 'fp16']),
                         help='print ptxas\' report of each kernel\'s '
                         'training variant for sm_90a at this precision')
-    parser.add_argument('--shape', nargs=3, metavar=('B', 'H', 'W'),
-                        type=Integer(1, 1 << 16), default=[4, 256, 512],
-                        help='with --predict or --former: the spikes\' '
-                        'batch, height and width (default 4 256 512)')
     parser.add_argument('--hidden', type=Choice([16, 32]), default=32,
-                        help='with --predict or --former: the band '
-                        'networks\' channels')
-    parser.add_argument('--sms', type=Integer(1, 1024), default=132,
-                        help='with --predict: the GPU\'s SMs')
-    parser.add_argument('--clock-mhz', type=Number(1, 10000,
-                                                   strict_minimum=True),
-                        default=1980.0,
-                        help='with --predict: the GPU\'s SM clock under load')
-    parser.add_argument('--former', metavar='SOURCE', type=Path('file'),
-                        help='the former pixel-major kernels\' module '
-                        '(git show 3123fe6:wgse_mmseg/core/wgse/'
-                        '_triton_band_kernels.py): print the predictor\'s '
-                        'times of their launches on an H200 at TF32')
-    parser.add_argument('--against', metavar='REPORT', type=Path(),
-                        help="a GPU report's gpu.json (dev/gpu_report.py): "
-                        'compile for its GPU and print each profiled band '
-                        "kernel's measured time beside the cost model's "
-                        'floor, as the share of issue it reached')
+                        help='with --ptxas: the band networks\' channels')
     return parser
-
-
-def _report_of_this_code(path: str) -> Dict:
-    """The report at ``path``, checked to have measured the code here (its
-    digest), so that what is compiled here is what ran there."""
-    from .gpu_report import code_digest, read_report
-    report = read_report(path)
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    environment = report.get('environment')
-    measured = environment.get('code') \
-        if isinstance(environment, dict) else None
-    here = code_digest(root)
-    if measured != here:
-        raise ValueError(f'{path}: it measured other code (digest '
-                         f'{measured}) than this checkout\'s ({here}); '
-                         f'compiling this code would not predict that run')
-    return report
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -769,36 +415,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
         parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
                      'cannot be compiled')
-    batch, height, width = args.shape
-    if args.predict:
-        hardware = sass_timing.H200._replace(
-            sms=args.sms, clock_ghz=args.clock_mhz / 1e3)
-        print(json.dumps(_predict_here(args.predict, batch, height * width,
-                                       PAPER_BANDS, args.hidden, hardware)))
-        return 0
     if args.ptxas:
         print(json.dumps({v.kernel: ptxas_report(v, 'sm_90')
-                          for v in _training_variants(args.ptxas,
-                                                      args.hidden)}))
+                          for v in training_variants(args.ptxas,
+                                                     args.hidden)}))
         return 0
-    if args.former:
-        print(json.dumps(_predict_former_here(
-            args.former, batch, height * width, args.hidden,
-            sass_timing.H200)))
-        return 0
-    if args.against:
-        try:
-            report = _report_of_this_code(args.against)
-            capability = report.get('environment', {}).get('capability')
-            rows = _compile_here([capability], args.jobs) \
-                if capability in ARCHITECTURES else []
-            found = measured_against_predicted(report, rows)
-        except ValueError as err:
-            parser.error(f'--against {args.against}: {err}')
-        print(json.dumps(found) if args.json else
-              format_comparison(found, report))
-        return 0
-    rows = _compile_here(args.archs, args.jobs)
+    rows = compile_rows(args.archs, args.jobs)
     print(json.dumps(rows) if args.json else format_table(rows))
     return 0
 

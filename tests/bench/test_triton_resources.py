@@ -15,8 +15,8 @@ import textwrap
 
 import pytest
 
-from wgse_bench import triton_resources
-from wgse_mmseg.core.wgse import triton_band_networks
+from wgse_bench import kernel_prediction, triton_resources
+from wgse_mmseg.core.wgse import triton_band_networks, triton_launch_choices
 
 triton_band_kernels = pytest.importorskip(
     'wgse_mmseg.core.wgse.triton_band_kernels')
@@ -202,7 +202,7 @@ def test_step_loop_and_cost_by_hand():
     assert triton_resources.step_cost(opcodes) == (4, 1)
     assert triton_resources.per_position(4, 4, 16) == 1.0
     # 1e8 positions at 50 instructions on 132 SMs of 4 schedulers, 1.5 GHz
-    assert triton_resources.predicted_ms(1e8, 50, 132, 1.5) == \
+    assert kernel_prediction.predicted_ms(1e8, 50, 132, 1.5) == \
         pytest.approx(1e8 * 50 / (132 * 4 * 1.5e9) * 1e3)
     with pytest.raises(ValueError, match='no loop'):
         triton_resources.step_loop(_SASS.replace('BRA', 'NOP'))
@@ -248,12 +248,12 @@ def test_measured_beside_the_cost_models_floor(rows):
     variant a training pass launches (no input gradient, the default
     entries), compiled for the report's GPU; other kernels and failed
     profiles left out."""
-    found = triton_resources.measured_against_predicted(_report(), rows)
+    found = kernel_prediction.measured_against_predicted(_report(), rows)
     assert [(r['precision'], r['kernel']) for r in found] == [
         ('bf16', 'band_backward'), ('bf16', 'band_forward')]
     for row, entry, ms in zip(
-            found, (triton_band_networks.backward_configs(False, 'bf16')[0],
-                    triton_band_networks.FORWARD_CONFIGS[0]), (12.0, 4.0)):
+            found, (triton_launch_choices.backward_configs(False, 'bf16')[0],
+                    triton_launch_choices.FORWARD_CONFIGS[0]), (12.0, 4.0)):
         compiled, = [r for r in rows if r['arch'] == 'sm_90' and
                      r['kernel'] == row['kernel'] and r['hidden'] == 32 and
                      r['precision'] == 'bf16' and not r['input_grad'] and
@@ -264,7 +264,7 @@ def test_measured_beside_the_cost_models_floor(rows):
         assert row['predicted_ms'] == pytest.approx(floor)
         assert row['measured_ms'] == ms
         assert row['of_issue'] == pytest.approx(floor / ms)
-    table = triton_resources.format_comparison(found, _report())
+    table = kernel_prediction.format_comparison(found, _report())
     assert table.startswith('NVIDIA H100 80GB HBM3 (sm_90, 132 SMs at 1980 '
                             'MHz')
     assert '| bf16 | band_backward |' in table
@@ -286,7 +286,7 @@ def test_measured_beside_the_cost_models_floor(rows):
 ])
 def test_a_report_the_comparison_cannot_read(rows, report, match):
     with pytest.raises(ValueError, match=match):
-        triton_resources.measured_against_predicted(report, rows)
+        kernel_prediction.measured_against_predicted(report, rows)
 
 
 def test_the_comparison_refuses_a_report_of_other_code(
@@ -297,7 +297,7 @@ def test_the_comparison_refuses_a_report_of_other_code(
     path = tmp_path / 'gpu.json'
     path.write_text(json.dumps(_report(code='0123456789abcdef')))
     with pytest.raises(SystemExit) as error:
-        triton_resources.main(['--against', str(path)])
+        kernel_prediction.main(['--against', str(path)])
     assert error.value.code == 2
     assert 'measured other code (digest 0123456789abcdef)' in \
         capsys.readouterr().err
@@ -309,7 +309,7 @@ def test_the_comparison_refuses_a_file_that_is_no_report(
     path = tmp_path / 'gpu.json'
     path.write_text('[1, 2]')
     with pytest.raises(SystemExit):
-        triton_resources.main(['--against', str(path)])
+        kernel_prediction.main(['--against', str(path)])
     assert f'{path} holds no report' in capsys.readouterr().err
 
 
@@ -327,7 +327,7 @@ def predictions(built_once):
     at 4x129x256x512, TF32 and bf16, compiled once a run."""
     def build(path):
         with open(path, 'w') as f:
-            json.dump({p: triton_resources.predict_band_kernels(p)
+            json.dump({p: kernel_prediction.predict_band_kernels(p)
                        for p in ('tf32', 'bf16')}, f)
     with open(built_once('band_kernel_predictions.json', build)) as f:
         return json.load(f)
@@ -354,7 +354,7 @@ def test_kernels_within_predicted_budget(hopper, predictions):
     assert not over, (over, PREDICTED_BUDGET_MS)
     for found in predictions.values():
         assert found['gpu'] == 'NVIDIA H200' and found['error'] == \
-            triton_resources.PREDICTION_ERROR
+            kernel_prediction.PREDICTION_ERROR
         assert found['band_forward_programs_per_sm'] >= 2
 
 
@@ -363,13 +363,13 @@ def test_prediction_arguments_are_checked():
                 dict(hidden=64), dict(batch=0), dict(width=2.5),
                 dict(clock_ghz=0), dict(sms=True)):
         with pytest.raises(ValueError, match='predict_band_kernels'):
-            triton_resources.predict_band_kernels(**bad)
+            kernel_prediction.predict_band_kernels(**bad)
 
 
 def test_makespan_by_hand():
-    assert triton_resources.makespan([3, 3, 3], 2) == 6
-    assert triton_resources.makespan([5, 1, 1, 1], 2) == 5
-    assert triton_resources.makespan([2, 2], 8) == 2
+    assert kernel_prediction.makespan([3, 3, 3], 2) == 6
+    assert kernel_prediction.makespan([5, 1, 1, 1], 2) == 5
+    assert kernel_prediction.makespan([2, 2], 8) == 2
 
 
 _FORMER = '3123fe6'
@@ -394,7 +394,7 @@ def test_the_predictor_explains_the_former_kernels_measurement(hopper,
     pixel-major kernels' launches on an H200 (their autotuner's times of
     its chosen entries, per band, at 4x256x512 pixels, in the report of
     that commit). The predictor, from their compiled code alone, is within
-    :data:`~wgse_bench.triton_resources.PREDICTION_ERROR` of each kernel's
+    :data:`~wgse_bench.kernel_prediction.PREDICTION_ERROR` of each kernel's
     sum over the bands."""
     source = tmp_path / 'former_kernels.py'
     source.write_text(_at_former_commit(
@@ -409,12 +409,12 @@ def test_the_predictor_explains_the_former_kernels_measurement(hopper,
             length = int(variant.split()[0][2:])
             measured.setdefault(kernel, {})[length] = \
                 choice['entry_ms'][choice['entry']]
-    predicted = triton_resources.predict_former_kernels(str(source))
+    predicted = kernel_prediction.predict_former_kernels(str(source))
     for kernel in ('band_forward', 'band_backward'):
-        want = sum(measured[kernel][n] for n in triton_resources.PAPER_BANDS)
+        want = sum(measured[kernel][n] for n in kernel_prediction.PAPER_BANDS)
         got = sum(predicted[kernel][str(n)]
-                  for n in triton_resources.PAPER_BANDS)
-        assert abs(got / want - 1) <= triton_resources.PREDICTION_ERROR, (
+                  for n in kernel_prediction.PAPER_BANDS)
+        assert abs(got / want - 1) <= kernel_prediction.PREDICTION_ERROR, (
             kernel, got, want)
 
 

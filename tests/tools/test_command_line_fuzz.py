@@ -41,7 +41,7 @@ TOOL_FILES = sorted(osp.relpath(p, ROOT) for room in ('tools', 'dev')
                                        recursive=True))
 TOOL_MODULES = ['wgse_bench.model_bases', 'wgse_bench.reconstruction',
                 'wgse_bench.wgse_memory',
-                'wgse_bench.triton_resources',
+                'wgse_bench.triton_resources', 'wgse_bench.kernel_prediction',
                 'wgse_mmseg.data_generation.training_images']
 TOOLS = TOOL_FILES + TOOL_MODULES
 
