@@ -1,8 +1,9 @@
 """A timing model of compiled GPU code: one SM issuing a kernel's SASS.
 
 The resources tool's instruction count (:mod:`.triton_resources`, as time:
-:func:`.kernel_prediction.predicted_ms`) is a floor: every scheduler issuing every cycle. What it leaves out is in the
-compiled code too, and this module reads it from there:
+:func:`.kernel_prediction.predicted_ms`) is a floor: every scheduler
+issuing every cycle. What it leaves out is in the compiled code too, and
+this module reads it from there:
 
 - **ptxas' own schedule.** Every SASS instruction of sm_70 and later carries
   control bits (the high word of its encoding): the cycles its warp must
