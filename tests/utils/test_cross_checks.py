@@ -125,6 +125,22 @@ def _user_model(tmp_path, base, num_steps=T, plain=False, **options):
     return cfg, MODELS.build(cfg.model)
 
 
+def test_the_checks_give_back_the_very_tensors_of_shared_modules(tmp_path):
+    """The shape-only forward swaps every parameter and buffer for a meta
+    one and back: a module two parents share (ANN's key and query
+    projection) and everything else hold the same tensors afterwards."""
+    cfg, model = _user_model(tmp_path, 'ann_r50-d8', crop_size=(48, 48))
+    shared = model.decode_head.context.stages[0]
+    assert shared.key_project is shared.query_project
+    held = [*model.named_parameters(remove_duplicate=False),
+            *model.named_buffers(remove_duplicate=False)]
+    check_training_fits(cfg, model)
+    after = dict([*model.named_parameters(remove_duplicate=False),
+                  *model.named_buffers(remove_duplicate=False)])
+    assert all(after[name] is tensor and tensor.device.type == 'cpu'
+               for name, tensor in held)
+
+
 def _peak_growth_mb(call):
     import resource
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

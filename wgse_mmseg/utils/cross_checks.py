@@ -6,9 +6,10 @@ to change and the smallest value that works.
 What a model takes is a property of the built model (its first layer's
 width, its strides, kernels, pooling and norm layers), so it is read off
 the built model, not listed per architecture, by a forward of shapes only:
-the model runs on fake tensors (torch's ``FakeTensorMode``: every
-operation computes its output's shape, none its values), so a check at any
-input size allocates nothing and takes milliseconds. The enhancer runs once
+the model runs on meta tensors, or where one of its operations has no meta
+form, on fake tensors (torch's ``FakeTensorMode``), and every operation
+computes its output's shape, none its values, so a check at any input size
+allocates nothing. The enhancer runs once
 for real on a tiny input, for the number of channels it gives the model.
 Where a model uses an operation that has no shape-only form (one that
 reads a tensor's values), the check runs it for real once, at most
@@ -90,6 +91,32 @@ def _untouched(model: nn.Module, training: bool) -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def _on_meta(model: nn.Module) -> Iterator[None]:
+    """``model`` with every parameter and buffer a meta tensor of its
+    shape and dtype (one for a tensor that several modules share), and its
+    own tensors again afterwards."""
+    meta = {}
+    swapped = []
+    try:
+        for module in model.modules():
+            for table in (module._parameters, module._buffers):
+                for name, tensor in table.items():
+                    if tensor is None:
+                        continue
+                    if id(tensor) not in meta:
+                        empty = torch.empty_like(tensor, device='meta')
+                        meta[id(tensor)] = nn.Parameter(
+                            empty, tensor.requires_grad) if isinstance(
+                                tensor, nn.Parameter) else empty
+                    swapped.append((table, name, tensor))
+                    table[name] = meta[id(tensor)]
+        yield
+    finally:
+        for table, name, tensor in swapped:
+            table[name] = tensor
+
+
+@contextlib.contextmanager
 def _widths_checked(model: nn.Module) -> Iterator[None]:
     """Every convolution of ``model`` raises :class:`_WrongWidth` when it is
     given another number of channels than it takes, before it runs."""
@@ -112,7 +139,7 @@ def _widths_checked(model: nn.Module) -> Iterator[None]:
 
 class _Probe:
     """Dry forwards of zero spikes through a built segmentor
-    (``mode='tensor'``), on fake tensors where the model allows it."""
+    (``mode='tensor'``), on shapes only where the model allows it."""
 
     def __init__(self, model: nn.Module, num_steps: int, source: str,
                  stem_hint: str = ''):
@@ -158,16 +185,16 @@ class _Probe:
         return self._run(batch, min(height, PROBE_SIDE),
                          min(width, PROBE_SIDE), training, False)
 
-    def _run(self, batch, height, width, training, fake):
-        mode = fake_tensor.FakeTensorMode(allow_non_fake_inputs=True) \
-            if fake else contextlib.nullcontext()
+    def _run(self, batch, height, width, training, shapes_only):
         with _untouched(self.model, training), \
                 _widths_checked(self.model):
             try:
-                with mode:
-                    inputs = torch.zeros(batch, self.channels, height, width,
-                                         device=self.device)
-                    self.model(inputs, None, mode='tensor')
+                if shapes_only:
+                    self._forward_on_shapes(batch, height, width)
+                else:
+                    self.model(torch.zeros(batch, self.channels, height,
+                                           width, device=self.device),
+                               None, mode='tensor')
             except _WrongWidth as wrong:
                 raise self._wrong_width(wrong) from None
             except _NO_SHAPE_ONLY_FORM:
@@ -185,6 +212,27 @@ class _Probe:
                         f'{cut(str(err), 120)}): its input sizes and batch '
                         f'are not checked')
         return None
+
+    def _forward_on_shapes(self, batch: int, height: int, width: int
+                           ) -> None:
+        """The forward of a ``(batch, channels, height, width)`` input on
+        shapes only: first on meta tensors (the parameters and buffers
+        swapped for meta ones; torch's compiled shape functions, several
+        times quicker than fake tensors); where that raises, on fake
+        tensors, whose verdict stands (they also take what a meta forward
+        cannot: tensors the model makes on its own device as it runs)."""
+        try:
+            with _on_meta(self.model):
+                self.model(torch.zeros(batch, self.channels, height, width,
+                                       device='meta'), None, mode='tensor')
+            return
+        except _WrongWidth:
+            raise
+        except Exception:  # judged on fake tensors below
+            pass
+        with fake_tensor.FakeTensorMode(allow_non_fake_inputs=True):
+            self.model(torch.zeros(batch, self.channels, height, width,
+                                   device=self.device), None, mode='tensor')
 
     def _fixed_size(self) -> Optional[Tuple[int, int]]:
         """The ``img_size`` of a backbone that runs only at it (a vision
