@@ -207,13 +207,13 @@ def test_both_forward_step_forms_compute_the_same(monkeypatch, hidden,
                                                   together):
     """The forward's conv2 as one product of taps 0 and 1 (sm_90's form
     on tensor cores) and as three products (every other target's, and
-    full float32's), over three tiles of pixels, the last partial, match
+    full float32's), over a full tile of pixels and a partial one, match
     float64."""
     monkeypatch.setattr(triton_launch_choices, 'taps_as_one_product',
                         lambda *args: together)
     monkeypatch.setattr(torch.backends.cudnn, 'allow_tf32', False)
     model = _model(backend='triton', hidden_channels=hidden)
-    spikes = _spikes(1, 13, 1, 2 * 128 + 7, seed=hidden)
+    spikes = _spikes(1, 13, 1, 128 + 7, seed=hidden)
     _assert_close(_run(model, spikes, False), _reference(model, spikes, False),
                   triton_band_networks.TOLERANCES['ieee'],
                   f'taps together {together}')
