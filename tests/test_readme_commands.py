@@ -180,12 +180,13 @@ def _suite_stack() -> str:
 
 
 #: environment a command run here gets: the quickstart's documented
-#: variables, for its shortest schedule into a temporary directory, on the
-#: stack of this suite (in that stack's virtual environment of the checkout)
+#: variables, for its shortest schedule on a third of its data into a
+#: temporary directory, on the stack of this suite (in that stack's virtual
+#: environment of the checkout)
 ENVIRONMENT = {
     'bash tools/quickstart.sh': lambda tmp: dict(
-        EPOCHS='2', DATA=str(tmp / 'data'), WORK=str(tmp / 'work'),
-        STACK=_suite_stack()),
+        EPOCHS='2', NUM_TRAIN='16', NUM_VAL='4', DATA=str(tmp / 'data'),
+        WORK=str(tmp / 'work'), STACK=_suite_stack()),
 }
 #: ``source`` commands, each for one stack's virtual environment: run in
 #: the stage of CI whose suite runs in it

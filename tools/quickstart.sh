@@ -6,23 +6,34 @@
 #   3. SegFormer-B0 + WGSE trained on it (resumes if interrupted),
 #   4. the final checkpoint evaluated: mIoU, mAcc and aAcc.
 # Variables: CONFIG (default configs/segformer_b0_wgse.py), EPOCHS (default 5),
-# DATA (dataset root), WORK (work dir); STACK, VENV as for tools/setup_env.sh.
+# DATA (dataset root), NUM_TRAIN and NUM_VAL (its training and validation
+# samples, default 48 and 12), WORK (work dir); STACK, VENV as for
+# tools/setup_env.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 CONFIG=${CONFIG:-configs/segformer_b0_wgse.py}
 EPOCHS=${EPOCHS:-5}
 DATA=${DATA:-data/synthetic_spike_cityscapes}
+NUM_TRAIN=${NUM_TRAIN:-48}
+NUM_VAL=${NUM_VAL:-12}
 WORK=${WORK:-work_dirs/quickstart_$(basename "$CONFIG" .py)}
 # a one-epoch warm-up, then the decay: two epochs at least
 if ! [[ "$EPOCHS" =~ ^[0-9]+$ ]] || [ "$EPOCHS" -lt 2 ]; then
     echo "quickstart.sh: EPOCHS must be an integer >= 2 (one warm-up epoch, then the decay), got '$EPOCHS'" >&2
     exit 2
 fi
+for count in NUM_TRAIN NUM_VAL; do
+    if ! [[ "${!count}" =~ ^[0-9]+$ ]] || [ "${!count}" -lt 1 ]; then
+        echo "quickstart.sh: $count must be an integer >= 1, got '${!count}'" >&2
+        exit 2
+    fi
+done
 
 source tools/setup_env.sh  # sets VENV
 PY=$VENV/bin/python
-"$PY" tools/dataset_converters/make_synthetic_dataset.py "$DATA" --num-steps 41
+"$PY" tools/dataset_converters/make_synthetic_dataset.py "$DATA" --num-steps 41 \
+    --num-train "$NUM_TRAIN" --num-val "$NUM_VAL"
 
 # The embedded data: T=41, 128x256 frames, 64x128 crops; a one-epoch warm-up
 # and a short schedule instead of the paper's 10 of 100 epochs; no
