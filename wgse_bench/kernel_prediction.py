@@ -375,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
         'from their code compiled here (no GPU needed): on a Hopper GPU '
         '(--predict), the former kernels on an H200 (--former), or the issue '
         'floor beside a GPU report\'s measurement (--against).')
-    action = parser.add_mutually_exclusive_group(required=True)
+    action = parser.add_mutually_exclusive_group()
     action.add_argument('--predict', metavar='PRECISION',
                         type=Choice(['tf32', 'bf16', 'fp16']),
                         help='the band kernels\' predicted times on a Hopper '
@@ -418,6 +418,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
         parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
                      'cannot be compiled')
+    if not (args.predict or args.former or args.against):
+        parser.error('give one of --predict, --former and --against')
     batch, height, width = args.shape
     if args.predict:
         hardware = sass_timing.H200._replace(
