@@ -258,6 +258,10 @@ def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
         w2_01 = _two_taps(w2_ptr + band * (3 * HIDDEN * HIDDEN), HIDDEN)
     x_1 = tl.zeros((BLOCK, ), tl.float32)  # x[s - 1]
     x_0 = tl.load(x_ptr + first + cols, mask=valid, other=0.0)  # x[s]
+    # x[s + 1], loaded a step before the step that reads it, so that the
+    # load from device memory overlaps a whole step's products
+    x_n = tl.load(x_ptr + first + row + cols, mask=valid & (1 < length),
+                  other=0.0)
     # conv2's pre-activation of h2[s - 1] and h2[s] without the taps of the
     # h1 values still to come (h2[-1] lies outside the band: -inf)
     p_1 = tl.full((BLOCK, HIDDEN), float('-inf'), tl.float32)
@@ -266,8 +270,8 @@ def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
     q_1 = tl.zeros((BLOCK, ), tl.float32)
     q_0 = tl.zeros((BLOCK, ), tl.float32)
     for s in range(0, length + 2):
-        x_n = tl.load(x_ptr + first + (s + 1) * row + cols,
-                      mask=valid & (s + 1 < length), other=0.0)
+        x_nn = tl.load(x_ptr + first + (s + 2) * row + cols,
+                       mask=valid & (s + 2 < length), other=0.0)
         # h1[s] through conv2's three taps: the last one h2[s - 1] needed
         if CONV1_DOT:
             h1_0 = _h1_of_window(s, _step_window(c, x_1, x_0, x_n), taps,
@@ -290,7 +294,7 @@ def band_forward(x_ptr, out_ptr, mask_ptr, pixels, columns, tiles_per_sample,
         at = first + (s - 2) * row + cols
         tl.store(out_ptr + at, tl.maximum(a3, 0.0), mask=valid & (s >= 2))
         tl.store(mask_ptr + at, (a3 > 0).to(tl.uint8), mask=valid & (s >= 2))
-        x_1, x_0 = x_0, x_n
+        x_1, x_0, x_n = x_0, x_n, x_nn
 
 
 @triton.jit
