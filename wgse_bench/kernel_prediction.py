@@ -33,8 +33,9 @@ from wgse_mmseg.limits import MAX_WORKERS
 from . import sass_timing
 from .triton_resources import (ARCHITECTURES, POINTERS, Variant,
                                compile_and_disassemble, compile_rows,
-                               disassemble, programs_per_sm, resources_of,
-                               run_fresh, training_variants)
+                               disassemble, programs_per_sm,
+                               refuse_interpreter, resources_of, run_fresh,
+                               training_variants)
 
 __all__ = []
 
@@ -415,9 +416,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
-        parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
-                     'cannot be compiled')
+    refuse_interpreter(parser)
     if not (args.predict or args.former or args.against):
         parser.error('give one of --predict, --former and --against')
     batch, height, width = args.shape

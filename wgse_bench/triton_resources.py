@@ -409,12 +409,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def refuse_interpreter(parser: argparse.ArgumentParser) -> None:
+    """A command line that compiles the kernels stops, naming the fix,
+    where ``TRITON_INTERPRET`` is set (its kernels cannot be compiled)."""
     if os.environ.get('TRITON_INTERPRET', '0') not in ('', '0'):
         parser.error('unset TRITON_INTERPRET: the interpreter\'s kernels '
                      'cannot be compiled')
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    refuse_interpreter(parser)
     if args.ptxas:
         print(json.dumps({v.kernel: ptxas_report(v, 'sm_90')
                           for v in training_variants(args.ptxas,
