@@ -23,7 +23,6 @@ The compiles run in a fresh process with ``TRITON_INTERPRET`` unset
 import argparse
 import json
 import os
-import re
 import sys
 from typing import Dict, List, Optional, Sequence
 
@@ -31,10 +30,10 @@ from wgse_mmseg.command_line import Choice, Integer, Number, Path
 from wgse_mmseg.limits import MAX_WORKERS
 
 from . import sass_timing
-from .triton_resources import (ARCHITECTURES, POINTERS, Variant,
-                               compile_and_disassemble, compile_rows,
-                               disassemble, programs_per_sm,
-                               refuse_interpreter, resources_of, run_fresh,
+from .triton_resources import (ARCHITECTURES, Variant, compile_and_disassemble,
+                               compile_band_kernel, compile_rows,
+                               programs_per_sm, refuse_interpreter,
+                               resource_usage, resources_of, run_fresh,
                                training_variants)
 
 __all__ = []
@@ -312,10 +311,6 @@ def _predict_former_here(source: str, batch: int, pixels: int,
                          ) -> Dict[str, Dict[int, float]]:
     """:func:`predict_former_kernels`, compiled in this process."""
     import importlib.util
-
-    import triton
-    from triton.backends.compiler import GPUTarget
-    from triton.compiler import ASTSource
     spec = importlib.util.spec_from_file_location('former_kernels', source)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -323,21 +318,15 @@ def _predict_former_here(source: str, batch: int, pixels: int,
     found: Dict[str, Dict[int, float]] = {}
     for kernel, (block, warps, extra) in _FORMER_ENTRIES.items():
         for length in sorted(set(PAPER_BANDS)):
-            signature = dict(_FORMER_SIGNATURES[kernel])
-            signature.update({name: '*fp32' for name in POINTERS})
             constants = dict(LENGTH=length, HIDDEN=hidden, BLOCK=block,
                              PRECISION='tf32')
             if kernel == 'band_backward':
                 constants['INPUT_GRAD'] = False
-            signature.update({name: 'constexpr' for name in constants})
-            compiled = triton.compile(
-                ASTSource(fn=getattr(module, kernel), signature=signature,
-                          constexprs=constants),
-                target=GPUTarget('cuda', 90, 32),
-                options=dict(num_warps=warps))
-            dump, sass = disassemble(compiled)
-            registers, shared = (int(x) for x in re.search(
-                r'REG:(\d+) .*?SHARED:(\d+)', dump).groups())
+            compiled, sass, dump = compile_band_kernel(
+                getattr(module, kernel), _FORMER_SIGNATURES[kernel],
+                constants, 90, dict(num_warps=warps))
+            registers, _, shared, _ = resource_usage(
+                dump, f'the former {kernel} at length {length}')
             programs = programs_per_sm(
                 registers, warps, shared + compiled.metadata.shared,
                 'sm_90')

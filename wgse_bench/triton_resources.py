@@ -201,19 +201,32 @@ def _cuobjdump() -> str:
     return path
 
 
-def compile_and_disassemble(variant: Variant, arch: str):
+def compile_band_kernel(fn, arguments: Dict[str, str],
+                        constants: Dict[str, object], capability: int,
+                        options: Dict[str, object]):
     """``(compiled kernel, its SASS text, cuobjdump's resource report)`` of
-    ``variant`` for ``arch``. Needs triton with ``TRITON_INTERPRET``
-    unset."""
+    the band kernel ``fn`` compiled by triton for compute capability
+    ``capability`` (80, 90, ...): its arguments are ``arguments`` (name ->
+    triton type), then the six parameter pointers :data:`POINTERS`, then
+    ``constants`` (its ``constexpr`` values). Needs triton with
+    ``TRITON_INTERPRET`` unset."""
     import triton
     from triton.backends.compiler import GPUTarget
     from triton.compiler import ASTSource
+    signature = {**arguments, **{name: '*fp32' for name in POINTERS},
+                 **{name: 'constexpr' for name in constants}}
+    compiled = triton.compile(
+        ASTSource(fn=fn, signature=signature, constexprs=constants),
+        target=GPUTarget('cuda', capability, 32), options=options)
+    dump, sass = disassemble(compiled)
+    return compiled, sass, dump
 
+
+def compile_and_disassemble(variant: Variant, arch: str):
+    """:func:`compile_band_kernel` of ``variant`` for ``arch``."""
     from wgse_mmseg.core.wgse import triton_band_kernels as kernels
     from wgse_mmseg.core.wgse.triton_launch_choices import (
         conv1_on_tensor_cores, taps_as_one_product)
-    signature = dict(_SIGNATURES[variant.kernel])
-    signature.update({name: '*fp32' for name in POINTERS})
     constants = dict(HIDDEN=variant.hidden, BLOCK=variant.block,
                      PRECISION=variant.precision)
     if variant.kernel == 'band_backward':
@@ -224,14 +237,10 @@ def compile_and_disassemble(variant: Variant, arch: str):
                                                        major)
         constants['TAPS_01_AS_ONE'] = taps_as_one_product(
             variant.precision, major)
-    signature.update({name: 'constexpr' for name in constants})
-    source = ASTSource(fn=getattr(kernels, variant.kernel),
-                       signature=signature, constexprs=constants)
-    compiled = triton.compile(
-        source, target=GPUTarget('cuda', ARCHITECTURES[arch][0], 32),
-        options=dict(num_warps=variant.num_warps, maxnreg=variant.maxnreg))
-    dump, sass = disassemble(compiled)
-    return compiled, sass, dump
+    return compile_band_kernel(
+        getattr(kernels, variant.kernel), _SIGNATURES[variant.kernel],
+        constants, ARCHITECTURES[arch][0],
+        dict(num_warps=variant.num_warps, maxnreg=variant.maxnreg))
 
 
 def disassemble(compiled) -> Tuple[str, str]:
@@ -254,15 +263,23 @@ def compile_variant(variant: Variant, arch: str) -> Resources:
                         *compile_and_disassemble(variant, arch))
 
 
-def resources_of(variant: Variant, arch: str, compiled, sass: str,
-                 dump: str) -> Resources:
-    """:class:`Resources` of a :func:`compile_and_disassemble` kernel."""
+def resource_usage(dump: str, what: str) -> Tuple[int, int, int, int]:
+    """``(registers, spill stack bytes, static shared bytes, local
+    bytes)`` of cuobjdump's resource report ``dump`` of the kernel
+    ``what`` (named where the report has none)."""
     match = re.search(r'REG:(\d+) STACK:(\d+) SHARED:(\d+) LOCAL:(\d+)',
                       dump)
     if match is None:
         raise RuntimeError(f'cuobjdump printed no resource usage for '
-                           f'{variant} on {arch}:\n{dump}')
-    registers, stack, static, local = map(int, match.groups())
+                           f'{what}:\n{dump}')
+    return tuple(map(int, match.groups()))
+
+
+def resources_of(variant: Variant, arch: str, compiled, sass: str,
+                 dump: str) -> Resources:
+    """:class:`Resources` of a :func:`compile_and_disassemble` kernel."""
+    registers, stack, static, local = resource_usage(dump,
+                                                     f'{variant} on {arch}')
     shared = static + compiled.metadata.shared
     return Resources(registers, stack, local, shared,
                      programs_per_sm(registers, variant.num_warps, shared,
