@@ -186,15 +186,15 @@ class _Probe:
                          min(width, PROBE_SIDE), training, False)
 
     def _run(self, batch, height, width, training, shapes_only):
+        shape = (batch, self.channels, height, width)
         with _untouched(self.model, training), \
                 _widths_checked(self.model):
             try:
                 if shapes_only:
-                    self._forward_on_shapes(batch, height, width)
+                    self._forward_on_shapes(shape)
                 else:
-                    self.model(torch.zeros(batch, self.channels, height,
-                                           width, device=self.device),
-                               None, mode='tensor')
+                    self.model(torch.zeros(shape, device=self.device), None,
+                               mode='tensor')
             except _WrongWidth as wrong:
                 raise self._wrong_width(wrong) from None
             except _NO_SHAPE_ONLY_FORM:
@@ -213,9 +213,8 @@ class _Probe:
                         f'are not checked')
         return None
 
-    def _forward_on_shapes(self, batch: int, height: int, width: int
-                           ) -> None:
-        """The forward of a ``(batch, channels, height, width)`` input on
+    def _forward_on_shapes(self, shape: Tuple[int, int, int, int]) -> None:
+        """The forward of an input of ``shape`` ``(B, C, H, W)`` on
         shapes only: first on meta tensors (the parameters and buffers
         swapped for meta ones; torch's compiled shape functions, several
         times quicker than fake tensors); where that raises, on fake
@@ -223,16 +222,16 @@ class _Probe:
         cannot: tensors the model makes on its own device as it runs)."""
         try:
             with _on_meta(self.model):
-                self.model(torch.zeros(batch, self.channels, height, width,
-                                       device='meta'), None, mode='tensor')
+                self.model(torch.zeros(shape, device='meta'), None,
+                           mode='tensor')
             return
         except _WrongWidth:
             raise
         except Exception:  # judged on fake tensors below
             pass
         with fake_tensor.FakeTensorMode(allow_non_fake_inputs=True):
-            self.model(torch.zeros(batch, self.channels, height, width,
-                                   device=self.device), None, mode='tensor')
+            self.model(torch.zeros(shape, device=self.device), None,
+                       mode='tensor')
 
     def _fixed_size(self) -> Optional[Tuple[int, int]]:
         """The ``img_size`` of a backbone that runs only at it (a vision
