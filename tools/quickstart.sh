@@ -18,17 +18,17 @@ DATA=${DATA:-data/synthetic_spike_cityscapes}
 NUM_TRAIN=${NUM_TRAIN:-48}
 NUM_VAL=${NUM_VAL:-12}
 WORK=${WORK:-work_dirs/quickstart_$(basename "$CONFIG" .py)}
-# a one-epoch warm-up, then the decay: two epochs at least
-if ! [[ "$EPOCHS" =~ ^[0-9]+$ ]] || [ "$EPOCHS" -lt 2 ]; then
-    echo "quickstart.sh: EPOCHS must be an integer >= 2 (one warm-up epoch, then the decay), got '$EPOCHS'" >&2
-    exit 2
-fi
-for count in NUM_TRAIN NUM_VAL; do
-    if ! [[ "${!count}" =~ ^[0-9]+$ ]] || [ "${!count}" -lt 1 ]; then
-        echo "quickstart.sh: $count must be an integer >= 1, got '${!count}'" >&2
+# check_count NAME LEAST [WHY]: stop unless variable NAME is an integer >= LEAST
+check_count() {
+    if ! [[ "${!1}" =~ ^[0-9]+$ ]] || [ "${!1}" -lt "$2" ]; then
+        echo "quickstart.sh: $1 must be an integer >= $2${3:+ ($3)}, got '${!1}'" >&2
         exit 2
     fi
-done
+}
+# a one-epoch warm-up, then the decay: two epochs at least
+check_count EPOCHS 2 'one warm-up epoch, then the decay'
+check_count NUM_TRAIN 1
+check_count NUM_VAL 1
 
 source tools/setup_env.sh  # sets VENV
 PY=$VENV/bin/python
