@@ -8,7 +8,8 @@
 # (without a test path it runs setup.cfg's testpaths, the whole suite).
 # The whole suite runs in one pytest-xdist worker per core; tests picked by a
 # path, -k, -m or --lf run in this one process, which starts in seconds
-# where workers take tens (-n auto or -n 0 chooses either way). pytest's
+# where workers take tens (-n auto or -n 0 chooses either way); the value of
+# an option such as -p, -o or -W (-p no:randomly) is no test path. pytest's
 # cache (what --lf reads) is .pytest_cache/ in the checkout, which git ignores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,8 +20,13 @@ source tools/setup_env.sh  # sets VENV
 # once, here.
 "$VENV/bin/python" -m compileall -q wgse_mmseg wgse_bench > /dev/null
 workers=(-n auto --dist worksteal)
+value_next=0  # the word after an option that takes a value is that value
 for arg in "$@"; do
+    if [ "$value_next" = 1 ]; then value_next=0; continue; fi
     case "$arg" in
+        -p|-o|-W|-c|-n|-r|--tb|--durations|--dist|--maxfail|--basetemp|\
+        --junitxml|--timeout|--color|--rootdir|--confcutdir|--log-level)
+            value_next=1 ;;
         -k*|-m*|--lf|--last-failed|--deselect*|[!-]*) workers=(-n 0) ;;
     esac
 done

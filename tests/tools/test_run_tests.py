@@ -20,18 +20,45 @@ VENVS = {'.venv': 'openmmlab', '.venv-onedl': 'onedl'}
 NODE = 'tests/test_repo_rules.py::test_the_plugin_part_is_held_short'
 
 
-@pytest.mark.long(20)
-def test_a_path_with_k_and_lf_run_only_those(tmp_path):
+@pytest.fixture
+def env():
+    """This process's environment for the script, with this suite's stack
+    and without the variables of this pytest run; a skip outside the
+    checkout's environments."""
     stacks = [stack for venv, stack in VENVS.items()
               if osp.realpath(osp.join(ROOT, venv)) ==
               osp.realpath(sys.prefix)]
     if not stacks:
         pytest.skip(f'this suite runs in {sys.prefix}, not in the '
                     f'checkout\'s {" or ".join(VENVS)}')
+    return dict({name: value for name, value in os.environ.items()
+                 if not name.startswith('PYTEST_')}, STACK=stacks[0])
+
+
+@pytest.mark.parametrize('args, workers', [
+    ((), True), (('-p', 'no:randomly', '-o', 'console_output_style=count',
+                  '-W', 'error', '--durations', '5'), True),
+    (('tests/core',), False), (('-k', 'gradcheck'), False),
+    (('-p', 'no:randomly', '--lf'), False)])
+def test_workers_for_the_whole_suite_one_process_for_a_selection(
+        env, args, workers):
+    """Read from the script's trace (``bash -x``) of the pytest it starts,
+    which ``--version`` ends at once."""
+    proc = subprocess.run(['bash', '-x', 'tools/run_tests.sh', *args,
+                           '--version'], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    started, = [line for line in proc.stderr.splitlines()
+                if line.startswith('+ exec ')]
+    assert started.endswith(' '.join(('-m pytest',
+                                      *(('-n', 'auto', '--dist', 'worksteal')
+                                        if workers else ('-n', '0')),
+                                      *args, '--version'))), started
+
+
+@pytest.mark.long(20)
+def test_a_path_with_k_and_lf_run_only_those(env, tmp_path):
     # the inner run's own cache and temporary folders, not this run's
-    env = {name: value for name, value in os.environ.items()
-           if not name.startswith('PYTEST_')}
-    env['STACK'] = stacks[0]
     cache = tmp_path / 'cache'
 
     def run(*args):
