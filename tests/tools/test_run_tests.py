@@ -42,8 +42,8 @@ def env():
     (('-p', 'no:randomly', '--lf'), False)])
 def test_workers_for_the_whole_suite_one_process_for_a_selection(
         env, args, workers):
-    """Read from the script's trace (``bash -x``) of the pytest it starts,
-    which ``--version`` ends at once."""
+    """The pytest command the script starts, read from its trace
+    (``bash -x``); ``--version`` makes that pytest stop at once."""
     proc = subprocess.run(['bash', '-x', 'tools/run_tests.sh', *args,
                            '--version'], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=120)
