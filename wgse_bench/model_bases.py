@@ -64,9 +64,11 @@ def _downloads(model: Any, path: str = 'model') -> List[str]:
     return found
 
 
-def _train_and_predict(model, num_steps: int, side: int) -> float:
-    """Two training iterations (SGD) on random spikes and labels, then one
-    prediction; the seconds of the second iteration."""
+def _train_and_predict(model, num_steps: int, side: int,
+                       iterations: int) -> float:
+    """``iterations`` training iterations (SGD) on random spikes and
+    labels, then one prediction; the seconds of the last iteration (the
+    first also pays for allocations a later one reuses)."""
     import torch
     from mmengine.optim import OptimWrapper
     from mmengine.structures import PixelData
@@ -89,7 +91,7 @@ def _train_and_predict(model, num_steps: int, side: int) -> float:
     wrapper = OptimWrapper(torch.optim.SGD(model.parameters(), lr=1e-3))
     model.train()
     seconds = 0.0
-    for _ in range(2):
+    for _ in range(iterations):
         start = time.perf_counter()
         losses = model.train_step(batch(2), wrapper)
         seconds = time.perf_counter() - start
@@ -103,15 +105,17 @@ def _train_and_predict(model, num_steps: int, side: int) -> float:
     return seconds
 
 
-def try_model_base(base: str, num_steps: int = 8,
-                   side: int = 64) -> Dict[str, Any]:
-    """One model base with spike input (module docstring).
+def try_model_base(base: str, num_steps: int = 8, side: int = 64,
+                   iterations: int = 2) -> Dict[str, Any]:
+    """One model base with spike input (module docstring), trained
+    ``iterations`` iterations (the page's step time is the second's; one
+    says whether the base trains).
 
     Returns:
         ``base``, ``status`` (``'trains'``, ``'refused'`` or
         ``'failed'``), ``reason`` (why, for the latter two), ``downloads``
         (fields left out), ``parameters`` (millions) and ``step_s`` (one
-        training iteration of batch 2 at ``side`` x ``side``).
+        training iteration of batch 2 at ``side`` x ``side``, the last).
     """
     import torch
     from mmengine.registry import init_default_scope
@@ -132,7 +136,8 @@ def try_model_base(base: str, num_steps: int = 8,
         model = MODELS.build(cfg.model)
         row['parameters'] = sum(p.numel() for p in model.parameters()) / 1e6
         check_training_fits(cfg, model)
-        row['step_s'] = _train_and_predict(model, num_steps, side)
+        row['step_s'] = _train_and_predict(model, num_steps, side,
+                                           iterations)
         row['status'] = 'trains'
     except ModelFitError as err:
         row.update(status='refused', reason=str(err).split(': ', 1)[-1])
