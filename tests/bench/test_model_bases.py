@@ -73,3 +73,12 @@ def test_the_models_page_lists_every_base():
     assert len(bases) >= 50
     missing = [b for b in bases if f'| {osp.basename(b)} ' not in page]
     assert not missing, missing
+
+
+@pytest.mark.parametrize('iterations', [0, -1, 1.5, True, '2'])
+def test_a_count_of_iterations_that_is_no_count_is_refused(iterations):
+    """No row that says a base trains after training nothing."""
+    with pytest.raises(ValueError, match='try_model_base: iterations must '
+                       'be an integer >= 1'):
+        try_model_base('mmseg::_base_/models/fcn_r50-d8.py',
+                       iterations=iterations)
