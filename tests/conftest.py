@@ -305,11 +305,35 @@ def pytest_runtest_setup(item):
             pytest.skip(reason)
 
 
-def pytest_collection_modifyitems(items):
+def pytest_addoption(parser):
+    parser.addoption(
+        '--gpu-targets', action='store_true',
+        help='also run the tests marked gpu_targets, which compile the '
+        'Triton kernels for real GPU targets (about 2 minutes of CPU); '
+        '.ci/run runs them once, as their own step')
+
+
+#: why a ``gpu_targets`` test is skipped without ``--gpu-targets``
+_GPU_TARGETS_SKIPPED = (
+    'compiles the Triton kernels for GPU targets: bash tools/run_tests.sh '
+    '--gpu-targets -m gpu_targets (a step of .ci/run of its own)')
+
+
+def pytest_collection_modifyitems(config, items):
     """The tests marked ``long`` first, longest first: pytest-xdist's work
     stealing takes the end of a worker's queue, so the short tests fill the
     gaps and no long test is left to run alone at the end (one started
-    last kept the other worker idle 51 s)."""
+    last kept the other worker idle 51 s). The tests marked
+    ``gpu_targets`` skip unless ``--gpu-targets`` is given: what they
+    check (registers, spills, instruction budgets of the compiled code)
+    depends on the kernels and triton alone, not on the stack a suite runs
+    on, so CI checks it once rather than in each stack's suite."""
+    if not config.getoption('--gpu-targets'):
+        skip = pytest.mark.skip(reason=_GPU_TARGETS_SKIPPED)
+        for item in items:
+            if item.get_closest_marker('gpu_targets'):
+                item.add_marker(skip)
+
     def seconds(item):
         marker = item.get_closest_marker('long')
         return marker.args[0] if marker else 0

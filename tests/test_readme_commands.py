@@ -69,6 +69,7 @@ HOW = {
     'bash tools/run_tests.sh tests/core/test_wavelets.py -k gradcheck':
         RUN_TESTS_TEST,
     'bash tools/run_tests.sh --lf': RUN_TESTS_TEST,
+    'bash tools/run_tests.sh --gpu-targets -m gpu_targets': CI,
     'bash tools/lint.sh': CI,
     'MMCV=full bash tools/setup_env.sh': NotHere(
         'compiles mmcv 2.1.0 for about 30 minutes and replaces mmcv-lite in '

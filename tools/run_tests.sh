@@ -4,6 +4,8 @@
 #   STACK=onedl bash tools/run_tests.sh   # the onedl-* fork, in .venv-onedl
 #   bash tools/run_tests.sh tests/core/test_wavelets.py -k gradcheck   # just those
 #   bash tools/run_tests.sh --lf          # the tests that failed last time
+#   bash tools/run_tests.sh --gpu-targets -m gpu_targets   # the kernels
+#       compiled for GPU targets, which the suite skips (CI's own step)
 # STACK, VENV and MMCV as for tools/setup_env.sh; arguments go to pytest
 # (without a test path it runs setup.cfg's testpaths, the whole suite).
 # The whole suite runs in one pytest-xdist worker per core; tests picked by a

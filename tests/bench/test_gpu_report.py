@@ -533,6 +533,7 @@ print(json.dumps(found))
 '''
 
 
+@pytest.mark.gpu_targets
 @pytest.mark.needs_triton
 @pytest.mark.long(30)
 def test_the_tensor_core_loops_run_the_instructions_they_measure(

@@ -1,11 +1,14 @@
 """WGSE's Triton kernels compile for real GPUs (sm_80, sm_89, sm_90, sm_100,
-sm_120) with no
-GPU: every variant the dispatcher can launch, use no local memory and leave
-room for two programs per SM (full float32's forward on sm_100 and sm_120
-excepted), and the tensor-core ones stay within the cost model's
-instruction budget
-(``wgse_bench.triton_resources``; the table is in
-docs/wgse_speed.md)."""
+sm_120) with no GPU: every variant the dispatcher can launch, use no local
+memory and leave room for two programs per SM (full float32's forward on
+sm_100 and sm_120 excepted), and the tensor-core ones stay within the cost
+model's instruction budget (``wgse_bench.triton_resources``; the table is in
+docs/wgse_speed.md).
+
+The tests that compile are marked ``gpu_targets``: about 2 minutes of CPU,
+skipped unless pytest gets ``--gpu-targets`` (``bash tools/run_tests.sh
+--gpu-targets -m gpu_targets``, a step of .ci/run of its own); the checks of
+the readers by hand run in the suite."""
 import ast
 import inspect
 import json
@@ -35,6 +38,7 @@ def rows(built_once):
         return json.load(f)
 
 
+@pytest.mark.gpu_targets
 def test_every_launchable_variant_compiles_for_every_target(rows):
     """Forward and backward (with and without the input gradient) at every
     width, precision and launch entry of each target, for sm_80, sm_89,
@@ -100,6 +104,7 @@ def _loop_variables(kernel, input_grad):
     return _carried(ast.parse(source).body[0].body, set(), bool(input_grad))
 
 
+@pytest.mark.gpu_targets
 def test_every_loop_variable_is_carried_into_the_next_step(rows):
     """Triton carries a name into the next iteration only if one pass over
     the body changes it: windows that start as one shared tensor
@@ -129,6 +134,7 @@ def test_loop_carried_needs_a_loop():
         triton_resources.loop_carried('tt.func @k() { tt.return }')
 
 
+@pytest.mark.gpu_targets
 def test_launched_variants_spill_nothing_and_fit_two_programs(rows):
     """What runs uses no local memory, and two programs of it share an SM:
     every variant on sm_80, sm_89 and sm_90, full float32 (``'ieee'``, on
@@ -156,6 +162,7 @@ STEP_BUDGET = {('band_forward', 128): (21, 0.1),
                ('band_backward', 16): (150, 5.0)}
 
 
+@pytest.mark.gpu_targets
 def test_the_step_loop_stays_within_its_instruction_budget(rows):
     over = [r for r in rows if r['tensor_cores'] and (
         r['per_position'] > STEP_BUDGET[r['kernel'], r['block']][0] or
@@ -243,6 +250,7 @@ def _report(**environment):
                                            rows=[failed, run])))
 
 
+@pytest.mark.gpu_targets
 def test_measured_beside_the_cost_models_floor(rows):
     """Each profiled band kernel's time against the issue floor of the
     variant a training pass launches (no input gradient, the default
@@ -270,6 +278,7 @@ def test_measured_beside_the_cost_models_floor(rows):
     assert '| bf16 | band_backward |' in table
 
 
+@pytest.mark.gpu_targets
 @pytest.mark.parametrize('report, match', [
     (_report(sm_clock_mhz=None), 'no clock'),
     (_report(capability='sm_75'), 'names no GPU of'),
@@ -344,6 +353,7 @@ PREDICTED_BUDGET_MS = {('tf32', 'band_forward'): 4.5,
                        ('bf16', 'band_backward'): 15.5}
 
 
+@pytest.mark.gpu_targets
 def test_kernels_within_predicted_budget(hopper, predictions):
     assert {(p, k) for p in predictions for k in predictions[p]
             if k.startswith('band_') and not k.endswith(('cycles', 'sm'))
@@ -388,6 +398,7 @@ def _at_former_commit(path):
     return proc.stdout
 
 
+@pytest.mark.gpu_targets
 def test_the_predictor_explains_the_former_kernels_measurement(hopper,
                                                                tmp_path):
     """The one measurement of these kernels' kind on a GPU: the former
@@ -418,6 +429,7 @@ def test_the_predictor_explains_the_former_kernels_measurement(hopper,
             kernel, got, want)
 
 
+@pytest.mark.gpu_targets
 def test_ptxas_serialises_no_wgmma_product(hopper):
     """ptxas' report of each training variant for sm_90a names no
     serialised ``wgmma`` products (its notice C7514: each waited for before

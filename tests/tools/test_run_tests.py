@@ -1,5 +1,6 @@
 """``tools/run_tests.sh`` runs what it is given: a test path and ``-k`` only
-those tests, ``--lf`` the last run's failures from pytest's cache.
+those tests, ``--lf`` the last run's failures from pytest's cache, and the
+compiles for GPU targets only where ``--gpu-targets`` asks for them.
 
 Run in the checkout's own environment of this suite's stack (the README's
 install mode, as CI runs the suite); elsewhere the test skips, since the
@@ -80,3 +81,31 @@ def test_a_path_with_k_and_lf_run_only_those(env, tmp_path):
     assert re.search(r'= 1 passed\b', out), out[-2000:]
     assert json.loads((cache / 'v' / 'cache' / 'lastfailed').read_text()) \
         == {}
+
+
+def test_the_compiles_for_gpu_targets_skip_unless_asked(env, tmp_path):
+    """The suite skips the tests marked ``gpu_targets``, naming the command
+    that runs them; ``--gpu-targets -m gpu_targets`` picks exactly those,
+    and .ci/run gives that command a step of its own."""
+    path = 'tests/bench/test_triton_resources.py'
+    options = ['-o', f'cache_dir={tmp_path / "cache"}',
+               f'--basetemp={tmp_path / "base"}']
+
+    def run(*args):
+        proc = subprocess.run(['bash', 'tools/run_tests.sh', path, *args,
+                               *options], cwd=ROOT, env=env,
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+        return proc.stdout
+
+    out = run('-k', 'every_launchable or by_hand', '-rs')
+    assert re.search(r'= \d+ passed, 1 skipped\b', out), out[-2000:]
+    assert 'bash tools/run_tests.sh --gpu-targets -m gpu_targets' in out
+    out = run('--gpu-targets', '-m', 'gpu_targets', '--collect-only', '-q')
+    picked = {line.split('::')[1].split('[')[0]
+              for line in out.splitlines() if line.startswith(path)}
+    assert 'test_every_launchable_variant_compiles_for_every_target' in picked
+    assert not {name for name in picked if 'by_hand' in name}
+    with open(osp.join(ROOT, '.ci', 'run'), encoding='utf-8') as f:
+        assert 'bash tools/run_tests.sh -q --gpu-targets -m gpu_targets ' \
+            '|| status=1' in f.read().splitlines()
