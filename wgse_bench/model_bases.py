@@ -117,16 +117,18 @@ def try_model_base(base: str, num_steps: int = 8, side: int = 64,
         (fields left out), ``parameters`` (millions) and ``step_s`` (one
         training iteration of batch 2 at ``side`` x ``side``, the last).
     """
+    from wgse_mmseg.argument_checks import check_integer
+
+    # before the stack's imports and the sweep's try: a wrong count is the
+    # caller's, no row's
+    check_integer('try_model_base', 'iterations', iterations, 1)
     import torch
     from mmengine.registry import init_default_scope
 
     from mmseg.registry import MODELS
-    from wgse_mmseg.argument_checks import check_integer
     from wgse_mmseg.utils.cross_checks import ModelFitError, \
         check_training_fits
     from wgse_mmseg.utils.spike_model import spike_config
-    # before the sweep's try: a wrong count is the caller's, no row's
-    check_integer('try_model_base', 'iterations', iterations, 1)
     row: Dict[str, Any] = dict(base=base, status='failed', reason='',
                                downloads=[], parameters=None, step_s=None)
     try:
